@@ -1,0 +1,85 @@
+"""The Asset data object: a triangle mesh in metres with PBR materials and a canonical box.
+
+Convention (object frame, same as a nuScenes box frame): x = the object's front, y = its left,
+z = up; the origin is at the bottom centre of the axis-aligned bounding box (so the box spans
+z in [0, h]).  ``wlh`` = (extent along y, along x, along z).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..conventions import check_shape
+
+
+@dataclass(frozen=True)
+class Material:
+    """UE4 / simplified Disney material (all colours linear RGB in [0, 1]).
+
+    Attributes:
+        name: material name from the asset (or a generated one).
+        base_color: (3,) base colour.
+        metallic, roughness, specular: UE4 parameters (specular 0.5 = 4 % reflectance at normal incidence).
+        opacity: 1 = opaque; < 1 for glass (the renderer blends the environment seen through it).
+        emission: (3,) emitted radiance (lights), usually zero.
+        clearcoat: 0..1 strength of a smooth clear-coat lobe over the base (car paint).
+        base_color_texture: optional (h, w, 3) float32 linear texture multiplied with ``base_color``.
+        metallic_roughness_texture: optional (h, w, 3) float32 (glTF: G = roughness, B = metallic).
+        normal_texture: optional (h, w, 3) float32 tangent-space normal map in [0, 1].
+    """
+
+    name: str
+    base_color: np.ndarray
+    metallic: float = 0.0
+    roughness: float = 0.5
+    specular: float = 0.5
+    opacity: float = 1.0
+    emission: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    clearcoat: float = 0.0
+    base_color_texture: np.ndarray | None = None
+    metallic_roughness_texture: np.ndarray | None = None
+    normal_texture: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
+class Asset:
+    """A renderable object.
+
+    Attributes:
+        name: identifier (file stem or generator description).
+        vertices: (V, 3) float64 positions in the object frame, metres.
+        faces: (F, 3) int64 vertex indices, counter-clockwise seen from outside.
+        face_material: (F,) int64 index into ``materials`` per face.
+        materials: the material table.
+        vertex_normals: (V, 3) float64 unit smooth-shading normals (object frame).
+        uv: (V, 2) float64 texture coordinates, or None.
+        category: nuScenes category of the object, e.g. ``vehicle.car``.
+    """
+
+    name: str
+    vertices: np.ndarray
+    faces: np.ndarray
+    face_material: np.ndarray
+    materials: tuple[Material, ...]
+    vertex_normals: np.ndarray
+    uv: np.ndarray | None = None
+    category: str = "vehicle.car"
+
+    def __post_init__(self) -> None:
+        check_shape(self.vertices, ("V", 3), f"asset {self.name}: vertices")
+        check_shape(self.faces, ("F", 3), f"asset {self.name}: faces")
+        check_shape(self.face_material, (len(self.faces),), f"asset {self.name}: face_material")
+        check_shape(self.vertex_normals, (len(self.vertices), 3), f"asset {self.name}: vertex_normals")
+
+    @property
+    def wlh(self) -> np.ndarray:
+        """Box size (3,) = (width along y, length along x, height along z), metres."""
+        ext = self.vertices.max(axis=0) - self.vertices.min(axis=0)
+        return np.array([ext[1], ext[0], ext[2]])
+
+    @property
+    def box_center_object(self) -> np.ndarray:
+        """Centre (3,) of the axis-aligned box in the object frame (x, y ~ 0, z = h / 2)."""
+        return (self.vertices.max(axis=0) + self.vertices.min(axis=0)) / 2.0

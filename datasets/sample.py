@@ -1,0 +1,180 @@
+"""Plain data objects for one dataset sample: cameras, LiDAR, boxes, drivable area.
+
+Conventions (see :mod:`streetaug.augment.conventions`): transforms ``T_a_from_b`` are 4x4 float64;
+quaternions ``[w, x, y, z]``; ego frame x forward / y left / z up; global frame = the map of the log's
+location (x east, y north, z up); metres; timestamps in microseconds.
+
+Objects are frozen; heavy fields (images, LiDAR) are loaded lazily through loader callables so that
+building a ``Sample`` parses no image it does not need.
+"""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
+from streetaug.augment.conventions import (
+    invert_transform,
+    make_transform,
+    quat_to_rotation,
+    rotation_to_quat,
+    transform_points,
+)
+
+# nuScenes categories whose boxes count as dynamic for placement clearance.
+DYNAMIC_CATEGORY_PREFIXES = ("vehicle.", "human.", "animal")
+
+
+@dataclass(frozen=True)
+class Box:
+    """A 3D box as in a nuScenes ``sample_annotation``, in the global frame.
+
+    Attributes:
+        center: (3,) float64 box centre (gravity centre, not bottom), global frame, metres.
+        wlh: (3,) float64 width (along box y), length (along box x = heading), height (along z), metres.
+        rotation: (4,) float64 ``[w, x, y, z]`` rotation from the box frame to the global frame.
+        category: nuScenes category name, e.g. ``vehicle.car``.
+        token: the ``sample_annotation`` token ('' for boxes we create).
+    """
+
+    center: np.ndarray
+    wlh: np.ndarray
+    rotation: np.ndarray
+    category: str
+    token: str = ""
+    attributes: tuple[str, ...] = ()
+
+    @property
+    def is_dynamic(self) -> bool:
+        return self.category.startswith(DYNAMIC_CATEGORY_PREFIXES)
+
+    @property
+    def T_global_from_box(self) -> np.ndarray:
+        """Box frame (origin at the centre, x = heading, z up) -> global."""
+        return make_transform(self.rotation, self.center)
+
+    def corners(self) -> np.ndarray:
+        """The 8 corners (8, 3) in the global frame; first four at the front (+x), then the back."""
+        w, l, h = self.wlh
+        x = np.array([1, 1, 1, 1, -1, -1, -1, -1]) * l / 2
+        y = np.array([1, -1, -1, 1, 1, -1, -1, 1]) * w / 2
+        z = np.array([1, 1, -1, -1, 1, 1, -1, -1]) * h / 2
+        return transform_points(self.T_global_from_box, np.stack([x, y, z], axis=1))
+
+    def transformed(self, T_new_from_global: np.ndarray) -> "Box":
+        """The same box expressed in another frame (returns a new Box; never mutates)."""
+        center = transform_points(T_new_from_global, self.center[None])[0]
+        R = T_new_from_global[:3, :3] @ quat_to_rotation(self.rotation)
+        return Box(center, self.wlh.copy(), rotation_to_quat(R), self.category, self.token, self.attributes)
+
+
+@dataclass(frozen=True)
+class CameraView:
+    """One camera image of a sample with its calibration and pose.
+
+    Attributes:
+        channel: sensor channel, e.g. ``CAM_FRONT``.
+        sample_data_token: token of the camera ``sample_data`` row ('' for non-nuScenes inputs).
+        image_path: path of the image file.
+        K: (3, 3) float64 intrinsics (pixel centres at integer coordinates).
+        width, height: image size in pixels.
+        T_ego_from_cam: (4, 4) camera (OpenCV) -> ego frame at this camera's timestamp.
+        T_global_from_ego: (4, 4) ego -> global at this camera's timestamp.
+        timestamp_us: capture time, microseconds since the Unix epoch (UTC).
+    """
+
+    channel: str
+    sample_data_token: str
+    image_path: str
+    K: np.ndarray
+    width: int
+    height: int
+    T_ego_from_cam: np.ndarray
+    T_global_from_ego: np.ndarray
+    timestamp_us: int
+    _load_image: Callable[[], np.ndarray] = field(repr=False, compare=False, default=None)
+
+    @functools.cached_property
+    def image(self) -> np.ndarray:
+        """(H, W, 3) uint8 RGB, decoded on first access."""
+        if self._load_image is None:
+            from streetaug.augment.io import read_image_rgb
+
+            return read_image_rgb(self.image_path)
+        return self._load_image()
+
+    @property
+    def T_global_from_cam(self) -> np.ndarray:
+        return self.T_global_from_ego @ self.T_ego_from_cam
+
+    @property
+    def T_cam_from_global(self) -> np.ndarray:
+        return invert_transform(self.T_global_from_cam)
+
+    @property
+    def T_cam_from_ego(self) -> np.ndarray:
+        return invert_transform(self.T_ego_from_cam)
+
+
+@dataclass(frozen=True)
+class LidarSweep:
+    """A LiDAR sweep.
+
+    Attributes:
+        points_sensor: (N, 3) float64 points in the LiDAR sensor frame, metres.
+        intensity: (N,) float32.
+        T_ego_from_lidar: (4, 4) sensor -> ego at the sweep's timestamp.
+        T_global_from_ego: (4, 4) ego -> global at the sweep's timestamp.
+        labels: (N,) uint8 lidarseg class indices, or None when the dataset has no lidarseg.
+    """
+
+    points_sensor: np.ndarray
+    intensity: np.ndarray
+    T_ego_from_lidar: np.ndarray
+    T_global_from_ego: np.ndarray
+    timestamp_us: int
+    labels: np.ndarray | None = None
+
+    @property
+    def T_global_from_lidar(self) -> np.ndarray:
+        return self.T_global_from_ego @ self.T_ego_from_lidar
+
+    def points_in(self, T_frame_from_global: np.ndarray) -> np.ndarray:
+        """Points (N, 3) in any frame given by its ``T_frame_from_global``."""
+        return transform_points(T_frame_from_global @ self.T_global_from_lidar, self.points_sensor)
+
+    @property
+    def points_global(self) -> np.ndarray:
+        return transform_points(self.T_global_from_lidar, self.points_sensor)
+
+
+@dataclass(frozen=True)
+class Sample:
+    """One keyframe: its cameras, LiDAR, annotated boxes and map context.
+
+    Attributes:
+        token: the nuScenes ``sample`` token.
+        scene_name: e.g. ``scene-0061``.
+        location: ``log.location``, e.g. ``singapore-onenorth`` (the global frame's map).
+        timestamp_us: keyframe time, microseconds since the Unix epoch (UTC).
+        cameras: channel -> CameraView (images load lazily).
+        boxes: annotated boxes in the global frame.
+        drivable_area_global: list of shapely (Multi)Polygons in global x/y, or None when no map.
+        load_lidar: callable returning the LiDAR sweep (or None when the sample has none).
+    """
+
+    token: str
+    scene_name: str
+    location: str
+    timestamp_us: int
+    cameras: dict[str, CameraView]
+    boxes: tuple[Box, ...]
+    drivable_area_global: list | None = None
+    _load_lidar: Callable[[], LidarSweep | None] = field(repr=False, compare=False, default=None)
+
+    @functools.cached_property
+    def lidar(self) -> LidarSweep | None:
+        return None if self._load_lidar is None else self._load_lidar()
