@@ -295,3 +295,28 @@ def luminance(rgb: np.ndarray) -> np.ndarray:
     """Rec. 709 luminance of linear RGB (..., 3) -> (...)."""
     rgb = np.asarray(rgb)
     return 0.2126 * rgb[..., 0] + 0.7152 * rgb[..., 1] + 0.0722 * rgb[..., 2]
+
+
+# ----------------------------------------------------------------------------- object poses in the camera
+
+
+def pose_camera_to_transform(x: float, y: float, z: float, yaw_deg: float) -> np.ndarray:
+    """``--pose-camera X,Y,Z,YAW_DEG`` -> ``T_cam_from_object`` (4, 4).
+
+    (X, Y, Z) is the bottom centre of the object's box in the camera frame; the object's up (+z)
+    is the camera's -y; yaw 0 puts the object's front (+x) along camera +z, +90 deg along camera +x.
+    """
+    th = np.radians(yaw_deg)
+    front = np.array([np.sin(th), 0.0, np.cos(th)])
+    up = np.array([0.0, -1.0, 0.0])
+    left = np.cross(up, front)
+    return make_transform(np.stack([front, left, up], axis=1), [x, y, z])
+
+
+def transform_to_pose_camera(T_cam_from_object: np.ndarray) -> tuple[np.ndarray, float]:
+    """Inverse of :func:`pose_camera_to_transform` for the yaw: returns (origin (3,), yaw_deg).
+
+    The yaw is that of the object's front projected onto the camera's x-z plane.
+    """
+    front = T_cam_from_object[:3, 0]
+    return T_cam_from_object[:3, 3].copy(), float(np.degrees(np.arctan2(front[0], front[2])))
