@@ -1,1 +1,362 @@
-def main(): print("hi")
+"""The ``streetaug`` command line: a thin shell over the library API.
+
+Exit codes: 0 success, 2 bad arguments (click usage errors), 1 runtime errors (one line on stderr;
+the traceback only with ``--debug``).
+"""
+
+from __future__ import annotations
+
+import functools
+import sys
+import time
+import traceback
+from pathlib import Path
+from typing import Callable
+
+import click
+import numpy as np
+
+CAMERA_DEFAULT = "CAM_FRONT"
+
+
+def _parse_floats(value: str | None, n: int, name: str) -> list[float] | None:
+    if value is None:
+        return None
+    try:
+        parts = [float(x) for x in value.split(",")]
+    except ValueError:
+        raise click.BadParameter(f"expected {n} comma-separated numbers, got {value!r}", param_hint=name) from None
+    if len(parts) != n or not all(np.isfinite(parts)):
+        raise click.BadParameter(f"expected {n} finite comma-separated numbers, got {value!r}", param_hint=name)
+    return parts
+
+
+def _runtime_errors(func: Callable) -> Callable:
+    """Turn library errors into one line on stderr and exit code 1 (traceback with --debug)."""
+
+    @functools.wraps(func)
+    def wrapper(*args, **kwargs):
+        try:
+            return func(*args, **kwargs)
+        except click.ClickException:
+            raise
+        except (Exception, KeyboardInterrupt) as e:  # noqa: BLE001 - the CLI boundary
+            if kwargs.get("debug"):
+                traceback.print_exc()
+            click.echo(f"error: {e}", err=True)
+            sys.exit(1)
+
+    return wrapper
+
+
+@click.group(context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100})
+@click.version_option(package_name="streetaug")
+def main() -> None:
+    """streetaug: insert physically lit, shadowed 3D cars into driving datasets, with exact 3D labels.
+
+    \b
+    Quick start (bundled sample scenes):
+      streetaug insert --scene sample-sunny --out out/sunny
+      streetaug predict-light --scene sample-lowsun --out out/light
+      streetaug batch --out out/dataset
+    """
+
+
+# ----------------------------------------------------------------------------- shared options
+
+
+def _dataset_options(func: Callable) -> Callable:
+    options = [
+        click.option("--dataroot", type=click.Path(file_okay=False, path_type=Path),
+                     help="nuScenes dataroot (default: the bundled sample scenes)."),
+        click.option("--version", "version", default=None,
+                     help="Dataset version folder, e.g. v1.0-mini (default for the bundled scenes: v1.0-samples)."),
+        click.option("--scene", default=None, help="Scene name (e.g. scene-0061) or scene token."),
+        click.option("--sample", "sample_token", default=None, help="Sample token (default: the scene's first sample)."),
+        click.option("--camera", default=CAMERA_DEFAULT, show_default=True, help="Camera channel."),
+    ]
+    for option in reversed(options):
+        func = option(func)
+    return func
+
+
+def _open_dataset(dataroot: Path | None, version: str | None):
+    from streetaug.datasets.bundled import BUNDLED_VERSION, bundled_dataroot
+    from streetaug.datasets.nuscenes import NuScenesReader
+
+    if dataroot is None:
+        return NuScenesReader(bundled_dataroot(), version or BUNDLED_VERSION)
+    if version is None:
+        raise click.UsageError("--version is required with --dataroot (e.g. --version v1.0-mini)")
+    return NuScenesReader(dataroot, version)
+
+
+def _resolve_sample(reader, scene: str | None, sample_token: str | None) -> str:
+    if sample_token:
+        return sample_token
+    if scene is None:
+        raise click.UsageError("give --scene NAME_OR_TOKEN or --sample TOKEN")
+    tokens = reader.sample_tokens(scene)
+    if not tokens:
+        raise click.UsageError(f"scene {scene!r} has no samples")
+    return tokens[0]
+
+
+def _view(sample, camera: str):
+    if camera not in sample.cameras:
+        raise click.UsageError(
+            f"camera {camera!r} not in sample {sample.token}; available: {', '.join(sorted(sample.cameras))}"
+        )
+    return sample.cameras[camera]
+
+
+# ----------------------------------------------------------------------------- predict-light
+
+
+@main.command("predict-light")
+@_dataset_options
+@click.option("--image", type=click.Path(dir_okay=False, path_type=Path), help="A single image (no metadata).")
+@click.option("--fov-deg", type=float, help="Horizontal field of view of --image, degrees.")
+@click.option("--intrinsics", help="fx,fy,cx,cy of --image (pixel centres at integers).")
+@click.option("--at", "at", help="X,Y,Z (camera frame, metres): point of the local environment map "
+              "(default: the ground point 15 m straight ahead).")
+@click.option("--level", type=click.Choice(["L0", "L1"]), default="L1", show_default=True,
+              help="Lighting level: L0 constant dome (no-light baseline), L1 sun + parametric sky.")
+@click.option("--out", required=True, type=click.Path(file_okay=False, path_type=Path), help="Output folder.")
+@click.option("--debug", is_flag=True, help="Show tracebacks.")
+@_runtime_errors
+def predict_light(dataroot, version, scene, sample_token, camera, image, fov_deg, intrinsics, at, level, out, debug):
+    """Estimate the scene's HDR lighting; write lighting.json, envmap_camera.exr and preview.png.
+
+    \b
+    Examples:
+      streetaug predict-light --scene sample-sunny --out out/light
+      streetaug predict-light --dataroot ../shared/data/nuscenes-real --version v1.0-mini \\
+          --scene scene-0061 --camera CAM_FRONT --out out/light-real
+      streetaug predict-light --image photo.jpg --fov-deg 70 --out out/light-photo
+    """
+    from streetaug.augment.io import read_image_rgb
+    from streetaug.augment.lighting.estimate import estimate_lighting, estimate_lighting_from_image
+    from streetaug.augment.lighting.outputs import write_lighting_outputs
+    from streetaug.augment.pipeline import ego_ground_plane_cam
+
+    at_cam = _parse_floats(at, 3, "--at")
+    if image is not None:
+        if fov_deg is None and intrinsics is None:
+            raise click.UsageError("--image needs --fov-deg F or --intrinsics fx,fy,cx,cy")
+        rgb = read_image_rgb(image)
+        K = _intrinsics(intrinsics, fov_deg, rgb.shape[1], rgb.shape[0])
+        estimate = estimate_lighting_from_image(rgb, K)
+        query = at_cam or [0.0, 1.5, 15.0]
+    else:
+        reader = _open_dataset(dataroot, version)
+        sample = reader.sample(_resolve_sample(reader, scene, sample_token))
+        view = _view(sample, camera)
+        rgb = view.image
+        estimate = estimate_lighting(view, sample.location, level=level)
+        if at_cam is None:
+            normal, offset = ego_ground_plane_cam(view)
+            # The ground point straight ahead at 15 m depth: on the plane n . p + d = 0 with p = (0, y, 15).
+            y = -(offset + normal[2] * 15.0) / normal[1] if abs(normal[1]) > 1e-6 else 1.5
+            at_cam = [0.0, float(y), 15.0]
+        query = at_cam
+    write_lighting_outputs(estimate, out, rgb, query_point_cam=np.asarray(query, dtype=float))
+    click.echo(f"wrote {out}/lighting.json, envmap_camera.exr, preview.png "
+               f"(sun: {estimate.sun_source}, visibility {estimate.sun_visibility:.2f}, level {estimate.level})")
+
+
+def _intrinsics(intrinsics: str | None, fov_deg: float | None, width: int, height: int) -> np.ndarray:
+    from streetaug.augment.conventions import intrinsics_from_fov
+
+    if intrinsics is not None:
+        fx, fy, cx, cy = _parse_floats(intrinsics, 4, "--intrinsics")
+        if fx <= 0 or fy <= 0:
+            raise click.BadParameter("focal lengths must be positive", param_hint="--intrinsics")
+        return np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
+    return intrinsics_from_fov(width, height, fov_deg)
+
+
+# ----------------------------------------------------------------------------- insert
+
+
+def _asset_options(func: Callable) -> Callable:
+    options = [
+        click.option("--asset", type=click.Path(dir_okay=False, path_type=Path),
+                     help="glTF/GLB/OBJ/PLY asset (metres, +Y up, front +Z). Default: a procedural car."),
+        click.option("--assets", "assets_dir", type=click.Path(file_okay=False, path_type=Path),
+                     help="Folder of assets to sample from."),
+        click.option("--asset-front", default="+z", show_default=True,
+                     type=click.Choice(["+x", "-x", "+y", "-y", "+z", "-z"]),
+                     help="Axis the asset's front points along (the Kenney cars: -z)."),
+        click.option("--asset-length", type=float, help="Rescale the asset to this length in metres."),
+    ]
+    for option in reversed(options):
+        func = option(func)
+    return func
+
+
+def _render_options(func: Callable) -> Callable:
+    options = [
+        click.option("--quality", type=click.Choice(["draft", "default", "high"]), default="default",
+                     show_default=True, help="Render preset."),
+        click.option("--seed", type=int, default=0, show_default=True, help="Random seed (placement, asset, sampling)."),
+        click.option("--ev", type=float, default=0.0, show_default=True, help="Exposure of the camera response."),
+    ]
+    for option in reversed(options):
+        func = option(func)
+    return func
+
+
+@main.command("insert")
+@_dataset_options
+@_asset_options
+@_render_options
+@click.option("--level", type=click.Choice(["L0", "L1"]), default="L1", show_default=True, help="Lighting level.")
+@click.option("--n-objects", type=click.IntRange(1, 8), default=1, show_default=True, help="Objects per image.")
+@click.option("--yaw-sigma", type=float, default=3.0, show_default=True,
+              help="Yaw noise (deg) around the ego heading: 3 realistic, 15 augmentation.")
+@click.option("--image", type=click.Path(dir_okay=False, path_type=Path), help="Image form: the input image.")
+@click.option("--intrinsics", help="Image form: fx,fy,cx,cy.")
+@click.option("--depth", type=click.Path(dir_okay=False, path_type=Path), help="Image form: metric depth (.exr|.npy).")
+@click.option("--envmap", type=click.Path(dir_okay=False, path_type=Path), help="Image form: camera-frame env map (.exr).")
+@click.option("--pose-camera", help="Image form: X,Y,Z,YAW_DEG (box bottom centre, camera frame).")
+@click.option("--out", required=True, type=click.Path(file_okay=False, path_type=Path), help="Output folder.")
+@click.option("--debug", is_flag=True, help="Also write mask.png and shadow.exr; show tracebacks.")
+@_runtime_errors
+def insert(dataroot, version, scene, sample_token, camera, asset, assets_dir, asset_front, asset_length,
+           quality, seed, ev, level, n_objects, yaw_sigma, image, intrinsics, depth, envmap, pose_camera, out, debug):
+    """Insert a car into one image; write image.png|jpg and labels.json.
+
+    \b
+    Dataset form (a nuScenes sample; without --dataroot, a bundled sample scene):
+      streetaug insert --scene sample-sunny --out out/sunny
+      streetaug insert --scene scene-0061 --dataroot ../shared/data/nuscenes-real \\
+          --version v1.0-mini --camera CAM_FRONT --out out/real
+    Image form (any image with depth, a camera-frame env map and a pose):
+      streetaug insert --image img.png --intrinsics 1266,1266,816,491 --depth depth.exr \\
+          --envmap env.exr --asset car.glb --pose-camera 0.5,1.5,15,90 --out out/img
+    """
+    from streetaug.augment.pipeline import InsertOptions, insert_into_image, insert_into_view, write_insert_outputs
+
+    options = InsertOptions(quality=quality, level=level, seed=seed, n_objects=n_objects, yaw_sigma_deg=yaw_sigma, ev=ev)
+    if image is not None:
+        missing = [n for n, v in [("--intrinsics", intrinsics), ("--depth", depth), ("--envmap", envmap),
+                                  ("--asset", asset), ("--pose-camera", pose_camera)] if v is None]
+        if missing:
+            raise click.UsageError(f"the image form of insert also needs {', '.join(missing)}")
+        from streetaug.augment.assets.select import load_asset_options
+        from streetaug.augment.io import read_exr, read_image_rgb
+
+        rgb = read_image_rgb(image)
+        K = _intrinsics(intrinsics, None, rgb.shape[1], rgb.shape[0])
+        depth_m = _read_depth(depth)
+        env = read_exr(envmap)
+        mesh = load_asset_options(asset, asset_front, asset_length)
+        pose = _parse_floats(pose_camera, 4, "--pose-camera")
+        result = insert_into_image(rgb, K, depth_m, env, mesh, pose, options)
+        suffix = image.suffix
+    else:
+        from streetaug.augment.assets.select import select_assets
+        from streetaug.augment.pipeline import item_seed
+
+        if scene is None and sample_token is None:
+            raise click.UsageError("give --scene NAME_OR_TOKEN (dataset form) or --image IMG (image form)")
+        reader = _open_dataset(dataroot, version)
+        sample = reader.sample(_resolve_sample(reader, scene, sample_token))
+        view = _view(sample, camera)
+        rng = item_seed(seed, "asset", sample.token, camera)
+        meshes = select_assets(rng, n_objects, asset, assets_dir, asset_front, asset_length)
+        result = insert_into_view(sample, view, meshes, options)
+        suffix = Path(view.image_path).suffix
+    path = write_insert_outputs(result, out, suffix, debug=debug)
+    if result.skipped_reason:
+        click.echo(f"no object inserted: {result.skipped_reason} (image copied unchanged to {path})")
+    else:
+        click.echo(f"wrote {path} and {out}/labels.json: {len(result.objects)} object(s), "
+                   f"{result.timing_s['total']:.2f} s")
+
+
+def _read_depth(path: Path) -> np.ndarray:
+    from streetaug.augment.io import InputError, read_exr
+
+    if path.suffix.lower() == ".npy":
+        if not path.is_file():
+            raise InputError(f"{path}: depth file not found")
+        depth = np.load(path, allow_pickle=False)
+    elif path.suffix.lower() == ".exr":
+        depth = read_exr(path)
+        depth = depth[..., 0]
+    else:
+        raise InputError(f"{path}: depth must be .exr or .npy (metres, camera-frame z)")
+    if depth.ndim != 2:
+        raise InputError(f"{path}: depth must be a single-channel (H, W) map, got shape {depth.shape}")
+    return depth.astype(np.float32)
+
+
+# ----------------------------------------------------------------------------- batch
+
+
+@main.command("batch")
+@click.option("--dataroot", type=click.Path(file_okay=False, path_type=Path),
+              help="nuScenes dataroot (default: the bundled sample scenes).")
+@click.option("--version", "version", default=None, help="Dataset version folder, e.g. v1.0-mini.")
+@click.option("--out", required=True, type=click.Path(file_okay=False, path_type=Path), help="Output folder.")
+@click.option("--cameras", default=CAMERA_DEFAULT, show_default=True, help="Comma-separated camera channels.")
+@click.option("--limit", type=click.IntRange(min=1), help="At most this many samples.")
+@_asset_options
+@_render_options
+@click.option("--level", type=click.Choice(["L0", "L1"]), default="L1", show_default=True, help="Lighting level.")
+@click.option("--fail-fast", is_flag=True, help="Stop at the first failing image.")
+@click.option("--debug", is_flag=True, help="Show tracebacks.")
+@_runtime_errors
+def batch(dataroot, version, out, cameras, limit, asset, assets_dir, asset_front, asset_length, quality, seed, ev,
+          level, fail_fast, debug):
+    """Augment every sample of a dataset (first version: images + labels; resumes when re-run).
+
+    \b
+    Examples:
+      streetaug batch --out out/dataset
+      streetaug batch --dataroot ../shared/data/nuscenes-real --version v1.0-mini \\
+          --cameras CAM_FRONT,CAM_FRONT_LEFT --out out/real-aug
+    """
+    from streetaug.augment.batch import BatchConfig, run_batch
+
+    reader = _open_dataset(dataroot, version)
+    config = BatchConfig(
+        cameras=tuple(c.strip() for c in cameras.split(",") if c.strip()), limit=limit, seed=seed,
+        quality=quality, level=level, ev=ev, asset=asset, assets_dir=assets_dir, asset_front=asset_front,
+        asset_length=asset_length, fail_fast=fail_fast,
+    )
+    t = time.perf_counter()
+    summary = run_batch(reader, out, config)
+    click.echo(f"done in {time.perf_counter() - t:.1f} s: " +
+               ", ".join(f"{k} {v}" for k, v in sorted(summary["counts"].items())) + f"; outputs in {out}")
+
+
+# ----------------------------------------------------------------------------- make-samples
+
+
+@main.command("make-samples")
+@click.option("--out", required=True, type=click.Path(file_okay=False, path_type=Path), help="Output dataroot.")
+@click.option("--scenes", default=None, help="Comma-separated scene names (default: all).")
+@click.option("--width", type=int, default=1600, show_default=True)
+@click.option("--height", type=int, default=900, show_default=True)
+@click.option("--seed", type=int, default=0, show_default=True)
+@click.option("--debug", is_flag=True, help="Show tracebacks.")
+@_runtime_errors
+def make_samples(out, scenes, width, height, seed, debug):
+    """Generate the procedural sample scenes (nuScenes format + ground-truth lighting).
+
+    \b
+    Example (regenerates the bundled scenes byte-identically):
+      streetaug make-samples --out examples/nuscenes-samples
+    """
+    from streetaug.augment.scenegen.make import make_sample_scenes
+
+    names = [s.strip() for s in scenes.split(",")] if scenes else None
+    paths = make_sample_scenes(out, names=names, width=width, height=height, seed=seed)
+    click.echo(f"wrote {len(paths)} scene(s) into {out}")
+
+
+if __name__ == "__main__":
+    main()

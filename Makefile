@@ -1,0 +1,42 @@
+# Two entry points that work on a fresh machine (Python 3.11 with venv; no GPU needed):
+#   make demo   set up .venv and augment the bundled sample scenes (outputs in out/demo)
+#   make test   set up .venv and run the test suite
+VENV   ?= .venv
+PYTHON ?= python3
+BIN    := $(VENV)/bin
+OUT    ?= out/demo
+
+.PHONY: setup demo test bench samples clean
+
+$(BIN)/.installed: pyproject.toml
+	$(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet --upgrade pip
+	# torch is pinned to the CPU build (torch==2.13.0); an unpinned torch would pull a multi-GB CUDA build.
+	$(BIN)/python -m pip install --quiet "torch==2.13.0"
+	$(BIN)/python -m pip install --quiet -e ".[test]"
+	touch $@
+
+setup: $(BIN)/.installed
+
+demo: setup
+	$(BIN)/streetaug batch --cameras CAM_FRONT,CAM_FRONT_LEFT --out $(OUT)
+	$(BIN)/streetaug insert --scene sample-sunny --debug --out $(OUT)/insert-sunny
+	$(BIN)/streetaug predict-light --scene sample-lowsun --out $(OUT)/light-lowsun
+	@echo
+	@echo "Outputs:"
+	@echo "  $(OUT)/samples/<CAMERA>/*.jpg      augmented images of every bundled scene"
+	@echo "  $(OUT)/labels/<CAMERA>/*.json      their 3D labels; $(OUT)/summary.json, augment_log.jsonl"
+	@echo "  $(OUT)/insert-sunny/               one insertion with mask.png and shadow.exr"
+	@echo "  $(OUT)/light-lowsun/               lighting.json, envmap_camera.exr, preview.png"
+
+test: setup
+	$(BIN)/pytest -q
+
+bench: setup
+	$(BIN)/python benchmarks/bench_render.py
+
+samples: setup
+	$(BIN)/streetaug make-samples --out examples/nuscenes-samples
+
+clean:
+	rm -rf $(VENV) out .pytest_cache

@@ -1,0 +1,12 @@
+"""Errors raised by the dataset readers."""
+
+from __future__ import annotations
+
+from streetaug.augment.io import InputError
+
+
+class DatasetError(InputError):
+    """A dataset on disk is missing, incomplete or inconsistent.
+
+    The message names the file (or table and token), what was expected, and what to do.
+    """

@@ -1,0 +1,385 @@
+"""A nuScenes v1.0 reader that needs no devkit: tables, cameras, LiDAR, lidarseg, boxes, drivable area.
+
+Layout read (as in nuScenes)::
+
+    <dataroot>/<version>/{scene,sample,sample_data,...}.json   tables (lists of rows keyed by token)
+    <dataroot>/samples/<CHANNEL>/...                          images (.jpg) and LiDAR (.pcd.bin)
+    <dataroot>/lidarseg/<version>/<sd_token>_lidarseg.bin     optional lidarseg labels
+    <dataroot>/maps/expansion/<location>.json                 optional map expansion (drivable_area)
+
+Frames: ``calibrated_sensor`` gives sensor -> ego (``T_ego_from_cam``; nuScenes camera frames are
+OpenCV frames), ``ego_pose`` gives ego -> global at the sample_data's own timestamp.  Quaternions are
+``[w, x, y, z]``.  Tables load on first use, once; images and LiDAR load only when accessed.
+
+Usage::
+
+    reader = NuScenesReader("/data/nuscenes", "v1.0-mini")
+    token = reader.sample_tokens("scene-0061")[0]
+    sample = reader.sample(token)
+    cam = sample.cameras["CAM_FRONT"]          # cam.image decodes on first access
+    points_cam = sample.lidar.points_in(cam.T_cam_from_global)
+"""
+
+from __future__ import annotations
+
+import json
+from collections import defaultdict
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from streetaug.augment.conventions import ConventionError, make_transform
+
+from .errors import DatasetError
+from .lidarseg import read_lidar_points, read_lidarseg_labels
+from .nuscenes_map import DrivableArea, map_expansion_path
+from .sample import Box, CameraView, LidarSweep, Sample
+
+__all__ = ["DatasetError", "NuScenesReader", "read_lidar_points", "read_lidarseg_labels"]
+
+REQUIRED_TABLES = (
+    "scene",
+    "sample",
+    "sample_data",
+    "calibrated_sensor",
+    "ego_pose",
+    "log",
+    "map",
+    "sample_annotation",
+    "instance",
+    "category",
+    "sensor",
+)
+OPTIONAL_TABLES = ("attribute", "visibility", "lidarseg")
+LIDAR_CHANNEL = "LIDAR_TOP"
+_MAX_LISTED = 10
+
+
+def _listing(values: list[str]) -> str:
+    shown = ", ".join(values[:_MAX_LISTED])
+    return shown + (f", ... ({len(values)} in total)" if len(values) > _MAX_LISTED else "")
+
+
+class NuScenesReader:
+    """Read one nuScenes-format dataset version (e.g. ``v1.0-mini``) from ``dataroot``.
+
+    Args:
+        dataroot: folder holding ``<version>/`` (the tables), ``samples/`` and optionally ``maps/``
+            and ``lidarseg/``.
+        version: table folder name, e.g. ``v1.0-mini`` or ``v1.0-trainval``.
+        with_map: attach the location's drivable area to each ``Sample`` (parsed once per location).
+
+    Raises:
+        DatasetError: ``dataroot`` or ``dataroot/version`` is missing, or a required table file is
+            absent.  (Table contents are parsed lazily, on first use.)
+    """
+
+    def __init__(self, dataroot: str | Path, version: str, *, with_map: bool = True) -> None:
+        self.dataroot = Path(dataroot)
+        self.version = str(version)
+        self.with_map = with_map
+        if not self.dataroot.is_dir():
+            raise DatasetError(f"{self.dataroot}: dataset root folder not found (check --dataroot)")
+        self.table_dir = self.dataroot / self.version
+        if not self.table_dir.is_dir():
+            found = sorted(p.name for p in self.dataroot.iterdir() if p.is_dir() and p.name.startswith("v"))
+            hint = f"versions found: {', '.join(found)}" if found else "no version folders found"
+            raise DatasetError(
+                f"{self.table_dir}: table folder for version '{self.version}' not found ({hint}; "
+                "check --version)"
+            )
+        missing = [t for t in REQUIRED_TABLES if not (self.table_dir / f"{t}.json").is_file()]
+        if missing:
+            raise DatasetError(
+                f"{self.table_dir / (missing[0] + '.json')}: required nuScenes table missing "
+                f"(missing: {', '.join(missing)}); the dataset is incomplete, re-extract the metadata archive"
+            )
+        self._rows: dict[str, list[dict]] = {}
+        self._by_token: dict[str, dict[str, dict]] = {}
+        self._sample_data_by_sample: dict[str, list[dict]] | None = None
+        self._annotations_by_sample: dict[str, list[dict]] | None = None
+        self._lidarseg_by_sd: dict[str, dict] | None = None
+        self._drivable: dict[str, DrivableArea | None] = {}
+
+    def __repr__(self) -> str:
+        return f"NuScenesReader({str(self.dataroot)!r}, {self.version!r})"
+
+    # ------------------------------------------------------------------ tables
+
+    def table(self, name: str) -> list[dict]:
+        """Raw rows of table ``name`` (parsed once; do not mutate).  Absent optional tables -> []."""
+        if name not in self._rows:
+            path = self.table_dir / f"{name}.json"
+            if not path.is_file():
+                if name in OPTIONAL_TABLES:
+                    self._rows[name] = []
+                    return self._rows[name]
+                raise DatasetError(f"{path}: nuScenes table '{name}' not found")
+            try:
+                rows = json.loads(path.read_text())
+            except (json.JSONDecodeError, UnicodeDecodeError) as e:
+                raise DatasetError(f"{path}: table is not valid JSON ({e})") from None
+            if not isinstance(rows, list) or not all(isinstance(r, dict) and "token" in r for r in rows):
+                raise DatasetError(f"{path}: expected a JSON list of rows, each with a 'token'")
+            self._rows[name] = rows
+        return self._rows[name]
+
+    def get(self, table: str, token: str) -> dict:
+        """The row of ``table`` with ``token``; DatasetError naming the table and token otherwise."""
+        if table not in self._by_token:
+            self._by_token[table] = {r["token"]: r for r in self.table(table)}
+        row = self._by_token[table].get(token)
+        if row is None:
+            raise DatasetError(
+                f"{self.table_dir / (table + '.json')}: no {table} with token '{token}' "
+                f"({len(self._by_token[table])} rows)"
+            )
+        return row
+
+    def _field(self, row: dict, table: str, key: str) -> Any:
+        if key not in row:
+            raise DatasetError(
+                f"{self.table_dir / (table + '.json')}: row '{row.get('token')}' has no field '{key}'"
+            )
+        return row[key]
+
+    # ------------------------------------------------------------------ scenes and samples
+
+    def scene_names(self) -> list[str]:
+        """Names of all scenes in table order, e.g. ``['scene-0061', ...]``."""
+        return [self._field(s, "scene", "name") for s in self.table("scene")]
+
+    def find_scene(self, name_or_token: str) -> dict:
+        """The scene row whose ``name`` or ``token`` equals ``name_or_token``."""
+        for s in self.table("scene"):
+            if s.get("name") == name_or_token or s["token"] == name_or_token:
+                return s
+        raise DatasetError(
+            f"{self.table_dir / 'scene.json'}: no scene named or with token '{name_or_token}' "
+            f"(known scenes: {_listing(self.scene_names())})"
+        )
+
+    def sample_tokens(self, scene: str | None = None) -> list[str]:
+        """Sample tokens in time order, following ``first_sample_token`` / ``next``.
+
+        Args:
+            scene: scene name or token; None = all scenes, in scene-table order.
+        """
+        scenes = self.table("scene") if scene is None else [self.find_scene(scene)]
+        tokens: list[str] = []
+        for s in scenes:
+            token = self._field(s, "scene", "first_sample_token")
+            seen: set[str] = set()
+            while token:
+                if token in seen:
+                    raise DatasetError(
+                        f"{self.table_dir / 'sample.json'}: 'next' links of scene '{s.get('name')}' form a "
+                        f"cycle at sample '{token}'"
+                    )
+                seen.add(token)
+                tokens.append(token)
+                token = self.get("sample", token).get("next", "")
+        return tokens
+
+    def _sample_row(self, sample_token: str) -> dict:
+        try:
+            return self.get("sample", sample_token)
+        except DatasetError:
+            n = len(self.table("sample"))
+            first = ", ".join(r["token"] for r in self.table("sample")[:3])
+            raise DatasetError(
+                f"{self.table_dir / 'sample.json'}: unknown sample token '{sample_token}' "
+                f"({n} samples, e.g. {first}); list them with sample_tokens()"
+            ) from None
+
+    def scene_of(self, sample_token: str) -> dict:
+        """The scene row of a sample."""
+        return self.get("scene", self._field(self._sample_row(sample_token), "sample", "scene_token"))
+
+    def location_of(self, sample_token: str) -> str:
+        """``log.location`` of the sample's scene, e.g. ``singapore-onenorth`` (names its global frame)."""
+        log = self.get("log", self._field(self.scene_of(sample_token), "scene", "log_token"))
+        return self._field(log, "log", "location")
+
+    # ------------------------------------------------------------------ per-sample indices
+
+    def sample_data_rows(self, sample_token: str) -> list[dict]:
+        """All ``sample_data`` rows of a sample (keyframes and sweeps)."""
+        if self._sample_data_by_sample is None:
+            index: dict[str, list[dict]] = defaultdict(list)
+            for r in self.table("sample_data"):
+                index[r.get("sample_token", "")].append(r)
+            self._sample_data_by_sample = dict(index)
+        return self._sample_data_by_sample.get(sample_token, [])
+
+    def annotation_rows(self, sample_token: str) -> list[dict]:
+        """All ``sample_annotation`` rows of a sample."""
+        if self._annotations_by_sample is None:
+            index: dict[str, list[dict]] = defaultdict(list)
+            for r in self.table("sample_annotation"):
+                index[r.get("sample_token", "")].append(r)
+            self._annotations_by_sample = dict(index)
+        return self._annotations_by_sample.get(sample_token, [])
+
+    def sensor_of(self, sample_data: dict) -> dict:
+        """The ``sensor`` row (``channel``, ``modality``) of a ``sample_data`` row."""
+        calib = self.get("calibrated_sensor", self._field(sample_data, "sample_data", "calibrated_sensor_token"))
+        return self.get("sensor", self._field(calib, "calibrated_sensor", "sensor_token"))
+
+    def keyframe_sample_data(self, sample_token: str, modality: str) -> dict[str, dict]:
+        """Channel -> keyframe ``sample_data`` row of the given modality (``camera``/``lidar``/``radar``)."""
+        out: dict[str, dict] = {}
+        for sd in self.sample_data_rows(sample_token):
+            if not sd.get("is_key_frame", False):
+                continue
+            sensor = self.sensor_of(sd)
+            if sensor.get("modality") == modality:
+                out[sensor["channel"]] = sd
+        return out
+
+    # ------------------------------------------------------------------ poses
+
+    def _transform(self, row: dict, table: str) -> np.ndarray:
+        """4x4 transform from a row's ``rotation`` ([w, x, y, z]) and ``translation``."""
+        try:
+            return make_transform(self._field(row, table, "rotation"), self._field(row, table, "translation"))
+        except (ConventionError, ValueError, TypeError) as e:
+            if isinstance(e, DatasetError):
+                raise
+            raise DatasetError(
+                f"{self.table_dir / (table + '.json')}: row '{row.get('token')}' has an invalid pose "
+                f"(rotation [w, x, y, z] and translation [x, y, z] expected): {e}"
+            ) from None
+
+    def T_ego_from_sensor(self, sample_data: dict) -> np.ndarray:
+        """(4, 4) sensor -> ego transform of a ``sample_data`` row (from its calibrated_sensor)."""
+        calib = self.get("calibrated_sensor", self._field(sample_data, "sample_data", "calibrated_sensor_token"))
+        return self._transform(calib, "calibrated_sensor")
+
+    def T_global_from_ego(self, sample_data: dict) -> np.ndarray:
+        """(4, 4) ego -> global transform at the ``sample_data``'s own timestamp."""
+        pose = self.get("ego_pose", self._field(sample_data, "sample_data", "ego_pose_token"))
+        return self._transform(pose, "ego_pose")
+
+    # ------------------------------------------------------------------ sensors
+
+    def camera_view(self, sample_data_token: str) -> CameraView:
+        """A ``CameraView`` for a camera ``sample_data`` row; the image is not decoded here."""
+        sd = self.get("sample_data", sample_data_token)
+        calib = self.get("calibrated_sensor", self._field(sd, "sample_data", "calibrated_sensor_token"))
+        sensor = self.get("sensor", self._field(calib, "calibrated_sensor", "sensor_token"))
+        K = np.asarray(self._field(calib, "calibrated_sensor", "camera_intrinsic"), dtype=np.float64)
+        if K.shape != (3, 3) or not np.all(np.isfinite(K)):
+            raise DatasetError(
+                f"{self.table_dir / 'calibrated_sensor.json'}: row '{calib['token']}' "
+                f"({sensor.get('channel')}): camera_intrinsic must be a finite 3x3 matrix, got shape {K.shape}"
+            )
+        return CameraView(
+            channel=sensor["channel"],
+            sample_data_token=sd["token"],
+            image_path=str(self.dataroot / self._field(sd, "sample_data", "filename")),
+            K=K,
+            width=int(sd.get("width", 0)),
+            height=int(sd.get("height", 0)),
+            T_ego_from_cam=self._transform(calib, "calibrated_sensor"),
+            T_global_from_ego=self.T_global_from_ego(sd),
+            timestamp_us=int(self._field(sd, "sample_data", "timestamp")),
+        )
+
+    def lidarseg_path(self, sample_data_token: str) -> Path | None:
+        """Path of the lidarseg labels of a LiDAR ``sample_data``, or None when the dataset has none.
+
+        Uses ``lidarseg.json``'s ``filename`` when the table lists the token, else
+        ``lidarseg/<version>/<token>_lidarseg.bin`` if that file exists.
+        """
+        if self._lidarseg_by_sd is None:
+            self._lidarseg_by_sd = {r.get("sample_data_token", ""): r for r in self.table("lidarseg")}
+        row = self._lidarseg_by_sd.get(sample_data_token)
+        if row is not None:
+            return self.dataroot / self._field(row, "lidarseg", "filename")
+        fallback = self.dataroot / "lidarseg" / self.version / f"{sample_data_token}_lidarseg.bin"
+        return fallback if fallback.is_file() else None
+
+    def lidar_sweep(self, sample_data_token: str) -> LidarSweep:
+        """Read the LiDAR sweep (and its lidarseg labels when present) of a LiDAR ``sample_data``."""
+        sd = self.get("sample_data", sample_data_token)
+        points = read_lidar_points(self.dataroot / self._field(sd, "sample_data", "filename"))
+        seg_path = self.lidarseg_path(sd["token"])
+        labels = None if seg_path is None else read_lidarseg_labels(seg_path, num_points=len(points))
+        return LidarSweep(
+            points_sensor=points[:, :3].astype(np.float64),
+            intensity=points[:, 3].copy(),
+            T_ego_from_lidar=self.T_ego_from_sensor(sd),
+            T_global_from_ego=self.T_global_from_ego(sd),
+            timestamp_us=int(self._field(sd, "sample_data", "timestamp")),
+            labels=labels,
+        )
+
+    # ------------------------------------------------------------------ boxes
+
+    def box(self, annotation: dict) -> Box:
+        """A ``Box`` (global frame) from a ``sample_annotation`` row."""
+        table = "sample_annotation"
+        instance = self.get("instance", self._field(annotation, table, "instance_token"))
+        category = self.get("category", self._field(instance, "instance", "category_token"))
+        attributes = tuple(self.get("attribute", t)["name"] for t in annotation.get("attribute_tokens", []))
+        center = np.asarray(self._field(annotation, table, "translation"), dtype=np.float64)
+        wlh = np.asarray(self._field(annotation, table, "size"), dtype=np.float64)
+        rotation = np.asarray(self._field(annotation, table, "rotation"), dtype=np.float64)
+        if center.shape != (3,) or wlh.shape != (3,) or rotation.shape != (4,) or np.any(wlh <= 0):
+            raise DatasetError(
+                f"{self.table_dir / (table + '.json')}: row '{annotation['token']}' needs translation (3,), "
+                f"positive size [w, l, h] (3,) and rotation [w, x, y, z] (4,); got shapes "
+                f"{center.shape}, {wlh.shape}, {rotation.shape}"
+            )
+        rotation = rotation / np.linalg.norm(rotation)
+        return Box(center, wlh, rotation, category["name"], annotation["token"], attributes)
+
+    # ------------------------------------------------------------------ map
+
+    def drivable_area(self, location: str) -> DrivableArea | None:
+        """The drivable area (with spatial index) of ``location``, or None without a map expansion file."""
+        if location not in self._drivable:
+            path = map_expansion_path(self.dataroot, location)
+            self._drivable[location] = DrivableArea.from_file(path) if path.is_file() else None
+        return self._drivable[location]
+
+    def drivable_area_global(self, location: str) -> list | None:
+        """Drivable-area (Multi)Polygons of ``location`` in global x/y (metres); None without a map."""
+        area = self.drivable_area(location)
+        return None if area is None else area.geometries
+
+    def drivable_area_near(self, location: str, xy_global: np.ndarray, radius_m: float):
+        """Drivable area clipped to the square of half-side ``radius_m`` around global ``xy_global`` (2,).
+
+        Returns a shapely geometry in global x/y (possibly empty), or None without a map.
+        """
+        area = self.drivable_area(location)
+        return None if area is None else area.near(xy_global, radius_m)
+
+    # ------------------------------------------------------------------ the Sample
+
+    def sample(self, token: str) -> Sample:
+        """Build the ``Sample`` of a keyframe: cameras (lazy images), boxes, lazy LiDAR, drivable area."""
+        row = self._sample_row(token)
+        scene = self.scene_of(token)
+        location = self.location_of(token)
+        cameras = {
+            channel: self.camera_view(sd["token"])
+            for channel, sd in sorted(self.keyframe_sample_data(token, "camera").items())
+        }
+        boxes = tuple(self.box(a) for a in self.annotation_rows(token))
+        lidars = self.keyframe_sample_data(token, "lidar")
+        lidar_sd = lidars.get(LIDAR_CHANNEL) or (next(iter(lidars.values())) if lidars else None)
+        load_lidar = None if lidar_sd is None else (lambda t=lidar_sd["token"]: self.lidar_sweep(t))
+        return Sample(
+            token=row["token"],
+            scene_name=self._field(scene, "scene", "name"),
+            location=location,
+            timestamp_us=int(self._field(row, "sample", "timestamp")),
+            cameras=cameras,
+            boxes=boxes,
+            drivable_area_global=self.drivable_area_global(location) if self.with_map else None,
+            _load_lidar=load_lidar,
+        )

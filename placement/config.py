@@ -1,0 +1,103 @@
+"""Every placement threshold in one frozen dataclass.
+
+The defaults follow the paper's supplement (drivable surface, 10-40 m, >= 1 m from static and >= 3 m
+from dynamic classes, yaw along or against the ego heading with 3 deg noise; use 15 deg for
+augmentation) plus the checks streetaug adds (LiDAR obstacles, lidarseg classes, camera view).
+Derive variants with ``dataclasses.replace(PlacementConfig(), yaw_sigma_deg=15.0)``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+# nuScenes-lidarseg class indices used by placement.
+LIDARSEG_VEHICLE_CAR = 17
+LIDARSEG_DRIVEABLE = 24
+LIDARSEG_NON_DRIVABLE = (25, 26, 27, 28, 29, 30)  # flat.other, sidewalk, terrain, manmade, static.other, vegetation
+LIDARSEG_GROUND = (24, 25, 26, 27)  # flat.* classes: usable for the local ground fit
+LIDARSEG_EGO = 31
+
+
+@dataclass(frozen=True)
+class PlacementConfig:
+    """Thresholds of the placement rules (metres, degrees, counts).
+
+    Attributes:
+        min_distance_m, max_distance_m: horizontal (global x/y) distance from the camera centre to the
+            box centre must lie in [min, max].
+        dynamic_clearance_m: minimum footprint-to-footprint distance to annotated vehicle/human/animal boxes.
+        static_clearance_m: minimum footprint-to-footprint distance to other annotated boxes; also the
+            margin around the footprint in which unannotated LiDAR obstacles and non-drivable lidarseg
+            points are not allowed (the paper's 1 m from static background classes).
+        mutual_clearance_m: minimum footprint distance between objects inserted into the same image.
+        yaw_sigma_deg: std of the Gaussian yaw noise around the ego heading (3 realistic, 15 augmentation).
+        opposite_heading_probability: probability of facing against the ego heading.
+        min_visible_fraction: minimum fraction of the projected 3D box (convex hull of its corners)
+            inside the image; the whole box must also be in front of the camera (z >= near_plane_m).
+        near_plane_m: minimum camera-frame z of every box corner.
+        n_candidates: candidates sampled per object.
+        n_objects: objects to place per image (each mutually non-colliding).
+        obstacle_min_height_m, obstacle_max_height_m: a LiDAR point counts as an obstacle when its height
+            above the local ground plane is in this range (and it lies in no annotated box).
+        obstacle_max_points: tolerated obstacle points near a footprint (LiDAR noise).
+        lidarseg_max_points: tolerated non-drivable lidarseg points near a footprint (label noise).
+        ground_radius_m: LiDAR points within this horizontal radius of the box centre fit the local ground.
+        ground_min_points: fewer ground points than this -> fall back to the ego ground plane.
+        ground_inlier_m: plane-fit inlier band (metres, along the normal).
+        ground_max_tilt_deg: fitted planes steeper than this are rejected (fallback to the ego plane).
+        grid_resolution_m: cell size of bird's-eye drivable grids built from LiDAR.
+        closing_radius_m: morphological closing radius applied to those grids.
+        ray_fill_max_gap_m: along one azimuth, two consecutive drivable points closer than this fill the
+            cells between them (the sparse far LiDAR rings).
+        azimuth_bin_deg: azimuth bin of that fill.
+        corridor_half_width_m: LiDAR ground fallback: only points with |y_ego| below this (the ego's corridor).
+        lidar_ground_band_m: LiDAR ground fallback: points within this height of the ego ground plane are ground.
+        map_roi_m: the map's drivable polygons are clipped to this radius around the camera.
+        kerb_distance_m: an object whose footprint is this close to the edge of the drivable area is
+            labelled ``vehicle.parked``; otherwise ``vehicle.moving``.
+    """
+
+    min_distance_m: float = 10.0
+    max_distance_m: float = 40.0
+    dynamic_clearance_m: float = 3.0
+    static_clearance_m: float = 1.0
+    mutual_clearance_m: float = 1.0
+    yaw_sigma_deg: float = 3.0
+    opposite_heading_probability: float = 0.5
+    min_visible_fraction: float = 0.5
+    near_plane_m: float = 0.5
+    n_candidates: int = 400
+    n_objects: int = 1
+    obstacle_min_height_m: float = 0.3
+    obstacle_max_height_m: float = 2.0
+    obstacle_max_points: int = 2
+    lidarseg_max_points: int = 2
+    ground_radius_m: float = 4.0
+    ground_min_points: int = 8
+    ground_inlier_m: float = 0.08
+    ground_max_tilt_deg: float = 12.0
+    grid_resolution_m: float = 0.25
+    closing_radius_m: float = 0.75
+    ray_fill_max_gap_m: float = 15.0
+    azimuth_bin_deg: float = 0.5
+    corridor_half_width_m: float = 6.0
+    lidar_ground_band_m: float = 0.25
+    map_roi_m: float = 80.0
+    kerb_distance_m: float = 1.0
+
+    def __post_init__(self) -> None:
+        if not 0.0 <= self.min_distance_m < self.max_distance_m:
+            raise ValueError(
+                f"PlacementConfig: need 0 <= min_distance_m < max_distance_m, got "
+                f"{self.min_distance_m}, {self.max_distance_m}"
+            )
+        for name in ("dynamic_clearance_m", "static_clearance_m", "mutual_clearance_m", "yaw_sigma_deg",
+                     "grid_resolution_m", "ground_radius_m"):
+            if getattr(self, name) < 0:
+                raise ValueError(f"PlacementConfig.{name} must be >= 0, got {getattr(self, name)}")
+        if self.n_candidates < 1 or self.n_objects < 1:
+            raise ValueError(
+                f"PlacementConfig: n_candidates and n_objects must be >= 1, got {self.n_candidates}, {self.n_objects}"
+            )
+        if not 0.0 <= self.min_visible_fraction <= 1.0:
+            raise ValueError(f"PlacementConfig.min_visible_fraction must be in [0, 1], got {self.min_visible_fraction}")

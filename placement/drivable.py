@@ -1,0 +1,255 @@
+"""Where the road is: a drivable area in global x/y from the best source a sample offers.
+
+Sources, best first:
+
+* ``"map"``: the map expansion's ``drivable_area`` polygons (``Sample.drivable_area_global``), clipped to a
+  disc around the camera. Confidence ``"high"``.
+* ``"lidarseg"``: LiDAR points labelled ``flat.driveable_surface`` (24), rasterised to a bird's-eye grid.
+  Far LiDAR rings are metres apart, so along each azimuth bin the cells between two consecutive
+  drivable points (no other labelled point between them, gap below ``ray_fill_max_gap_m``) are filled,
+  then a morphological closing joins neighbouring azimuths. Confidence ``"medium"``.
+* ``"lidar-ground"``: the same grid from LiDAR points near the ego's ground plane (ego z = 0) inside
+  the ego corridor (|y_ego| < ``corridor_half_width_m``); anything higher blocks the fill. Confidence ``"low"``.
+
+Grid convention: cell ``grid[iy, ix]`` covers global ``x in [x0 + ix res, x0 + (ix + 1) res)`` and
+``y in [y0 + iy res, y0 + (iy + 1) res)`` with ``(x0, y0) = grid_origin_xy``; outside the grid is not drivable.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import cv2
+import numpy as np
+import shapely
+
+from streetaug.augment.conventions import check_shape, invert_transform, transform_points
+
+from .config import LIDARSEG_DRIVEABLE, LIDARSEG_EGO, PlacementConfig
+
+_MAX_BLOCKER_HEIGHT_M = 3.0  # points higher above the ego ground (canopies, signs) do not block the road
+
+
+@dataclass(frozen=True)
+class DrivableArea:
+    """A drivable region in the global x/y plane (metres).
+
+    Attributes:
+        source: ``"map"``, ``"lidarseg"`` or ``"lidar-ground"``.
+        confidence: ``"high"``, ``"medium"`` or ``"low"``.
+        region: shapely (Multi)Polygon in global x/y (polygon sources), else None.
+        grid: (H, W) bool bird's-eye grid (grid sources), else None.
+        grid_origin_xy: (2,) float64 global x/y of the grid's corner (cell (0, 0) lower-left), metres.
+        resolution_m: grid cell size in metres.
+    """
+
+    source: str
+    confidence: str
+    region: Any = None
+    grid: np.ndarray | None = None
+    grid_origin_xy: np.ndarray | None = None
+    resolution_m: float = 0.25
+
+    # ------------------------------------------------------------------ queries
+    def contains_points(self, xy: np.ndarray) -> np.ndarray:
+        """(N,) bool: whether global x/y points (N, 2) are drivable."""
+        xy = np.asarray(xy, dtype=np.float64)
+        check_shape(xy, ("N", 2), "xy")
+        if self.region is not None:
+            return shapely.contains_xy(self.region, xy[:, 0], xy[:, 1])
+        ix, iy, inside = self._cells(xy)
+        out = np.zeros(len(xy), dtype=bool)
+        out[inside] = self.grid[iy[inside], ix[inside]]
+        return out
+
+    def contains_footprints(self, corners_xy: np.ndarray) -> np.ndarray:
+        """(M,) bool: whether each whole footprint (corners (M, 4, 2), global x/y, in order) is drivable.
+
+        Polygon sources test polygon containment (all corners and edges); grid sources test a dense
+        lattice of points over each footprint (spacing <= half a cell, edges included).
+        """
+        corners_xy = np.asarray(corners_xy, dtype=np.float64)
+        check_shape(corners_xy, ("M", 4, 2), "corners_xy")
+        if len(corners_xy) == 0:
+            return np.zeros(0, dtype=bool)
+        if self.region is not None:
+            return shapely.contains(self.region, shapely.polygons(corners_xy))
+        pts = _footprint_lattice(corners_xy, self.resolution_m / 2.0)  # (M, S, 2)
+        ok = self.contains_points(pts.reshape(-1, 2)).reshape(pts.shape[:2])
+        return ok.all(axis=1)
+
+    def edge_distance(self, corners_xy: np.ndarray) -> np.ndarray:
+        """(M,) float64 distance (m) from each footprint to the nearest non-drivable place (0 if it overlaps)."""
+        corners_xy = np.asarray(corners_xy, dtype=np.float64)
+        check_shape(corners_xy, ("M", 4, 2), "corners_xy")
+        if len(corners_xy) == 0:
+            return np.zeros(0)
+        if self.region is not None:
+            polys = shapely.polygons(corners_xy)
+            d = shapely.distance(polys, shapely.boundary(self.region))
+            return np.where(shapely.contains(self.region, polys), d, 0.0)
+        dist = cv2.distanceTransform(
+            np.pad(self.grid, 1).astype(np.uint8), cv2.DIST_L2, cv2.DIST_MASK_PRECISE
+        )[1:-1, 1:-1] * self.resolution_m
+        pts = _footprint_lattice(corners_xy, self.resolution_m / 2.0)
+        ix, iy, inside = self._cells(pts.reshape(-1, 2))
+        d = np.zeros(len(inside))
+        d[inside] = dist[iy[inside], ix[inside]]
+        # distanceTransform measures centre-to-centre; subtract half a cell for the distance to the edge
+        return np.maximum(d.reshape(pts.shape[:2]).min(axis=1) - 0.5 * self.resolution_m, 0.0)
+
+    def _cells(self, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        rel = (xy - self.grid_origin_xy) / self.resolution_m
+        ix = np.floor(rel[:, 0]).astype(np.int64)
+        iy = np.floor(rel[:, 1]).astype(np.int64)
+        H, W = self.grid.shape
+        inside = (ix >= 0) & (ix < W) & (iy >= 0) & (iy < H)
+        return ix, iy, inside
+
+
+def _footprint_lattice(corners_xy: np.ndarray, spacing_m: float) -> np.ndarray:
+    """Points (M, S, 2) covering each quadrilateral footprint (M, 4, 2), boundary included."""
+    side = np.linalg.norm(corners_xy - np.roll(corners_xy, -1, axis=1), axis=2).max()
+    n = int(np.ceil(side / max(spacing_m, 1e-3))) + 1
+    a, b = np.meshgrid(np.linspace(0, 1, n), np.linspace(0, 1, n))
+    a, b = a.ravel(), b.ravel()
+    w = np.stack([(1 - a) * (1 - b), a * (1 - b), a * b, (1 - a) * b], axis=1)  # (S, 4) bilinear weights
+    return np.einsum("sk,mkd->msd", w, corners_xy)
+
+
+# ---------------------------------------------------------------------- builders
+
+
+def drivable_from_map(polygons: list, center_xy: np.ndarray, roi_m: float) -> DrivableArea | None:
+    """Union of the map's drivable polygons (global x/y) within ``roi_m`` of ``center_xy``; None if empty."""
+    if not polygons:
+        return None
+    roi = shapely.Point(float(center_xy[0]), float(center_xy[1])).buffer(roi_m, quad_segs=16)
+    geoms = np.asarray(polygons, dtype=object)
+    geoms = geoms[shapely.intersects(geoms, roi)]
+    if len(geoms) == 0:
+        return None
+    region = shapely.intersection(shapely.union_all(shapely.make_valid(geoms)), roi)
+    if region.is_empty or region.area <= 0:
+        return None
+    shapely.prepare(region)
+    return DrivableArea(source="map", confidence="high", region=region)
+
+
+def _ray_fill_grid(
+    drivable_xy: np.ndarray,
+    blocker_xy: np.ndarray,
+    sensor_xy: np.ndarray,
+    config: PlacementConfig,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Bird's-eye grid (H, W) bool and its origin (2,) from drivable and blocking points (global x/y)."""
+    res = config.grid_resolution_m
+    lo = sensor_xy - config.map_roi_m
+    hi = sensor_xy + config.map_roi_m
+    W = int(np.ceil((hi[0] - lo[0]) / res))
+    H = int(np.ceil((hi[1] - lo[1]) / res))
+    all_xy = np.concatenate([drivable_xy, blocker_xy])
+    is_drv = np.concatenate([np.ones(len(drivable_xy), bool), np.zeros(len(blocker_xy), bool)])
+    rel = all_xy - sensor_xy
+    rng_m = np.hypot(rel[:, 0], rel[:, 1])
+    az_bin = np.floor(np.degrees(np.arctan2(rel[:, 1], rel[:, 0])) / config.azimuth_bin_deg).astype(np.int64)
+    order = np.lexsort((rng_m, az_bin))
+    az_s, r_s, d_s, xy_s = az_bin[order], rng_m[order], is_drv[order], all_xy[order]
+    # consecutive drivable pairs on the same azimuth bin, close enough: fill the segment between them
+    pair = (az_s[1:] == az_s[:-1]) & d_s[1:] & d_s[:-1] & (r_s[1:] - r_s[:-1] < config.ray_fill_max_gap_m)
+    a, b = xy_s[:-1][pair], xy_s[1:][pair]
+    seg_len = np.linalg.norm(b - a, axis=1)
+    steps = np.ceil(seg_len / (0.5 * res)).astype(np.int64) + 1
+    seg_id = np.repeat(np.arange(len(a)), steps)
+    frac = (np.arange(steps.sum()) - np.repeat(np.cumsum(steps) - steps, steps)) / np.maximum(
+        np.repeat(steps - 1, steps), 1
+    )
+    fill_xy = a[seg_id] + (b - a)[seg_id] * frac[:, None]
+    pts = np.concatenate([drivable_xy, fill_xy])
+    ix = np.floor((pts[:, 0] - lo[0]) / res).astype(np.int64)
+    iy = np.floor((pts[:, 1] - lo[1]) / res).astype(np.int64)
+    keep = (ix >= 0) & (ix < W) & (iy >= 0) & (iy < H)
+    grid = np.zeros((H, W), dtype=np.uint8)
+    grid[iy[keep], ix[keep]] = 1
+    r = max(int(round(config.closing_radius_m / res)), 1)
+    kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1))
+    grid = cv2.morphologyEx(grid, cv2.MORPH_CLOSE, kernel)
+    return grid.astype(bool), lo
+
+
+def drivable_from_lidarseg(
+    points_global: np.ndarray,
+    labels: np.ndarray,
+    T_global_from_ego: np.ndarray,
+    sensor_xy: np.ndarray,
+    config: PlacementConfig,
+) -> DrivableArea | None:
+    """Grid drivable area from lidarseg labels (class 24 drivable; other classes block); None if no class-24 point."""
+    check_shape(points_global, ("N", 3), "points_global")
+    labels = np.asarray(labels)
+    check_shape(labels, (len(points_global),), "lidarseg labels")
+    drv = labels == LIDARSEG_DRIVEABLE
+    if not drv.any():
+        return None
+    z_ego = transform_points(invert_transform(T_global_from_ego), points_global)[:, 2]
+    block = (~drv) & (labels != 0) & (labels != LIDARSEG_EGO) & (z_ego < _MAX_BLOCKER_HEIGHT_M)
+    grid, origin = _ray_fill_grid(points_global[drv, :2], points_global[block, :2], sensor_xy, config)
+    return DrivableArea("lidarseg", "medium", grid=grid, grid_origin_xy=origin, resolution_m=config.grid_resolution_m)
+
+
+def drivable_from_lidar_ground(
+    points_global: np.ndarray,
+    T_global_from_ego: np.ndarray,
+    sensor_xy: np.ndarray,
+    config: PlacementConfig,
+    min_points: int = 50,
+) -> DrivableArea | None:
+    """Low-confidence grid: points near the ego ground plane inside the ego corridor; None if too few."""
+    check_shape(points_global, ("N", 3), "points_global")
+    p_ego = transform_points(invert_transform(T_global_from_ego), points_global)
+    corridor = np.abs(p_ego[:, 1]) < config.corridor_half_width_m
+    ground = corridor & (np.abs(p_ego[:, 2]) < config.lidar_ground_band_m)
+    block = (p_ego[:, 2] >= config.lidar_ground_band_m + config.obstacle_min_height_m * 0.5) & (
+        p_ego[:, 2] < _MAX_BLOCKER_HEIGHT_M
+    )
+    if ground.sum() < min_points:
+        return None
+    grid, origin = _ray_fill_grid(points_global[ground, :2], points_global[block, :2], sensor_xy, config)
+    return DrivableArea("lidar-ground", "low", grid=grid, grid_origin_xy=origin, resolution_m=config.grid_resolution_m)
+
+
+def drivable_area_for_sample(sample, view, config: PlacementConfig) -> tuple[DrivableArea | None, str | None]:
+    """The best drivable area of ``sample`` around ``view``'s camera, or (None, reason).
+
+    Args:
+        sample: a :class:`streetaug.datasets.sample.Sample`.
+        view: the :class:`streetaug.datasets.sample.CameraView` being augmented.
+    """
+    cam_xy = view.T_global_from_cam[:2, 3]
+    tried = []
+    polygons = sample.drivable_area_global
+    if polygons:
+        area = drivable_from_map(polygons, cam_xy, config.map_roi_m)
+        if area is not None:
+            return area, None
+        tried.append(f"map has no drivable polygon within {config.map_roi_m:g} m of the camera")
+    else:
+        tried.append("no map")
+    lidar = sample.lidar
+    if lidar is None:
+        return None, "no drivable area: " + ", ".join(tried + ["no lidarseg", "no LiDAR"])
+    points = lidar.points_global
+    sensor_xy = lidar.T_global_from_lidar[:2, 3]
+    if lidar.labels is not None:
+        area = drivable_from_lidarseg(points, lidar.labels, lidar.T_global_from_ego, sensor_xy, config)
+        if area is not None:
+            return area, None
+        tried.append("lidarseg has no flat.driveable_surface point")
+    else:
+        tried.append("no lidarseg")
+    area = drivable_from_lidar_ground(points, lidar.T_global_from_ego, sensor_xy, config)
+    if area is not None:
+        return area, None
+    tried.append("LiDAR ground fit found too few ground points in the ego corridor")
+    return None, "no drivable area: " + ", ".join(tried)

@@ -1,0 +1,132 @@
+"""Local ground under a placement, fitted from LiDAR, with the ego's ground plane as the fallback.
+
+In nuScenes ego frames the ground is z = 0 (the ego pose sits on the road), so the ego ground plane
+in global coordinates passes through the ego origin with normal = the ego's +z axis.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from streetaug.augment.conventions import check_shape
+
+from .config import LIDARSEG_GROUND, PlacementConfig
+
+
+@dataclass(frozen=True)
+class GroundPlane:
+    """A local ground plane in the global frame.
+
+    Attributes:
+        point_global: (3,) float64 the plane point below the query x/y, metres.
+        normal_global: (3,) float64 unit normal pointing up (z > 0).
+        source: ``"lidarseg"`` (fit on flat.* points), ``"lidar-plane"`` (robust fit on low points) or
+            ``"ego-plane"`` (fallback: the ego's z = 0 plane).
+        n_points: LiDAR points supporting the fit (0 for the fallback).
+    """
+
+    point_global: np.ndarray
+    normal_global: np.ndarray
+    source: str
+    n_points: int = 0
+
+    def height_at(self, xy: np.ndarray) -> np.ndarray:
+        """Plane z (N,) at global x/y points (N, 2)."""
+        xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+        n, p = self.normal_global, self.point_global
+        return p[2] - (n[0] * (xy[:, 0] - p[0]) + n[1] * (xy[:, 1] - p[1])) / n[2]
+
+
+def _plane_at(xy: np.ndarray, normal: np.ndarray, through: np.ndarray, source: str, n_points: int) -> GroundPlane:
+    normal = normal / np.linalg.norm(normal)
+    if normal[2] < 0:
+        normal = -normal
+    z = through[2] - (normal[0] * (xy[0] - through[0]) + normal[1] * (xy[1] - through[1])) / normal[2]
+    return GroundPlane(np.array([xy[0], xy[1], z]), normal, source, n_points)
+
+
+def ego_ground_plane(T_global_from_ego: np.ndarray, xy: np.ndarray) -> GroundPlane:
+    """The ego's z = 0 plane (global frame), evaluated below global x/y ``xy`` (2,)."""
+    check_shape(T_global_from_ego, (4, 4), "T_global_from_ego")
+    return _plane_at(np.asarray(xy, float), T_global_from_ego[:3, 2].copy(), T_global_from_ego[:3, 3], "ego-plane", 0)
+
+
+def _fit_plane(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Least-squares plane through points (N, 3): (normal (3,), centroid (3,))."""
+    c = points.mean(axis=0)
+    _, _, vt = np.linalg.svd(points - c, full_matrices=False)
+    n = vt[-1]
+    return (n if n[2] > 0 else -n), c
+
+
+class LocalGroundFitter:
+    """Fits the ground plane under query points from one LiDAR sweep (global frame).
+
+    Args:
+        points_global: (N, 3) float64 LiDAR points, global frame, metres.
+        T_global_from_ego: (4, 4) ego pose used for the fallback plane and the tilt check.
+        labels: (N,) lidarseg labels or None; with labels only flat.* points are used.
+        config: thresholds (``ground_radius_m``, ``ground_min_points``, ``ground_inlier_m``, ``ground_max_tilt_deg``).
+    """
+
+    def __init__(
+        self,
+        points_global: np.ndarray | None,
+        T_global_from_ego: np.ndarray,
+        labels: np.ndarray | None = None,
+        config: PlacementConfig = PlacementConfig(),
+    ) -> None:
+        self.T_global_from_ego = np.asarray(T_global_from_ego, dtype=np.float64)
+        self.config = config
+        self.use_labels = labels is not None
+        if points_global is None or len(points_global) == 0:
+            self.points = np.zeros((0, 3))
+        else:
+            points_global = np.asarray(points_global, dtype=np.float64)
+            check_shape(points_global, ("N", 3), "points_global")
+            if labels is not None:
+                points_global = points_global[np.isin(np.asarray(labels), LIDARSEG_GROUND)]
+            self.points = points_global
+        self.tree = cKDTree(self.points[:, :2]) if len(self.points) else None
+
+    def fit(self, xy: np.ndarray) -> GroundPlane:
+        """Ground plane below global x/y ``xy`` (2,); falls back to the ego plane when LiDAR is insufficient."""
+        xy = np.asarray(xy, dtype=np.float64)
+        cfg = self.config
+        fallback = ego_ground_plane(self.T_global_from_ego, xy)
+        if self.tree is None:
+            return fallback
+        idx = self.tree.query_ball_point(xy, cfg.ground_radius_m)
+        if len(idx) < cfg.ground_min_points:
+            return fallback
+        pts = self.points[np.asarray(idx)]
+        up = self.T_global_from_ego[:3, 2]
+        if self.use_labels:
+            cand = pts
+        else:
+            # low points: within 0.4 m of the 5th percentile height (relative to the ego plane's slope)
+            rel_h = pts @ up
+            cand = pts[rel_h <= np.percentile(rel_h, 5) + 0.4]
+        if len(cand) < cfg.ground_min_points:
+            return fallback
+        normal, centroid = _fit_plane(cand)
+        for _ in range(3):
+            res = (pts - centroid) @ normal
+            inl = pts[np.abs(res) < max(cfg.ground_inlier_m, 1e-3)]
+            if len(inl) < cfg.ground_min_points:
+                return fallback
+            normal, centroid = _fit_plane(inl)
+        spread = np.linalg.eigvalsh(np.cov((inl[:, :2] - inl[:, :2].mean(0)).T))
+        if spread[0] < 0.5**2:  # points on one scan line: trust only the height, keep the ego's tilt
+            normal = up.copy()
+            centroid = np.array([xy[0], xy[1], np.median(inl @ up - xy @ up[:2]) / up[2]]) if up[2] else centroid
+            source_n = len(inl)
+            plane = _plane_at(xy, normal, centroid, "lidarseg" if self.use_labels else "lidar-plane", source_n)
+            return plane
+        tilt = np.degrees(np.arccos(np.clip(abs(normal @ up), -1.0, 1.0)))
+        if tilt > cfg.ground_max_tilt_deg:
+            return fallback
+        return _plane_at(xy, normal, centroid, "lidarseg" if self.use_labels else "lidar-plane", len(inl))
