@@ -183,11 +183,12 @@ class NuScenesReader:
         return tokens
 
     def _sample_row(self, sample_token: str) -> dict:
+        rows = self.table("sample")  # parse errors surface as such, not as an unknown token
         try:
             return self.get("sample", sample_token)
         except DatasetError:
-            n = len(self.table("sample"))
-            first = ", ".join(r["token"] for r in self.table("sample")[:3])
+            n = len(rows)
+            first = ", ".join(r["token"] for r in rows[:3])
             raise DatasetError(
                 f"{self.table_dir / 'sample.json'}: unknown sample token '{sample_token}' "
                 f"({n} samples, e.g. {first}); list them with sample_tokens()"

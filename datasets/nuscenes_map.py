@@ -59,7 +59,7 @@ def read_drivable_area(path: str | Path) -> list[Polygon | MultiPolygon]:
             exterior = ring(rec["exterior_node_tokens"], f"polygon '{token}'")
             holes = [ring(h["node_tokens"], f"hole of polygon '{token}'") for h in rec.get("holes", [])]
             poly = Polygon(exterior, [h for h in holes if len(h) >= 3])
-            return poly if poly.is_valid else shapely.make_valid(poly)
+            return poly if poly.is_valid else _polygonal(shapely.make_valid(poly))
 
         areas = []
         for rec in data["drivable_area"]:
@@ -71,6 +71,14 @@ def read_drivable_area(path: str | Path) -> list[Polygon | MultiPolygon]:
             raise
         raise DatasetError(f"{path}: malformed map expansion record ({type(e).__name__}: {e})") from None
     return areas
+
+
+def _polygonal(geometry) -> Polygon | MultiPolygon:
+    """Keep only the polygonal parts of a geometry (``make_valid`` may add stray lines or points)."""
+    if isinstance(geometry, (Polygon, MultiPolygon)):
+        return geometry
+    parts = [g for g in getattr(geometry, "geoms", []) if isinstance(g, (Polygon, MultiPolygon))]
+    return shapely.union_all(parts) if parts else Polygon()
 
 
 @dataclass(frozen=True)
@@ -113,6 +121,6 @@ class DrivableArea:
         xy = np.asarray(xy_global, dtype=np.float64).reshape(-1, 2)
         points = shapely.points(xy)
         inside = np.zeros(len(xy), dtype=bool)
-        point_idx, geom_idx = self.tree.query(points, predicate="intersects")
+        point_idx, _ = self.tree.query(points, predicate="intersects")
         inside[point_idx] = True
         return inside
