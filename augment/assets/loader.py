@@ -1,0 +1,500 @@
+"""Load untrusted mesh files (glTF/GLB, OBJ+MTL, PLY) into :class:`Asset` objects.
+
+Contract (``interfaces.md``): files are in metres with glTF axes (+Y up, the object's front +Z)
+unless options say otherwise.  The result is in the object frame of :mod:`.asset` (x front,
+y left, z up, metres, origin at the bottom centre of the box).
+
+Safety: before any library sees a file, its external references are checked -- glTF
+``buffers[].uri`` / ``images[].uri`` (also inside a GLB's JSON chunk), OBJ ``mtllib`` and MTL
+texture paths -- and anything absolute, with a URL scheme other than ``data:``, or escaping the
+asset's folder is refused with :class:`InputError`; so are files larger than 200 MB.
+
+Materials: glTF PBR factors are read exactly from the file's JSON (baseColorFactor and
+emissiveFactor are linear; ``alphaMode: BLEND`` alpha and ``KHR_materials_transmission`` become
+opacity), textures are converted to float32 (base colour sRGB -> linear).  OBJ: Kd (taken as
+linear, as Blender writes it), Ns -> roughness, d / Tr -> opacity, Ke -> emission, Pr / Pm when
+present.  PLY: vertex or face colours (sRGB) quantised into a few materials, else grey paint.
+UVs are stored in the glTF convention (origin top-left, v down).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import struct
+import urllib.parse
+from pathlib import Path
+
+import numpy as np
+
+from ..io import InputError
+from .asset import Asset, Material
+from .procedural import srgb_to_linear
+from .validate import smooth_vertex_normals, validate_asset
+
+SUPPORTED_SUFFIXES = (".glb", ".gltf", ".obj", ".ply")
+MAX_FILE_BYTES = 200 * 1024 * 1024
+_AXES = {"+x": (0, 1.0), "-x": (0, -1.0), "+y": (1, 1.0), "-y": (1, -1.0), "+z": (2, 1.0), "-z": (2, -1.0)}
+_CACHE_SIZE = 32
+
+#: In-process cache: (resolved path, mtime_ns, size, options) -> Asset.  Bounded (oldest evicted).
+asset_cache: dict[tuple, Asset] = {}
+
+
+# ----------------------------------------------------------------------------- public API
+
+
+def list_assets(directory: str | Path) -> list[Path]:
+    """Asset files (``.glb``, ``.gltf``, ``.obj``, ``.ply``) directly in ``directory``, sorted by name.
+
+    Raises:
+        InputError: the folder does not exist or holds no asset file.
+    """
+    directory = Path(directory)
+    if not directory.is_dir():
+        raise InputError(f"{directory}: asset folder not found")
+    files = sorted(p for p in directory.iterdir() if p.is_file() and p.suffix.lower() in SUPPORTED_SUFFIXES)
+    if not files:
+        raise InputError(f"{directory}: no asset files ({', '.join(SUPPORTED_SUFFIXES)}) in this folder")
+    return files
+
+
+def axis_rotation(front_axis: str = "+z", up_axis: str = "+y") -> np.ndarray:
+    """Rotation (3, 3) R_object_from_file: file front -> +x, file up -> +z, left = up x front -> +y.
+
+    Raises:
+        InputError: an axis is not one of +x, -x, +y, -y, +z, -z, or front and up are parallel.
+    """
+    vecs = []
+    for name, axis in (("front_axis", front_axis), ("up_axis", up_axis)):
+        key = str(axis).strip().lower()
+        if key in ("x", "y", "z"):
+            key = "+" + key
+        if key not in _AXES:
+            raise InputError(f"{name}: expected one of {', '.join(_AXES)}, got {axis!r}")
+        i, sign = _AXES[key]
+        v = np.zeros(3)
+        v[i] = sign
+        vecs.append(v)
+    front, up = vecs
+    if abs(front @ up) > 0.5:
+        raise InputError(f"front_axis {front_axis!r} and up_axis {up_axis!r} must be perpendicular")
+    left = np.cross(up, front)
+    return np.stack([front, left, up])
+
+
+def load_asset(
+    path: str | Path,
+    front_axis: str = "+z",
+    up_axis: str = "+y",
+    scale: float | None = None,
+    length_m: float | None = None,
+    category: str | None = None,
+    use_cache: bool = True,
+) -> Asset:
+    """Load a mesh file as an :class:`Asset` in the object frame (x front, y left, z up, metres).
+
+    Args:
+        path: ``.glb``, ``.gltf``, ``.obj`` or ``.ply`` file (untrusted).
+        front_axis: the file's axis the object's front points along (``+x`` ... ``-z``); the Kenney
+            cars use ``-z``.
+        up_axis: the file's up axis (glTF: ``+y``).
+        scale: multiply file units by this to get metres (default 1).
+        length_m: instead of ``scale``, rescale so the extent along the front axis is this length.
+        category: nuScenes category (default ``vehicle.car``).
+        use_cache: reuse an earlier result for the same file (path, mtime, size) and options.
+
+    Returns:
+        The validated asset; origin at the bottom centre (min z = 0, x/y box centre = 0).
+
+    Raises:
+        InputError: missing / too large / unsupported / unsafe / broken file, bad options.
+    """
+    path = Path(path)
+    if scale is not None and length_m is not None:
+        raise InputError(f"{path}: give either scale or length_m, not both")
+    for name, value in (("scale", scale), ("length_m", length_m)):
+        if value is not None and not (np.isfinite(value) and value > 0):
+            raise InputError(f"{path}: {name} must be a positive number, got {value!r}")
+    R = axis_rotation(front_axis, up_axis)
+    if not path.is_file():
+        raise InputError(f"{path}: asset file not found")
+    suffix = path.suffix.lower()
+    if suffix not in SUPPORTED_SUFFIXES:
+        raise InputError(f"{path}: unsupported asset format {suffix!r}; "
+                         f"expected one of {', '.join(SUPPORTED_SUFFIXES)}")
+    st = path.stat()
+    if st.st_size > MAX_FILE_BYTES:
+        raise InputError(f"{path}: file is {st.st_size / 2**20:.0f} MB; assets larger than 200 MB are refused")
+    key = (str(path.resolve()), st.st_mtime_ns, st.st_size, str(front_axis), str(up_axis), scale, length_m, category)
+    if use_cache and key in asset_cache:
+        return asset_cache[key]
+
+    if suffix in (".gltf", ".glb"):
+        gltf = _read_gltf_json(path)
+        check_gltf_references(path, gltf)
+        parts = _load_gltf_parts(path, gltf)
+    elif suffix == ".obj":
+        mtl = check_obj_references(path)
+        parts = _load_obj_parts(path, mtl)
+    else:
+        parts = _load_ply_parts(path)
+    asset = _assemble(path, parts, R, scale, length_m, category or "vehicle.car")
+
+    if use_cache:
+        asset_cache[key] = asset
+        while len(asset_cache) > _CACHE_SIZE:
+            asset_cache.pop(next(iter(asset_cache)))
+    return asset
+
+
+# ----------------------------------------------------------------------------- reference checks
+
+
+_SCHEME = re.compile(r"^[a-zA-Z][a-zA-Z0-9+.\-]*:")
+
+
+def check_reference(asset_path: Path, ref: str, field: str) -> Path | None:
+    """Check one external reference of ``asset_path``; return the local file it names (None for data:).
+
+    Raises:
+        InputError: ``ref`` is absolute, has a URL scheme other than ``data:``, or escapes the
+            asset's folder (``..``, symlinks).  The message names the file, the field and the URI.
+    """
+    if not isinstance(ref, str) or not ref:
+        raise InputError(f"{asset_path}: {field} must be a non-empty string, got {ref!r}")
+    if ref.startswith("data:"):
+        return None
+    if _SCHEME.match(ref):
+        raise InputError(f"{asset_path}: {field} {ref!r} has a URL scheme; only relative paths inside the "
+                         f"asset's folder or data: URIs are allowed")
+    decoded = urllib.parse.unquote(ref).replace("\\", "/")
+    if decoded.startswith("/") or _SCHEME.match(decoded) or os.path.isabs(decoded):
+        raise InputError(f"{asset_path}: {field} {ref!r} is an absolute path; only relative paths inside the "
+                         f"asset's folder are allowed")
+    folder = asset_path.parent.resolve()
+    target = (folder / decoded).resolve()
+    try:
+        target.relative_to(folder)
+    except ValueError:
+        raise InputError(f"{asset_path}: {field} {ref!r} points outside the asset's folder {folder}") from None
+    return target
+
+
+def _read_gltf_json(path: Path) -> dict:
+    """The glTF JSON of a ``.gltf`` file or of a ``.glb``'s JSON chunk (no library involved)."""
+    data = path.read_bytes()
+    if path.suffix.lower() == ".glb":
+        if len(data) < 20 or data[:4] != b"glTF":
+            raise InputError(f"{path}: not a binary glTF file (missing 'glTF' magic)")
+        version, total = struct.unpack_from("<II", data, 4)
+        chunk_len, chunk_type = struct.unpack_from("<I4s", data, 12)
+        if version != 2 or chunk_type != b"JSON" or 20 + chunk_len > len(data) or total > len(data):
+            raise InputError(f"{path}: malformed GLB header (version {version}, first chunk {chunk_type!r}); "
+                             f"expected glTF 2.0 with a JSON chunk")
+        text = data[20:20 + chunk_len]
+    else:
+        text = data
+    try:
+        gltf = json.loads(text.decode("utf-8"))
+    except (UnicodeDecodeError, json.JSONDecodeError) as e:
+        raise InputError(f"{path}: glTF JSON is not valid ({e})") from None
+    if not isinstance(gltf, dict):
+        raise InputError(f"{path}: glTF JSON must be an object")
+    return gltf
+
+
+def check_gltf_references(path: Path, gltf: dict) -> None:
+    """Refuse unsafe ``buffers[].uri`` / ``images[].uri`` of a glTF document (see :func:`check_reference`)."""
+    for key in ("buffers", "images"):
+        items = gltf.get(key, [])
+        if not isinstance(items, list):
+            raise InputError(f"{path}: glTF field {key!r} must be a list")
+        for i, item in enumerate(items):
+            if isinstance(item, dict) and "uri" in item:
+                target = check_reference(path, item["uri"], f"{key}[{i}].uri")
+                if target is not None and target.is_file() and target.stat().st_size > MAX_FILE_BYTES:
+                    raise InputError(f"{path}: {key}[{i}].uri {item['uri']!r} is larger than 200 MB; refused")
+
+
+def check_obj_references(path: Path) -> dict[str, dict]:
+    """Check the ``mtllib`` files of an OBJ and the texture paths inside them; return parsed MTL materials."""
+    materials: dict[str, dict] = {}
+    with open(path, "r", errors="replace") as f:
+        for line in f:
+            if line.startswith("mtllib"):
+                for ref in line.split()[1:]:
+                    mtl_path = check_reference(path, ref, "mtllib")
+                    if mtl_path is not None and mtl_path.is_file():
+                        materials.update(_parse_mtl(path, mtl_path))
+    return materials
+
+
+_MTL_MAPS = ("map_ka", "map_kd", "map_ks", "map_ns", "map_d", "map_bump", "bump", "disp", "decal", "refl",
+             "map_pr", "map_pm", "map_ke", "norm", "map_kn")
+
+
+def _parse_mtl(obj_path: Path, mtl_path: Path) -> dict[str, dict]:
+    """Parse an MTL file into {material name: {key: values}}; texture paths are checked."""
+    out: dict[str, dict] = {}
+    cur: dict | None = None
+    with open(mtl_path, "r", errors="replace") as f:
+        for line in f:
+            tok = line.strip().split()
+            if not tok or tok[0].startswith("#"):
+                continue
+            key = tok[0].lower()
+            if key == "newmtl":
+                cur = out.setdefault(" ".join(tok[1:]), {})
+            elif key in _MTL_MAPS:
+                check_reference(obj_path, tok[-1], f"{mtl_path.name}: {tok[0]}")
+                if cur is not None:
+                    cur[key] = tok[-1]
+            elif cur is not None:
+                try:
+                    cur[key] = [float(t) for t in tok[1:]]
+                except ValueError:
+                    pass
+    return out
+
+
+# ----------------------------------------------------------------------------- format readers
+
+# A part: (vertices (V,3) file frame, faces (F,3), vertex normals (V,3) or None, uv (V,2) glTF or None, Material)
+_PartT = tuple[np.ndarray, np.ndarray, np.ndarray | None, np.ndarray | None, Material]
+
+
+def _trimesh_load(path: Path):
+    import trimesh
+
+    try:
+        return trimesh.load(str(path), force="scene", process=False)
+    except Exception as e:  # any parser error of a broken file is user input error
+        raise InputError(f"{path}: could not read the mesh ({type(e).__name__}: {e})") from None
+
+
+def _load_gltf_parts(path: Path, gltf: dict) -> list[_PartT]:
+    import trimesh
+
+    scene = _trimesh_load(path)
+    exact = _gltf_materials_by_name(gltf)
+    cache: dict[int, Material] = {}
+    parts = []
+    for node in scene.graph.nodes_geometry:
+        T, geom_name = scene.graph[node]
+        geom = scene.geometry[geom_name]
+        if not isinstance(geom, trimesh.Trimesh) or len(geom.faces) == 0:
+            continue
+        mat_obj = getattr(geom.visual, "material", None)
+        if id(mat_obj) not in cache:
+            cache[id(mat_obj)] = _material_from_trimesh(mat_obj, exact, len(cache))
+        parts.append(_transformed_part(geom, np.asarray(T, dtype=np.float64), cache[id(mat_obj)]))
+    return parts
+
+
+def _gltf_materials_by_name(gltf: dict) -> dict[str, dict]:
+    """Material JSON entries keyed by name (names that occur once only)."""
+    mats = gltf.get("materials", [])
+    names = [m.get("name") for m in mats if isinstance(m, dict)]
+    return {m["name"]: m for m in mats if isinstance(m, dict) and m.get("name") and names.count(m["name"]) == 1}
+
+
+def _transformed_part(geom, T: np.ndarray, material: Material) -> _PartT:
+    V = np.asarray(geom.vertices, dtype=np.float64) @ T[:3, :3].T + T[:3, 3]
+    F = np.asarray(geom.faces, dtype=np.int64)
+    normal_matrix = np.linalg.inv(T[:3, :3]).T
+    N = np.asarray(geom.vertex_normals, dtype=np.float64) @ normal_matrix.T
+    if np.linalg.det(T[:3, :3]) < 0:  # mirrored node: keep counter-clockwise = outward
+        F = F[:, ::-1].copy()
+    uv = getattr(geom.visual, "uv", None)
+    if uv is not None and len(uv) == len(V):
+        uv = np.asarray(uv, dtype=np.float64).copy()
+        uv[:, 1] = 1.0 - uv[:, 1]  # trimesh stores OpenGL (v up); assets keep the glTF convention
+    else:
+        uv = None
+    return V, F, N, uv, material
+
+
+def _texture(image, srgb: bool) -> np.ndarray | None:
+    if image is None:
+        return None
+    arr = np.asarray(image.convert("RGB"), dtype=np.float32) / 255.0
+    return srgb_to_linear(arr).astype(np.float32) if srgb else arr
+
+
+def _material_from_trimesh(mat, exact: dict[str, dict], index: int) -> Material:
+    """Material of a trimesh visual: exact glTF factors when the JSON has them, else trimesh's."""
+    from trimesh.visual.material import PBRMaterial, SimpleMaterial
+
+    name = getattr(mat, "name", None) or f"material{index}"
+    if isinstance(mat, PBRMaterial):
+        j = exact.get(name, {})
+        pbr = j.get("pbrMetallicRoughness", {})
+        if "baseColorFactor" in pbr:
+            rgba = np.asarray(pbr["baseColorFactor"], dtype=np.float64)
+        elif mat.baseColorFactor is not None:
+            rgba = np.asarray(mat.baseColorFactor, dtype=np.float64) / 255.0
+        else:
+            rgba = np.ones(4)
+        metallic = pbr.get("metallicFactor", mat.metallicFactor if mat.metallicFactor is not None else 1.0)
+        roughness = pbr.get("roughnessFactor", mat.roughnessFactor if mat.roughnessFactor is not None else 1.0)
+        emission = np.asarray(j.get("emissiveFactor", mat.emissiveFactor if mat.emissiveFactor is not None
+                                    else np.zeros(3)), dtype=np.float64)
+        alpha_mode = j.get("alphaMode", mat.alphaMode or "OPAQUE")
+        opacity = float(rgba[3]) if len(rgba) > 3 and alpha_mode == "BLEND" else 1.0
+        transmission = j.get("extensions", {}).get("KHR_materials_transmission", {}).get("transmissionFactor")
+        if transmission is not None:
+            opacity = min(opacity, 1.0 - float(transmission))
+        return Material(
+            name=name, base_color=np.clip(rgba[:3], 0, 1), metallic=float(np.clip(metallic, 0, 1)),
+            roughness=float(np.clip(roughness, 0.02, 1)), opacity=float(np.clip(opacity, 0.02, 1)),
+            emission=np.clip(emission[:3], 0, None),
+            base_color_texture=_texture(mat.baseColorTexture, srgb=True),
+            metallic_roughness_texture=_texture(mat.metallicRoughnessTexture, srgb=False),
+            normal_texture=_texture(mat.normalTexture, srgb=False),
+        )
+    if isinstance(mat, SimpleMaterial):
+        diffuse = np.asarray(mat.diffuse, dtype=np.float64)[:3] / 255.0
+        return Material(name=name, base_color=diffuse, roughness=0.5,
+                        base_color_texture=_texture(getattr(mat, "image", None), srgb=True))
+    return _grey_paint(name)
+
+
+def _grey_paint(name: str = "paint") -> Material:
+    return Material(name=name, base_color=np.array([0.30, 0.30, 0.30]), metallic=0.0, roughness=0.4, clearcoat=1.0)
+
+
+def _load_obj_parts(path: Path, mtl: dict[str, dict]) -> list[_PartT]:
+    import trimesh
+
+    scene = _trimesh_load(path)
+    cache: dict[str, Material] = {}
+    parts = []
+    for node in scene.graph.nodes_geometry:
+        T, geom_name = scene.graph[node]
+        geom = scene.geometry[geom_name]
+        if not isinstance(geom, trimesh.Trimesh) or len(geom.faces) == 0:
+            continue
+        mat_obj = getattr(geom.visual, "material", None)
+        name = getattr(mat_obj, "name", None) or "default"
+        if name not in cache:
+            cache[name] = _material_from_mtl(name, mtl.get(name), mat_obj)
+        parts.append(_transformed_part(geom, np.asarray(T, dtype=np.float64), cache[name]))
+    return parts
+
+
+def _material_from_mtl(name: str, entry: dict | None, mat_obj) -> Material:
+    """UE4 material from MTL values: Kd base colour, Ns -> roughness, d/Tr opacity, Ke emission, Pr/Pm."""
+    if entry is None:
+        return _material_from_trimesh(mat_obj, {}, 0) if mat_obj is not None else _grey_paint(name)
+    kd = np.asarray(entry.get("kd", [0.6, 0.6, 0.6])[:3], dtype=np.float64)
+    if len(kd) == 1:
+        kd = np.repeat(kd, 3)
+    if "pr" in entry:
+        roughness = entry["pr"][0]
+    else:
+        ns = entry.get("ns", [50.0])[0]
+        roughness = (2.0 / (max(ns, 0.0) + 2.0)) ** 0.25  # Blinn-Phong exponent -> GGX alpha -> roughness
+    if "d" in entry:
+        opacity = entry["d"][0]
+    elif "tr" in entry:
+        opacity = 1.0 - entry["tr"][0]
+    else:
+        opacity = 1.0
+    metallic = entry.get("pm", [0.0])[0]
+    ke = np.asarray(entry.get("ke", [0.0, 0.0, 0.0])[:3], dtype=np.float64)
+    texture = _texture(getattr(mat_obj, "image", None), srgb=True) if "map_kd" in entry else None
+    return Material(name=name, base_color=np.clip(kd, 0, 1), metallic=float(np.clip(metallic, 0, 1)),
+                    roughness=float(np.clip(roughness, 0.02, 1)), opacity=float(np.clip(opacity, 0.02, 1)),
+                    emission=np.clip(ke, 0, None), base_color_texture=texture)
+
+
+def _load_ply_parts(path: Path) -> list[_PartT]:
+    import trimesh
+
+    scene = _trimesh_load(path)
+    parts = []
+    for node in scene.graph.nodes_geometry:
+        T, geom_name = scene.graph[node]
+        geom = scene.geometry[geom_name]
+        if not isinstance(geom, trimesh.Trimesh) or len(geom.faces) == 0:
+            continue
+        kind = getattr(geom.visual, "kind", None)
+        if kind in ("vertex", "face"):
+            if kind == "vertex":
+                vc = np.asarray(geom.visual.vertex_colors, dtype=np.float64)[:, :3] / 255.0
+                face_srgb = vc[np.asarray(geom.faces)].mean(axis=1)
+            else:
+                face_srgb = np.asarray(geom.visual.face_colors, dtype=np.float64)[:, :3] / 255.0
+            # Quantise to at most ~64 colours, one material each.
+            for levels in (32, 16, 8, 4):
+                q = np.round(face_srgb * (levels - 1)).astype(np.int64)
+                uniq, inverse = np.unique(q, axis=0, return_inverse=True)
+                if len(uniq) <= 64:
+                    break
+            inverse = inverse.reshape(-1)
+            for k, code in enumerate(uniq):
+                sel = inverse == k
+                color = srgb_to_linear(face_srgb[sel].mean(axis=0))
+                sub = trimesh.Trimesh(geom.vertices, np.asarray(geom.faces)[sel], process=False)
+                mat = Material(name=f"color{k}", base_color=color, roughness=0.5)
+                V, F, _, _, _ = _transformed_part(sub, np.asarray(T, dtype=np.float64), mat)
+                parts.append((V, F, None, None, mat))
+        else:
+            parts.append(_transformed_part(geom, np.asarray(T, dtype=np.float64), _grey_paint()))
+    return parts
+
+
+# ----------------------------------------------------------------------------- assembly
+
+
+def _assemble(path: Path, parts: list[_PartT], R: np.ndarray, scale: float | None, length_m: float | None,
+              category: str) -> Asset:
+    """Merge parts, rotate into the object frame, scale, recentre (bottom centre) and validate."""
+    if not parts:
+        raise InputError(f"{path}: the file has no faces; expected a triangle mesh")
+    materials: list[Material] = []
+    mat_index: dict[int, int] = {}
+    V_list, F_list, N_list, uv_list, fm_list = [], [], [], [], []
+    offset = 0
+    any_uv = any(p[3] is not None for p in parts)
+    for V, F, N, uv, mat in parts:
+        if id(mat) not in mat_index:
+            mat_index[id(mat)] = len(materials)
+            materials.append(mat)
+        if N is None or N.shape != V.shape or not np.isfinite(N).all():
+            N = smooth_vertex_normals(V, F) if len(F) and np.isfinite(V).all() else np.zeros_like(V)
+        V_list.append(V)
+        F_list.append(F + offset)
+        N_list.append(N)
+        uv_list.append(uv if uv is not None else np.zeros((len(V), 2)))
+        fm_list.append(np.full(len(F), mat_index[id(mat)], dtype=np.int64))
+        offset += len(V)
+    V = np.concatenate(V_list) @ R.T
+    N = np.concatenate(N_list) @ R.T
+    F = np.concatenate(F_list)
+    if not np.isfinite(V).all():
+        bad = int((~np.isfinite(V).all(axis=1)).sum())
+        raise InputError(f"{path}: {bad} vertices contain NaN or Inf")
+    # Only vertices used by faces define the box.
+    used = np.unique(F)
+    if len(used) == 0 or used.max() >= len(V):
+        raise InputError(f"{path}: face indices out of range")
+    lo, hi = V[used].min(axis=0), V[used].max(axis=0)
+    if length_m is not None:
+        length = hi[0] - lo[0]
+        if length <= 0:
+            raise InputError(f"{path}: zero extent along the front axis; cannot rescale to length_m")
+        s = length_m / length
+    else:
+        s = 1.0 if scale is None else float(scale)
+    V = (V - np.array([(lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, lo[2]])) * s
+    asset = Asset(
+        name=path.name, vertices=V, faces=F, face_material=np.concatenate(fm_list), materials=tuple(materials),
+        vertex_normals=N, uv=np.concatenate(uv_list) if any_uv else None, category=category,
+    )
+    try:
+        return validate_asset(asset)
+    except InputError as e:
+        raise InputError(f"{path}: {e}") from None
