@@ -233,7 +233,7 @@ def sky_radiance(
     return np.maximum(out, NIGHT_RADIANCE)
 
 
-def _rotation_up_from_frame(up: np.ndarray, hint: np.ndarray) -> np.ndarray:
+def rotation_up_from_frame(up: np.ndarray, hint: np.ndarray) -> np.ndarray:
     """R (3, 3) taking vectors of a frame to a z-up frame whose +z is ``up`` (x axis from ``hint``)."""
     z = _unit(up, "up")
     x = hint - (hint @ z) * z
@@ -268,7 +268,7 @@ def make_sky_light(
         raise ValueError(f"scale must be finite and >= 0, got {scale}")
     sun_f = _unit(sun_dir, "sun_dir")
     check_shape(sun_f, (3,), "sun_dir")
-    R_up_from_f = _rotation_up_from_frame(np.asarray(up, dtype=np.float64), np.array([0.0, 0.0, 1.0]))
+    R_up_from_f = rotation_up_from_frame(np.asarray(up, dtype=np.float64), np.array([0.0, 0.0, 1.0]))
     dirs_f = camera_envmap_directions(height, width).reshape(-1, 3)
     sun_up = R_up_from_f @ sun_f
     rad = sky_radiance(dirs_f @ R_up_from_f.T, sun_up, turbidity, cloud_cover, ground_albedo)
@@ -278,3 +278,17 @@ def make_sky_light(
     if np.any(e_sun > 0):
         sun = SunLight(direction=sun_f, irradiance_rgb=e_sun * scale, visibility=sun_visibility(cloud_cover))
     return DistantLight(env, sun)
+
+
+def sky_horizontal_irradiance(sun_dir_up: np.ndarray, turbidity: float = 3.0, cloud_cover: float = 0.0) -> np.ndarray:
+    """Irradiance (3,) RGB, W m^-2, that the sky alone (sun excluded) delivers to a horizontal surface."""
+    _check_params(turbidity, cloud_cover)
+    sun = _unit(sun_dir_up, "sun_dir_up")
+    check_shape(sun, (3,), "sun_dir_up")
+    return _sky_components(sun, turbidity, cloud_cover)[3]
+
+
+def sun_horizontal_irradiance(sun_dir_up: np.ndarray, turbidity: float = 3.0, cloud_cover: float = 0.0) -> np.ndarray:
+    """Irradiance (3,) RGB, W m^-2, that the sun alone delivers to a horizontal surface (0 below the horizon)."""
+    sun = _unit(sun_dir_up, "sun_dir_up")
+    return sun_irradiance(sun, turbidity, cloud_cover) * max(float(sun[2]), 0.0)
