@@ -1,0 +1,232 @@
+"""The UE4 (simplified Disney) BRDF of the paper, plus a clear-coat lobe, and GGX importance sampling.
+
+All functions are vectorised over N shading samples.  Vectors are unit (N, 3) arrays in any one
+frame; ``n`` is the shading normal, ``v`` points from the surface towards the viewer, ``l`` from
+the surface towards the light.  BRDF values are in 1/sr (multiply by radiance and ``n.l``).
+
+Model (``docs/method.md``): ``c_diff = (1 - m) c_base``, ``c_spec = (1 - m) 0.08 s + m c_base``,
+GGX ``D`` with ``alpha = r^2``, Smith-Schlick ``G`` with ``k = (r + 1)^2 / 8``, Schlick ``F`` with the
+spherical-Gaussian exponent ``2^((-5.55473 v.h - 6.98316) v.h)`` and, as in UE4's shader code,
+``F90 = saturate(50 F0_green)`` so that specular = 0 really is a pure Lambertian.  The clear coat is a second GGX
+lobe (roughness :data:`CLEARCOAT_ROUGHNESS`, F0 = 0.04) weighted by ``clearcoat``; the layer below
+is attenuated by the light the coat reflects, ``1 - clearcoat F_c(v.h)``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import cached_property
+
+import numpy as np
+
+CLEARCOAT_ROUGHNESS = 0.05
+CLEARCOAT_F0 = 0.04
+MIN_ROUGHNESS = 0.03  # below this GGX is a delta lobe that a few samples cannot integrate
+
+
+@dataclass(frozen=True)
+class BRDFParams:
+    """Per-sample material parameters (N samples).
+
+    Attributes:
+        base_color: (N, 3) linear base colour in [0, 1].
+        metallic: (N,) in [0, 1].
+        roughness: (N,) perceptual roughness in [0, 1] (clamped to :data:`MIN_ROUGHNESS`).
+        specular: (N,) UE4 specular, 0.5 = 4 % reflectance.
+        clearcoat: (N,) clear-coat strength in [0, 1].
+    """
+
+    base_color: np.ndarray
+    metallic: np.ndarray
+    roughness: np.ndarray
+    specular: np.ndarray
+    clearcoat: np.ndarray
+
+    @staticmethod
+    def uniform(n: int, base_color=(0.8, 0.8, 0.8), metallic=0.0, roughness=0.5, specular=0.5, clearcoat=0.0) -> "BRDFParams":
+        """N identical samples (handy for tests)."""
+        return BRDFParams(
+            base_color=np.tile(np.asarray(base_color, dtype=np.float64), (n, 1)),
+            metallic=np.full(n, float(metallic)),
+            roughness=np.full(n, float(roughness)),
+            specular=np.full(n, float(specular)),
+            clearcoat=np.full(n, float(clearcoat)),
+        )
+
+    @cached_property
+    def lobe_probs(self) -> np.ndarray:
+        """(N, 3) lobe sampling probabilities, see :func:`lobe_probabilities`."""
+        return lobe_probabilities(self)
+
+    def take(self, index: np.ndarray) -> "BRDFParams":
+        """The parameters of the samples ``index`` (any numpy index); derived arrays already computed are taken too."""
+        out = BRDFParams(*(getattr(self, f)[index] for f in ("base_color", "metallic", "roughness", "specular", "clearcoat")))
+        for key in ("c_diff", "c_spec", "alpha", "lobe_probs"):
+            if key in self.__dict__:
+                out.__dict__[key] = self.__dict__[key][index]
+        return out
+
+    def precompute(self) -> "BRDFParams":
+        """Compute the derived arrays now (so that :meth:`take` copies them instead of recomputing)."""
+        for key in ("c_diff", "c_spec", "alpha", "lobe_probs"):
+            getattr(self, key)
+        return self
+
+    @cached_property
+    def c_diff(self) -> np.ndarray:
+        """(N, 3) diffuse colour."""
+        return (1.0 - self.metallic)[:, None] * self.base_color
+
+    @cached_property
+    def c_spec(self) -> np.ndarray:
+        """(N, 3) specular colour at normal incidence (F0)."""
+        m = self.metallic[:, None]
+        return (1.0 - m) * 0.08 * self.specular[:, None] + m * self.base_color
+
+    @cached_property
+    def alpha(self) -> np.ndarray:
+        """(N,) GGX alpha = r^2."""
+        return np.maximum(self.roughness, MIN_ROUGHNESS) ** 2
+
+
+def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    return np.einsum("ij,ij->i", a, b)
+
+
+def ggx_d(n_dot_h: np.ndarray, alpha: np.ndarray) -> np.ndarray:
+    """GGX normal distribution D(h) (N,), normalised so that the integral of D (n.h) over h is 1."""
+    a2 = alpha * alpha
+    denom = n_dot_h * n_dot_h * (a2 - 1.0) + 1.0
+    return a2 / (np.pi * denom * denom)
+
+
+def smith_g(n_dot_l: np.ndarray, n_dot_v: np.ndarray, roughness: np.ndarray) -> np.ndarray:
+    """Smith-Schlick geometry term with UE4's k = (r + 1)^2 / 8 (N,)."""
+    k = (np.maximum(roughness, MIN_ROUGHNESS) + 1.0) ** 2 / 8.0
+    return (n_dot_l / (n_dot_l * (1.0 - k) + k)) * (n_dot_v / (n_dot_v * (1.0 - k) + k))
+
+
+def schlick_weight(v_dot_h: np.ndarray) -> np.ndarray:
+    """UE4's spherical-Gaussian approximation of (1 - v.h)^5 (N,)."""
+    return np.exp2((-5.55473 * v_dot_h - 6.98316) * v_dot_h)
+
+
+def eval_brdf(n: np.ndarray, v: np.ndarray, l: np.ndarray, params: BRDFParams) -> np.ndarray:
+    """BRDF value f(v, l) (N, 3), zero where ``n.l <= 0`` or ``n.v <= 0``."""
+    n_l = _dot(n, l)
+    n_v = _dot(n, v)
+    ok = (n_l > 1e-6) & (n_v > 1e-6)
+    n_l = np.clip(n_l, 1e-6, 1.0)
+    n_v = np.clip(n_v, 1e-6, 1.0)
+    h = v + l
+    h /= np.maximum(np.linalg.norm(h, axis=1, keepdims=True), 1e-12)
+    n_h = np.clip(_dot(n, h), 0.0, 1.0)
+    v_h = np.clip(_dot(v, h), 0.0, 1.0)
+    fw = schlick_weight(v_h)[:, None]
+    c_spec = params.c_spec
+    f90 = np.clip(50.0 * c_spec[:, 1:2], 0.0, 1.0)  # UE4 (BRDF.ush): F0 < 2 % fades the Fresnel rim out
+    F = c_spec + (f90 - c_spec) * fw
+    spec = (ggx_d(n_h, params.alpha) * smith_g(n_l, n_v, params.roughness) / (4.0 * n_l * n_v))[:, None] * F
+    f = params.c_diff / np.pi + spec
+    cc = params.clearcoat
+    if np.any(cc > 0):
+        a_c = np.full_like(n_h, CLEARCOAT_ROUGHNESS**2)
+        r_c = np.full_like(n_h, CLEARCOAT_ROUGHNESS)
+        F_c = CLEARCOAT_F0 + (1.0 - CLEARCOAT_F0) * fw[:, 0]
+        coat = ggx_d(n_h, a_c) * smith_g(n_l, n_v, r_c) / (4.0 * n_l * n_v) * F_c
+        f = f * (1.0 - cc * F_c)[:, None] + (cc * coat)[:, None]
+    return np.where(ok[:, None], f, 0.0)
+
+
+# ----------------------------------------------------------------------------- sampling
+
+
+def tangent_frame(n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Two unit tangents (t, b), each (N, 3), completing ``n`` to a right-handed frame (Duff et al. 2017)."""
+    sign = np.where(n[:, 2] >= 0.0, 1.0, -1.0)
+    a = -1.0 / (sign + n[:, 2])
+    b = n[:, 0] * n[:, 1] * a
+    t = np.stack([1.0 + sign * n[:, 0] ** 2 * a, sign * b, -sign * n[:, 0]], axis=1)
+    bt = np.stack([b, sign + n[:, 1] ** 2 * a, -n[:, 1]], axis=1)
+    return t, bt
+
+
+def to_world(local: np.ndarray, n: np.ndarray, frame: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
+    """Directions (N, 3) given in the frame (t, b, n) of ``n`` -> the frame of ``n``.
+
+    ``n`` may be (N, 3) or a single (3,) axis; ``frame`` = precomputed :func:`tangent_frame` of ``n``.
+    """
+    if n.ndim == 1:
+        t, b = tangent_frame(n[None])
+        return np.einsum("ij,jk->ik", local, np.stack([t[0], b[0], n]))
+    t, b = tangent_frame(n) if frame is None else frame
+    return local[:, :1] * t + local[:, 1:2] * b + local[:, 2:3] * n
+
+
+def sample_ggx_half(n: np.ndarray, alpha: np.ndarray, u1: np.ndarray, u2: np.ndarray,
+                    frame: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
+    """Half vectors h (N, 3) distributed as D(h) (n.h) around ``n``, from uniforms u1, u2 (N,)."""
+    a2 = alpha * alpha
+    cos2 = (1.0 - u1) / (1.0 + (a2 - 1.0) * u1)
+    cos_t = np.sqrt(np.clip(cos2, 0.0, 1.0))
+    sin_t = np.sqrt(np.clip(1.0 - cos2, 0.0, 1.0))
+    phi = 2.0 * np.pi * u2
+    local = np.stack([sin_t * np.cos(phi), sin_t * np.sin(phi), cos_t], axis=1)
+    return to_world(local, n, frame)
+
+
+def reflect(v: np.ndarray, h: np.ndarray) -> np.ndarray:
+    """Mirror ``v`` about ``h``: l = 2 (v.h) h - v, (N, 3)."""
+    return 2.0 * _dot(v, h)[:, None] * h - v
+
+
+def ggx_reflection_pdf(n: np.ndarray, v: np.ndarray, l: np.ndarray, alpha: np.ndarray) -> np.ndarray:
+    """Solid-angle pdf (N,) of ``l`` when ``h`` is drawn by :func:`sample_ggx_half` and ``l = reflect(v, h)``."""
+    h = v + l
+    h /= np.maximum(np.linalg.norm(h, axis=1, keepdims=True), 1e-12)
+    n_h = np.clip(_dot(n, h), 0.0, 1.0)
+    v_h = np.maximum(_dot(v, h), 1e-6)
+    return ggx_d(n_h, alpha) * n_h / (4.0 * v_h)
+
+
+def lobe_probabilities(params: BRDFParams) -> np.ndarray:
+    """Probabilities (N, 3) of sampling the (diffuse, specular, clear-coat) lobes for BRDF sampling.
+
+    Proportional to each lobe's rough reflectance (luminance of c_diff, of c_spec plus a Fresnel
+    allowance, clear-coat strength x 0.1), with a floor so that no lobe with weight is starved.
+    """
+    lum = np.array([0.2126, 0.7152, 0.0722])
+    w_d = np.einsum("ij,j->i", params.c_diff, lum)
+    w_s = np.einsum("ij,j->i", params.c_spec, lum) + 0.05
+    w_c = 0.1 * params.clearcoat
+    w = np.stack([w_d, w_s, w_c], axis=1)
+    w = np.where(w > 0, np.maximum(w, 0.05 * w.sum(axis=1, keepdims=True)), 0.0)
+    return w / w.sum(axis=1, keepdims=True)
+
+
+def sample_brdf(n: np.ndarray, v: np.ndarray, params: BRDFParams, u: np.ndarray) -> np.ndarray:
+    """Directions l (N, 3) drawn from the lobe mixture of :func:`lobe_probabilities`; u is (N, 3) uniform."""
+    probs = params.lobe_probs
+    pick = u[:, 0]
+    diffuse = pick < probs[:, 0]
+    coat = pick >= probs[:, 0] + probs[:, 1]
+    alpha = np.where(coat, CLEARCOAT_ROUGHNESS**2, params.alpha)
+    frame = tangent_frame(n)
+    h = sample_ggx_half(n, alpha, u[:, 1], u[:, 2], frame)
+    l = reflect(v, h)
+    # Cosine-weighted hemisphere for the diffuse lobe (same uniforms).
+    r = np.sqrt(u[:, 1])
+    phi = 2.0 * np.pi * u[:, 2]
+    local = np.stack([r * np.cos(phi), r * np.sin(phi), np.sqrt(np.clip(1.0 - u[:, 1], 0.0, 1.0))], axis=1)
+    l_d = to_world(local, n, frame)
+    return np.where(diffuse[:, None], l_d, l)
+
+
+def brdf_pdf(n: np.ndarray, v: np.ndarray, l: np.ndarray, params: BRDFParams) -> np.ndarray:
+    """Solid-angle pdf (N,) of :func:`sample_brdf` producing ``l``."""
+    probs = params.lobe_probs
+    n_l = np.clip(_dot(n, l), 0.0, 1.0)
+    pdf = probs[:, 0] * n_l / np.pi + probs[:, 1] * ggx_reflection_pdf(n, v, l, params.alpha)
+    if np.any(probs[:, 2] > 0):
+        pdf = pdf + probs[:, 2] * ggx_reflection_pdf(n, v, l, np.full(len(n), CLEARCOAT_ROUGHNESS**2))
+    return pdf

@@ -1,0 +1,175 @@
+"""Insert one object into one image: foreground render, shadow ratio map, depth test, composite.
+
+This is the renderer's single entry point::
+
+    prepare (cached BVH) -> render_foreground -> render_shadow -> depth_visibility -> composite
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..assets.asset import Asset
+from ..conventions import check_shape
+from ..io import InputError
+from ..lighting.light import DistantLight
+from .composite import composite, depth_visibility
+from .geometry import prepare_asset
+from .sampling import sky_irradiance
+from .settings import QUALITY_PRESETS, RenderSettings
+from .shade import render_foreground
+from .shadow import car_ambient_radiance, render_shadow
+
+__all__ = ["QUALITY_PRESETS", "RenderSettings", "Insertion", "render_insertion"]
+
+INTERIOR_SKY_FRACTION = 0.1  # a car interior receives roughly a tenth of the sky through its windows
+
+
+@dataclass(frozen=True)
+class Insertion:
+    """Result of :func:`render_insertion`.
+
+    Attributes:
+        image: (H, W, 3) uint8 composited image (pixels outside the affected region byte-identical).
+        mask: (H, W) float32 final object alpha after occlusion, 0..1.
+        coverage: (H, W) float32 object coverage before occlusion (for the visible fraction).
+        shadow_ratio: (H, W) float32 ratio map S (luminance of the per-channel ratio), 1 = unchanged.
+        object_depth_m: (H, W) float32 camera-z of the object, inf where none.
+        timing_s: seconds per stage: "prepare" (cached BVH, ambient), "foreground" (= "raycast" inside it + "shade"),
+            "shadow", "composite", and "total".
+        stats: rays cast per stage, sample counts, pixel boxes.
+        shadow_ratio_rgb: (H, W, 3) float32 per-channel ratio actually used in the composite.
+        object_radiance: (H, W, 3) float32 un-premultiplied linear object radiance (0 where no coverage).
+    """
+
+    image: np.ndarray
+    mask: np.ndarray
+    coverage: np.ndarray
+    shadow_ratio: np.ndarray
+    object_depth_m: np.ndarray
+    timing_s: dict[str, float]
+    stats: dict
+    shadow_ratio_rgb: np.ndarray | None = None
+    object_radiance: np.ndarray | None = None
+
+
+def _settings(quality: str | RenderSettings) -> RenderSettings:
+    if isinstance(quality, RenderSettings):
+        return quality
+    if quality not in QUALITY_PRESETS:
+        raise InputError(f"quality: expected one of {sorted(QUALITY_PRESETS)}, got {quality!r}")
+    return QUALITY_PRESETS[quality]
+
+
+def render_insertion(image_rgb: np.ndarray, K: np.ndarray, depth_m: np.ndarray, light: DistantLight,
+                     asset: Asset, T_cam_from_object: np.ndarray, ground_normal_cam: np.ndarray | None = None,
+                     quality: str | RenderSettings = "default", ev: float = 0.0, seed: int = 0) -> Insertion:
+    """Render ``asset`` at ``T_cam_from_object`` into ``image_rgb`` with its shadow and occlusion.
+
+    Args:
+        image_rgb: (H, W, 3) uint8 LDR image (the contract's camera response with exposure ``ev``).
+        K: (3, 3) intrinsics.
+        depth_m: (H, W) scene camera-z depth (metres), inf where unknown.
+        light: camera-frame distant light (envmap without the sun + the sun).
+        asset: the object (object frame x front, y left, z up, metres, origin at the bottom centre).
+        T_cam_from_object: (4, 4) pose of the object in the camera frame.
+        ground_normal_cam: (3,) ground normal (up) in the camera frame; default: the object's up axis.
+        quality: a :data:`QUALITY_PRESETS` name or explicit :class:`RenderSettings`.
+        ev: exposure of the camera response.
+        seed: random seed (the result is deterministic for a seed).
+    """
+    t_start = time.perf_counter()
+    image_rgb = np.asarray(image_rgb)
+    if image_rgb.dtype != np.uint8 or image_rgb.ndim != 3 or image_rgb.shape[2] != 3:
+        raise InputError(f"image: expected an (H, W, 3) uint8 RGB array, got {image_rgb.shape} {image_rgb.dtype}")
+    H, W = image_rgb.shape[:2]
+    K = np.asarray(K, dtype=np.float64)
+    check_shape(K, (3, 3), "K")
+    depth_m = np.asarray(depth_m, dtype=np.float32)
+    if depth_m.shape != (H, W):
+        raise InputError(f"depth: expected shape {(H, W)} (same as the image), got {depth_m.shape}")
+    T = np.asarray(T_cam_from_object, dtype=np.float64)
+    check_shape(T, (4, 4), "T_cam_from_object")
+    if not np.all(np.isfinite(T)):
+        raise InputError("T_cam_from_object: must be finite")
+    settings = _settings(quality)
+    rng = np.random.default_rng(seed)
+    timing: dict[str, float] = {}
+
+    t0 = time.perf_counter()
+    prep = prepare_asset(asset)
+    up = T[:3, 2] if ground_normal_cam is None else np.asarray(ground_normal_cam, dtype=np.float64)
+    check_shape(up, (3,), "ground_normal_cam")
+    up = up / np.linalg.norm(up)
+    E_sky_up = sky_irradiance(light.envmap, up)
+    ambient = car_ambient_radiance(light, prep.mean_albedo, up)
+    interior = INTERIOR_SKY_FRACTION * E_sky_up / np.pi
+    timing["prepare"] = time.perf_counter() - t0
+
+    t0 = time.perf_counter()
+    fg = render_foreground(K, W, H, light, prep, T, settings, rng, ambient, interior)
+    timing["foreground"] = time.perf_counter() - t0
+    timing["raycast"] = fg.stats.get("raycast_s", 0.0) if fg is not None else 0.0
+    timing["shade"] = timing["foreground"] - timing["raycast"]
+
+    t0 = time.perf_counter()
+    sh = render_shadow(K, W, H, depth_m, light, prep, T, up, settings, rng, ambient)
+    timing["shadow"] = time.perf_counter() - t0
+
+    t0 = time.perf_counter()
+    coverage = np.zeros((H, W), np.float32)
+    mask = np.zeros((H, W), np.float32)
+    obj_depth = np.full((H, W), np.inf, np.float32)
+    rad_premult = np.zeros((H, W, 3), np.float32)
+    vis_full = np.zeros((H, W), np.float32)
+    ratio = np.ones((H, W, 3), np.float32)
+    if fg is not None:
+        h, w = fg.alpha.shape
+        sl = (slice(fg.y0, fg.y0 + h), slice(fg.x0, fg.x0 + w))
+        vis = depth_visibility(fg.depth_m, depth_m[sl])
+        coverage[sl] = fg.alpha
+        mask[sl] = fg.alpha * vis
+        vis_full[sl] = vis
+        obj_depth[sl] = fg.depth_m
+        rad_premult[sl] = fg.radiance_premult
+    if sh is not None:
+        h, w = sh.ratio_rgb.shape[:2]
+        ratio[sh.y0 : sh.y0 + h, sh.x0 : sh.x0 + w] = sh.ratio_rgb
+    # Everything below only touches the union of the object's and the shadow's boxes.
+    boxes = [(fg.x0, fg.y0, fg.x0 + fg.alpha.shape[1], fg.y0 + fg.alpha.shape[0])] if fg is not None else []
+    if sh is not None:
+        boxes.append((sh.x0, sh.y0, sh.x0 + sh.ratio_rgb.shape[1], sh.y0 + sh.ratio_rgb.shape[0]))
+    image = image_rgb.copy()
+    obj_rad = np.zeros((H, W, 3), np.float32)
+    ratio_lum = np.ones((H, W), np.float32)
+    if boxes:
+        bx0, by0 = min(b[0] for b in boxes), min(b[1] for b in boxes)
+        bx1, by1 = max(b[2] for b in boxes), max(b[3] for b in boxes)
+        ub = (slice(by0, by1), slice(bx0, bx1))
+        image[ub] = composite(image_rgb[ub], rad_premult[ub], mask[ub], vis_full[ub], ratio[ub], ev)
+        cov = coverage[ub][..., None]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            obj_rad[ub] = np.where(cov > 0, rad_premult[ub] / cov, 0.0)
+        lum_w = np.array([0.2126, 0.7152, 0.0722], np.float32)
+        ratio_lum[ub] = np.einsum("hwc,c->hw", ratio[ub], lum_w)
+    timing["composite"] = time.perf_counter() - t0
+    timing["total"] = time.perf_counter() - t_start
+
+    rays = {}
+    for part in (fg, sh):
+        if part is not None:
+            for k, v in part.stats.get("rays", {}).items():
+                rays[k] = rays.get(k, 0) + int(v)
+    stats = {
+        "quality": quality if isinstance(quality, str) else "custom",
+        "rays": rays,
+        "rays_total": int(sum(rays.values())),
+        "foreground": None if fg is None else {k: v for k, v in fg.stats.items() if k != "rays"},
+        "shadow": None if sh is None else {k: v for k, v in sh.stats.items() if k != "rays"},
+        "ambient_rgb": ambient.tolist(),
+    }
+    return Insertion(image=image, mask=mask, coverage=coverage, shadow_ratio=ratio_lum, object_depth_m=obj_depth,
+                     timing_s=timing, stats=stats, shadow_ratio_rgb=ratio, object_radiance=obj_rad)

@@ -1,0 +1,191 @@
+"""Direction sampling: Fibonacci lattice, cosine hemisphere, environment-map importance, sun disc.
+
+Directions are unit (N, 3) float64 vectors; pdfs are per steradian.  Local hemisphere samples are
+z-up (rotate them with :func:`streetaug.augment.render.brdf.to_world`).  Environment maps use the
+camera-frame equirectangular convention of :mod:`streetaug.augment.conventions`.
+"""
+
+from __future__ import annotations
+
+from collections import OrderedDict
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..conventions import (
+    camera_dir_to_lonlat,
+    check_shape,
+    equirect_solid_angles,
+    lonlat_to_camera_dir,
+    luminance,
+)
+
+GOLDEN_ANGLE = np.pi * (3.0 - np.sqrt(5.0))
+
+
+def fibonacci_hemisphere(n: int) -> np.ndarray:
+    """``n`` near-equal-area directions (n, 3) on the upper (z >= 0) hemisphere; each stands for 2 pi / n sr."""
+    if n < 1:
+        raise ValueError(f"fibonacci_hemisphere: need at least one direction, got {n}")
+    k = np.arange(n) + 0.5
+    z = 1.0 - k / n  # uniform in z = uniform in solid angle
+    r = np.sqrt(np.clip(1.0 - z * z, 0.0, 1.0))
+    phi = GOLDEN_ANGLE * k
+    return np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1)
+
+
+def cosine_hemisphere(u1: np.ndarray, u2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Cosine-weighted local directions (N, 3) (z-up) and their pdf cos / pi (N,)."""
+    r = np.sqrt(u1)
+    phi = 2.0 * np.pi * u2
+    z = np.sqrt(np.clip(1.0 - u1, 0.0, 1.0))
+    return np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1), z / np.pi
+
+
+def sample_cone(axis: np.ndarray, half_angle_rad: float, u1: np.ndarray, u2: np.ndarray) -> np.ndarray:
+    """Directions (N, 3) uniform in solid angle inside the cone around unit ``axis`` (3,) (e.g. the sun disc)."""
+    from .brdf import to_world
+
+    cos_max = np.cos(half_angle_rad)
+    z = 1.0 - u1 * (1.0 - cos_max)
+    r = np.sqrt(np.clip(1.0 - z * z, 0.0, 1.0))
+    phi = 2.0 * np.pi * u2
+    local = np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1)
+    return to_world(local, np.asarray(axis, dtype=np.float64))
+
+
+@dataclass(frozen=True)
+class EnvSampler:
+    """Importance sampling of an equirect environment map by luminance x solid angle.
+
+    Attributes:
+        height, width: map size.
+        cdf: (H*W,) float64 cumulative pixel probabilities (last = 1).
+        pmf: (H*W,) float64 pixel probabilities.
+        solid_angle: (H,) float64 solid angle of a pixel in each row (sr).
+    """
+
+    height: int
+    width: int
+    cdf: np.ndarray
+    pmf: np.ndarray
+    solid_angle: np.ndarray
+
+    @staticmethod
+    def build(envmap: np.ndarray, uniform_mix: float = 0.05) -> "EnvSampler":
+        """From an (H, W, 3) map; ``uniform_mix`` of the probability is spread by solid angle (no zero pdf)."""
+        check_shape(envmap, ("H", "W", 3), "envmap")
+        H, W = envmap.shape[:2]
+        omega = equirect_solid_angles(H, W)
+        w = np.maximum(luminance(np.asarray(envmap, dtype=np.float64)), 0.0) * omega
+        total = w.sum()
+        pmf = omega / omega.sum() if total <= 0 else (1 - uniform_mix) * w / total + uniform_mix * omega / omega.sum()
+        pmf = pmf.ravel()
+        cdf = np.cumsum(pmf)
+        cdf /= cdf[-1]
+        return EnvSampler(H, W, cdf, pmf, omega[:, 0].copy())
+
+    def sample(self, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Camera-frame directions (N, 3) and pdfs (N,) from uniforms ``u`` (N, 3)."""
+        idx = np.minimum(np.searchsorted(self.cdf, u[:, 0], side="right"), self.cdf.size - 1)
+        row, col = np.divmod(idx, self.width)
+        # Uniform in solid angle inside the pixel: uniform in longitude and in sin(latitude).
+        lon = ((col + u[:, 1]) / self.width - 0.5) * 2.0 * np.pi
+        s_top = np.sin((0.5 - row / self.height) * np.pi)
+        s_bot = np.sin((0.5 - (row + 1) / self.height) * np.pi)
+        lat = np.arcsin(np.clip(s_top + (s_bot - s_top) * u[:, 2], -1.0, 1.0))
+        return lonlat_to_camera_dir(lon, lat), self.pmf[idx] / self.solid_angle[row]
+
+    def pdf(self, dirs: np.ndarray) -> np.ndarray:
+        """Solid-angle pdf (N,) of camera-frame directions (N, 3) under :meth:`sample`."""
+        lon, lat = camera_dir_to_lonlat(dirs)
+        col = np.clip(((lon / (2 * np.pi) + 0.5) * self.width).astype(np.int64), 0, self.width - 1)
+        row = np.clip(((0.5 - lat / np.pi) * self.height).astype(np.int64), 0, self.height - 1)
+        return self.pmf[row * self.width + col] / self.solid_angle[row]
+
+
+_SAMPLER_CACHE: "OrderedDict[int, tuple[np.ndarray, EnvSampler]]" = OrderedDict()
+_SAMPLER_CACHE_SIZE = 8
+
+
+def env_sampler_for(envmap: np.ndarray) -> EnvSampler:
+    """The :class:`EnvSampler` of ``envmap``, built once and cached (keyed by the array's identity)."""
+    key = id(envmap)
+    hit = _SAMPLER_CACHE.get(key)
+    if hit is not None and hit[0] is envmap:
+        _SAMPLER_CACHE.move_to_end(key)
+        return hit[1]
+    sampler = EnvSampler.build(envmap)
+    _SAMPLER_CACHE[key] = (envmap, sampler)  # holding the array keeps its id from being reused
+    while len(_SAMPLER_CACHE) > _SAMPLER_CACHE_SIZE:
+        _SAMPLER_CACHE.popitem(last=False)
+    return sampler
+
+
+def hemisphere_irradiance(envmap: np.ndarray, normal: np.ndarray) -> np.ndarray:
+    """Irradiance (3,) on a surface with unit ``normal`` (3,) from an unoccluded camera-frame envmap."""
+    from ..conventions import camera_envmap_directions
+
+    H, W = envmap.shape[:2]
+    cos = np.clip(np.einsum("hwk,k->hw", camera_envmap_directions(H, W), np.asarray(normal, dtype=np.float64)), 0.0, None)
+    w = cos * equirect_solid_angles(H, W)
+    return np.einsum("hw,hwc->c", w, np.asarray(envmap, dtype=np.float64))
+
+
+_IRRADIANCE_CACHE: "OrderedDict[int, tuple[np.ndarray, np.ndarray]]" = OrderedDict()
+
+
+def irradiance_map(envmap: np.ndarray, height: int = 32, width: int = 64) -> np.ndarray:
+    """Unoccluded irradiance (height, width, 3) for every normal direction, camera-frame equirect layout.
+
+    ``E(n) = sum_pixels L max(0, n . w) dw`` from the map downsampled to (height, width); cached by
+    the map's identity.  Look it up with a normal as the direction.
+    """
+    key = id(envmap)
+    hit = _IRRADIANCE_CACHE.get(key)
+    if hit is not None and hit[0] is envmap:
+        return hit[1]
+    import cv2
+
+    from ..conventions import camera_envmap_directions
+
+    env = cv2.resize(np.asarray(envmap, dtype=np.float32), (width, height), interpolation=cv2.INTER_AREA)
+    # Keep the energy exact: rescale each row of the small map to the big map's row-band sums.
+    d = camera_envmap_directions(height, width).reshape(-1, 3)
+    w = (equirect_solid_angles(height, width).reshape(-1, 1) * env.reshape(-1, 3).astype(np.float64))
+    cos = np.clip(np.einsum("ik,jk->ij", d, d), 0.0, None)  # (normals, directions)
+    E = np.einsum("ij,jc->ic", cos, w).reshape(height, width, 3)
+    _IRRADIANCE_CACHE[key] = (envmap, E)
+    while len(_IRRADIANCE_CACHE) > _SAMPLER_CACHE_SIZE:
+        _IRRADIANCE_CACHE.popitem(last=False)
+    return E
+
+
+def sky_irradiance(envmap: np.ndarray, normal: np.ndarray) -> np.ndarray:
+    """Irradiance (3,) on a surface with unit camera-frame ``normal`` (3,), from the cached :func:`irradiance_map`."""
+    from .shade import lookup_equirect
+
+    n = np.asarray(normal, dtype=np.float64)
+    return lookup_equirect(irradiance_map(envmap), (n / np.linalg.norm(n))[None])[0]
+
+
+
+_PYRAMID_CACHE: "OrderedDict[int, tuple[np.ndarray, list[np.ndarray]]]" = OrderedDict()
+
+
+def env_pyramid(envmap: np.ndarray, min_width: int = 8) -> list[np.ndarray]:
+    """Box-filtered copies of an equirect map, widths W, W/2, ... down to ``min_width`` (cached by identity)."""
+    key = id(envmap)
+    hit = _PYRAMID_CACHE.get(key)
+    if hit is not None and hit[0] is envmap:
+        return hit[1]
+    import cv2
+
+    levels = [np.asarray(envmap, dtype=np.float32)]
+    while levels[-1].shape[1] // 2 >= min_width and levels[-1].shape[0] >= 2:
+        h, w = levels[-1].shape[:2]
+        levels.append(cv2.resize(levels[-1], (w // 2, max(h // 2, 1)), interpolation=cv2.INTER_AREA))
+    _PYRAMID_CACHE[key] = (envmap, levels)
+    while len(_PYRAMID_CACHE) > _SAMPLER_CACHE_SIZE:
+        _PYRAMID_CACHE.popitem(last=False)
+    return levels

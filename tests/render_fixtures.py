@@ -1,0 +1,124 @@
+"""Small scenes for renderer tests and benchmarks: a primitive car, spheres, lights, a ground-plane image."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import cv2
+import numpy as np
+import trimesh
+
+from streetaug.augment.assets.asset import Asset, Material
+from streetaug.augment.conventions import (
+    camera_envmap_directions,
+    hdr_to_ldr_uint8,
+    pixel_rays,
+)
+from streetaug.augment.lighting.light import DistantLight, SunLight
+from streetaug.augment.render.depth import ground_plane_depth
+
+SHARED_DATA = (Path(__file__).parents[1] / ".." / "shared" / "data").resolve()
+NUSCENES_K = np.array([[1266.4, 0.0, 816.3], [0.0, 1266.4, 491.5], [0.0, 0.0, 1.0]])
+
+
+def _flat(mesh: trimesh.Trimesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Unshared vertices with flat normals: (V, 3), (F, 3), (V, 3)."""
+    V = mesh.vertices[mesh.faces].reshape(-1, 3)
+    F = np.arange(len(V)).reshape(-1, 3)
+    N = np.repeat(mesh.face_normals, 3, axis=0)
+    return V, F, N
+
+
+def primitive_car(paint=(0.6, 0.05, 0.04)) -> Asset:
+    """A boxy car (4.4 x 1.8 x 1.5 m): painted body, glass cabin, rubber tyres. Object frame, origin bottom centre."""
+    parts = []
+    body = trimesh.creation.box(extents=[4.4, 1.8, 0.75])
+    body.apply_translation([0, 0, 0.3 + 0.375])
+    parts.append((body, 0, False))
+    cabin = trimesh.creation.box(extents=[2.3, 1.6, 0.5])
+    cabin.apply_translation([-0.3, 0, 1.05 + 0.25])
+    parts.append((cabin, 1, False))
+    for x in (-1.4, 1.4):
+        for y in (-0.8, 0.8):
+            wheel = trimesh.creation.cylinder(radius=0.33, height=0.24, sections=24)
+            wheel.apply_transform(trimesh.transformations.rotation_matrix(np.pi / 2, [1, 0, 0]))
+            wheel.apply_translation([x, y, 0.33])
+            parts.append((wheel, 2, True))
+    Vs, Fs, Ns, Ms = [], [], [], []
+    off = 0
+    for mesh, mat, smooth in parts:
+        if smooth:
+            V, F, N = mesh.vertices, mesh.faces, mesh.vertex_normals
+        else:
+            V, F, N = _flat(mesh)
+        Vs.append(V)
+        Fs.append(F + off)
+        Ns.append(N)
+        Ms.append(np.full(len(F), mat))
+        off += len(V)
+    V = np.concatenate(Vs)
+    V[:, 2] -= V[:, 2].min()
+    mats = (
+        Material("paint", np.array(paint), metallic=0.0, roughness=0.35, specular=0.5, clearcoat=1.0),
+        Material("glass", np.array([0.05, 0.06, 0.07]), roughness=0.05, specular=0.5, opacity=0.25),
+        Material("tyre", np.array([0.03, 0.03, 0.03]), roughness=0.85, specular=0.3),
+    )
+    return Asset("primitive_car", V, np.concatenate(Fs), np.concatenate(Ms), mats, np.concatenate(Ns))
+
+
+def sphere_asset(radius: float = 1.0, material: Material | None = None, subdivisions: int = 4) -> Asset:
+    """An icosphere resting on z = 0 with smooth normals."""
+    m = trimesh.creation.icosphere(subdivisions=subdivisions, radius=radius)
+    n = m.vertices / np.linalg.norm(m.vertices, axis=1, keepdims=True)
+    V = m.vertices + [0, 0, radius]
+    mat = material or Material("white", np.ones(3), roughness=1.0, specular=0.0)
+    return Asset("sphere", V, m.faces, np.zeros(len(m.faces), np.int64), (mat,), n)
+
+
+def sunny_light(sun_dir_cam=(0.5, -0.6, 0.62), sun_irradiance=8.0, sky=(0.25, 0.35, 0.55), ground=0.12,
+                height: int = 64, width: int = 128) -> DistantLight:
+    """Analytic sky (blue-ish above the horizon, grey ground below) plus a sun, camera frame."""
+    d = camera_envmap_directions(height, width)
+    up = -d[..., 1]
+    sky_rgb = np.asarray(sky)[None, None] * (0.6 + 0.4 * (1 - np.clip(up, 0, 1)))[..., None]
+    env = np.where(up[..., None] > 0, sky_rgb, ground).astype(np.float32)
+    s = np.asarray(sun_dir_cam, dtype=np.float64)
+    sun = SunLight(direction=s / np.linalg.norm(s), irradiance_rgb=np.array([1.0, 0.95, 0.85]) * sun_irradiance,
+                   half_angle_rad=np.radians(0.5))
+    return DistantLight(env, sun)
+
+
+def read_hdri_light(name: str, height: int = 128, width: int = 256) -> DistantLight:
+    """A camera-frame DistantLight from ``shared/data/hdri/<name>.hdr`` (camera looking horizontally).
+
+    The panoramas use azimuth = 360 u / W - 180 and elevation = 90 - 180 v / H, which is the camera
+    equirect convention's (lon, lat) for a level camera, so only resampling is needed.
+    """
+    bgr = cv2.imread(str(SHARED_DATA / "hdri" / f"{name}.hdr"), cv2.IMREAD_UNCHANGED)
+    rgb = cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
+    rgb = cv2.resize(rgb, (width, height), interpolation=cv2.INTER_AREA)
+    return DistantLight.from_envmap(np.maximum(rgb, 0.0))
+
+
+def ground_scene(light: DistantLight, K=NUSCENES_K, width: int = 1600, height: int = 900, cam_height_m: float = 1.5,
+                 albedo: float = 0.25, ev: float | None = None):
+    """A Lambertian ground plane under ``light`` seen by a level camera; sky where there is no ground.
+
+    Returns (image uint8 (H, W, 3), depth_m (H, W), ev): ``ev`` puts the ground at about 0.45 LDR.
+    """
+    from streetaug.augment.render.sampling import hemisphere_irradiance
+    from streetaug.augment.render.shade import env_radiance
+
+    n = np.array([0.0, -1.0, 0.0])
+    depth = ground_plane_depth(K, width, height, n, cam_height_m)
+    E = hemisphere_irradiance(light.envmap, n)
+    if light.sun is not None:
+        E = E + np.asarray(light.sun.irradiance_rgb) * max(float(light.sun.direction @ n), 0.0)
+    ground_rgb = albedo * E / np.pi
+    if ev is None:
+        ev = float(np.log2(0.45**2.2 / (0.2126 * ground_rgb[0] + 0.7152 * ground_rgb[1] + 0.0722 * ground_rgb[2])))
+    ys, xs = np.mgrid[0:height, 0:width]
+    dirs = pixel_rays(K, np.stack([xs.ravel(), ys.ravel()], 1).astype(np.float64))
+    sky = env_radiance(light, dirs).reshape(height, width, 3)
+    hdr = np.where(np.isfinite(depth)[..., None], ground_rgb[None, None], sky)
+    return hdr_to_ldr_uint8(hdr, ev), depth, ev
