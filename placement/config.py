@@ -29,14 +29,16 @@ class PlacementConfig:
         static_clearance_m: minimum footprint-to-footprint distance to other annotated boxes; also the
             margin around the footprint in which unannotated LiDAR obstacles and non-drivable lidarseg
             points are not allowed (the paper's 1 m from static background classes).
-        mutual_clearance_m: minimum footprint distance between objects inserted into the same image.
+        mutual_clearance_m: minimum footprint distance between objects inserted into the same image
+            (inserted objects are vehicles, so the dynamic clearance by default).
         yaw_sigma_deg: std of the Gaussian yaw noise around the ego heading (3 realistic, 15 augmentation).
         opposite_heading_probability: probability of facing against the ego heading.
         min_visible_fraction: minimum fraction of the projected 3D box (convex hull of its corners)
             inside the image; the whole box must also be in front of the camera (z >= near_plane_m).
         near_plane_m: minimum camera-frame z of every box corner.
         n_candidates: candidates sampled per object.
-        n_objects: objects to place per image (each mutually non-colliding).
+        n_objects: objects to place per image (each mutually non-colliding); the caller passes that many
+            sizes to :func:`streetaug.placement.place.place_objects`.
         obstacle_min_height_m, obstacle_max_height_m: a LiDAR point counts as an obstacle when its height
             above the local ground plane is in this range (and it lies in no annotated box).
         obstacle_max_points: tolerated obstacle points near a footprint (LiDAR noise).
@@ -53,6 +55,10 @@ class PlacementConfig:
         corridor_half_width_m: LiDAR ground fallback: only points with |y_ego| below this (the ego's corridor).
         lidar_ground_band_m: LiDAR ground fallback: points within this height of the ego ground plane are ground.
         map_roi_m: the map's drivable polygons are clipped to this radius around the camera.
+        require_unoccluded_corners: the paper's occlusion rule (for realism; off for augmentation, where
+            the renderer's depth test handles occlusion): no top box corner hidden behind LiDAR points
+            nearer by more than ``occlusion_tolerance_m``.
+        occlusion_tolerance_m: depth margin of that rule.
         kerb_distance_m: an object whose footprint is this close to the edge of the drivable area is
             labelled ``vehicle.parked``; otherwise ``vehicle.moving``.
     """
@@ -61,7 +67,7 @@ class PlacementConfig:
     max_distance_m: float = 40.0
     dynamic_clearance_m: float = 3.0
     static_clearance_m: float = 1.0
-    mutual_clearance_m: float = 1.0
+    mutual_clearance_m: float = 3.0
     yaw_sigma_deg: float = 3.0
     opposite_heading_probability: float = 0.5
     min_visible_fraction: float = 0.5
@@ -83,6 +89,8 @@ class PlacementConfig:
     corridor_half_width_m: float = 6.0
     lidar_ground_band_m: float = 0.25
     map_roi_m: float = 80.0
+    require_unoccluded_corners: bool = False
+    occlusion_tolerance_m: float = 1.0
     kerb_distance_m: float = 1.0
 
     def __post_init__(self) -> None:

@@ -7,7 +7,8 @@ Sources, best first:
 * ``"lidarseg"``: LiDAR points labelled ``flat.driveable_surface`` (24), rasterised to a bird's-eye grid.
   Far LiDAR rings are metres apart, so along each azimuth bin the cells between two consecutive
   drivable points (no other labelled point between them, gap below ``ray_fill_max_gap_m``) are filled,
-  then a morphological closing joins neighbouring azimuths. Confidence ``"medium"``.
+  between a drivable and a blocking point up to their midpoint (nearest-label boundary), then a
+  morphological closing joins neighbouring azimuths. Confidence ``"medium"``.
 * ``"lidar-ground"``: the same grid from LiDAR points near the ego's ground plane (ego z = 0) inside
   the ego corridor (|y_ego| < ``corridor_half_width_m``); anything higher blocks the fill. Confidence ``"low"``.
 
@@ -157,8 +158,14 @@ def _ray_fill_grid(
     order = np.lexsort((rng_m, az_bin))
     az_s, r_s, d_s, xy_s = az_bin[order], rng_m[order], is_drv[order], all_xy[order]
     # consecutive drivable pairs on the same azimuth bin, close enough: fill the segment between them
-    pair = (az_s[1:] == az_s[:-1]) & d_s[1:] & d_s[:-1] & (r_s[1:] - r_s[:-1] < config.ray_fill_max_gap_m)
-    a, b = xy_s[:-1][pair], xy_s[1:][pair]
+    # (a drivable point next to a blocking one fills up to the midpoint: nearest-label boundary)
+    near = (az_s[1:] == az_s[:-1]) & (r_s[1:] - r_s[:-1] < config.ray_fill_max_gap_m)
+    both = near & d_s[1:] & d_s[:-1]
+    d_then_b = near & d_s[:-1] & ~d_s[1:]
+    b_then_d = near & ~d_s[:-1] & d_s[1:]
+    mid = 0.5 * (xy_s[:-1] + xy_s[1:])
+    a = np.concatenate([xy_s[:-1][both], xy_s[:-1][d_then_b], xy_s[1:][b_then_d]])
+    b = np.concatenate([xy_s[1:][both], mid[d_then_b], mid[b_then_d]])
     seg_len = np.linalg.norm(b - a, axis=1)
     steps = np.ceil(seg_len / (0.5 * res)).astype(np.int64) + 1
     seg_id = np.repeat(np.arange(len(a)), steps)

@@ -93,40 +93,50 @@ class LocalGroundFitter:
         self.tree = cKDTree(self.points[:, :2]) if len(self.points) else None
 
     def fit(self, xy: np.ndarray) -> GroundPlane:
-        """Ground plane below global x/y ``xy`` (2,); falls back to the ego plane when LiDAR is insufficient."""
+        """Ground plane below global x/y ``xy`` (2,); falls back to the ego plane when LiDAR is insufficient.
+
+        The fit uses points within ``ground_radius_m``; where the far LiDAR rings are too sparse the
+        radius grows to 2x and 3x before falling back.
+        """
         xy = np.asarray(xy, dtype=np.float64)
+        for scale in (1.0, 2.0, 3.0):
+            plane = self._fit_within(xy, self.config.ground_radius_m * scale)
+            if plane is not None:
+                return plane
+        return ego_ground_plane(self.T_global_from_ego, xy)
+
+    def _fit_within(self, xy: np.ndarray, radius_m: float) -> GroundPlane | None:
         cfg = self.config
-        fallback = ego_ground_plane(self.T_global_from_ego, xy)
         if self.tree is None:
-            return fallback
-        idx = self.tree.query_ball_point(xy, cfg.ground_radius_m)
+            return None
+        idx = self.tree.query_ball_point(xy, radius_m)
         if len(idx) < cfg.ground_min_points:
-            return fallback
+            return None
         pts = self.points[np.asarray(idx)]
         up = self.T_global_from_ego[:3, 2]
+        source = "lidarseg" if self.use_labels else "lidar-plane"
         if self.use_labels:
             cand = pts
         else:
-            # low points: within 0.4 m of the 5th percentile height (relative to the ego plane's slope)
+            # low points: within 0.4 m of the 5th percentile height (measured along the ego's up)
             rel_h = pts @ up
             cand = pts[rel_h <= np.percentile(rel_h, 5) + 0.4]
         if len(cand) < cfg.ground_min_points:
-            return fallback
+            return None
         normal, centroid = _fit_plane(cand)
         for _ in range(3):
             res = (pts - centroid) @ normal
             inl = pts[np.abs(res) < max(cfg.ground_inlier_m, 1e-3)]
             if len(inl) < cfg.ground_min_points:
-                return fallback
+                return None
             normal, centroid = _fit_plane(inl)
         spread = np.linalg.eigvalsh(np.cov((inl[:, :2] - inl[:, :2].mean(0)).T))
-        if spread[0] < 0.5**2:  # points on one scan line: trust only the height, keep the ego's tilt
-            normal = up.copy()
-            centroid = np.array([xy[0], xy[1], np.median(inl @ up - xy @ up[:2]) / up[2]]) if up[2] else centroid
-            source_n = len(inl)
-            plane = _plane_at(xy, normal, centroid, "lidarseg" if self.use_labels else "lidar-plane", source_n)
-            return plane
+        if spread[0] < 0.5**2:
+            # points on one scan line: trust only the height, keep the ego's tilt (plane up . p = median)
+            d = float(np.median(inl @ up))
+            z = (d - up[:2] @ xy) / up[2]
+            return _plane_at(xy, up.copy(), np.array([xy[0], xy[1], z]), source, len(inl))
         tilt = np.degrees(np.arccos(np.clip(abs(normal @ up), -1.0, 1.0)))
         if tilt > cfg.ground_max_tilt_deg:
-            return fallback
-        return _plane_at(xy, normal, centroid, "lidarseg" if self.use_labels else "lidar-plane", len(inl))
+            return None
+        return _plane_at(xy, normal, centroid, source, len(inl))
