@@ -86,7 +86,7 @@ def run_batch(reader, out_dir: str | Path, config: BatchConfig) -> dict:
     stage_times: dict[str, list[float]] = {}
     counts: Counter = Counter()
     reasons: Counter = Counter()
-    sample_cache: dict[str, object] = {}
+    sample = None
     for token, camera in tqdm(items, desc="augment", unit="img", dynamic_ncols=True):
         if _is_done(done.get((token, camera)), out_dir):
             counts["resumed"] += 1
@@ -94,9 +94,8 @@ def run_batch(reader, out_dir: str | Path, config: BatchConfig) -> dict:
         row = {"sample_token": token, "camera": camera}
         t0 = time.perf_counter()
         try:
-            sample = sample_cache.get(token) or reader.sample(token)
-            sample_cache.clear()
-            sample_cache[token] = sample
+            if sample is None or sample.token != token:  # items are ordered by sample: load each once
+                sample = reader.sample(token)
             if camera not in sample.cameras:
                 raise LookupError(f"camera {camera} not in sample")
             view = sample.cameras[camera]

@@ -95,12 +95,11 @@ def scene_depth_for_view(sample: Sample, view: CameraView) -> np.ndarray:
     from .render.depth import densify_lidar_depth, ground_plane_depth
 
     normal, offset = ego_ground_plane_cam(view)
-    ground = ground_plane_depth(view.K, view.width, view.height, normal, offset)
     lidar = sample.lidar
     if lidar is None:
-        return ground
+        return ground_plane_depth(view.K, view.width, view.height, normal, offset)
     points_cam = lidar.points_in(view.T_cam_from_global)
-    return densify_lidar_depth(points_cam, view.K, view.width, view.height, ground_fill=ground)
+    return densify_lidar_depth(points_cam, view.K, view.width, view.height, ground_fill=(normal, offset))
 
 
 def insert_into_view(sample: Sample, view: CameraView, assets: Sequence[Asset], options: InsertOptions) -> InsertResult:
@@ -127,7 +126,8 @@ def insert_into_view(sample: Sample, view: CameraView, assets: Sequence[Asset], 
 
     t = time.perf_counter()
     config = PlacementConfig(yaw_sigma_deg=options.yaw_sigma_deg, n_objects=options.n_objects)
-    placement = place_objects(sample, view, [a.wlh for a in assets], rng, config)
+    placement = place_objects(sample, view, [a.wlh for a in assets], rng, config,
+                              categories=[a.category for a in assets])
     timing["placement"] = time.perf_counter() - t
 
     t = time.perf_counter()
@@ -140,25 +140,37 @@ def insert_into_view(sample: Sample, view: CameraView, assets: Sequence[Asset], 
             image=image, objects=[], mask=np.zeros(image.shape[:2], np.float32),
             shadow_ratio=np.ones(image.shape[:2], np.float32), timing_s=timing, lighting=estimate,
             placement_report=placement.report, skipped_reason=placement.reason or "no valid placement",
+            extras={"placement": placement},
         )
 
+    placed_assets = _assets_of_placements(assets, placement.placements)
     result = _render_objects(
-        image, view.K, depth_m, estimate.light_cam, assets,
+        image, view.K, depth_m, estimate.light_cam, placed_assets,
         [view.T_cam_from_global @ p.T_global_from_object for p in placement.placements],
         [rotate_vectors(view.T_cam_from_global, p.ground_normal_global[None])[0] for p in placement.placements],
         options, rng, timing, render_insertion,
     )
     objects = [
         object_label(T_cam_from_object, asset.wlh, asset.category, view.K, view.width, view.height,
-                     ins.mask, ins.coverage, T_global_from_cam=view.T_global_from_cam)
-        for (T_cam_from_object, asset, ins) in result["objects"]
+                     ins.mask, ins.coverage, T_global_from_cam=view.T_global_from_cam, attribute=p.attribute)
+        for (T_cam_from_object, asset, ins), p in zip(result["objects"], placement.placements)
     ]
     timing["total"] = time.perf_counter() - t0
     return InsertResult(
         image=result["image"], objects=objects, mask=result["mask"], shadow_ratio=result["shadow"],
         timing_s=timing, lighting=estimate, placement_report=placement.report,
-        extras={"placements": placement.placements},
+        extras={"placement": placement},
     )
+
+
+def _assets_of_placements(assets: Sequence[Asset], placements: Sequence) -> list[Asset]:
+    """The asset of each placement (placement may drop objects it could not place; sizes identify them)."""
+    unused = list(assets)
+    out = []
+    for p in placements:
+        i = next(i for i, a in enumerate(unused) if np.allclose(a.wlh, p.wlh))
+        out.append(unused.pop(i))
+    return out
 
 
 def insert_into_image(

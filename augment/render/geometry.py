@@ -63,8 +63,10 @@ class PreparedAsset:
         return np.where(ix == 0, lo, hi)
 
 
-def validate_asset(asset: Asset) -> np.ndarray:
-    """Check an asset can be rendered; return the indices of its non-degenerate faces.
+def renderable_faces(asset: Asset) -> np.ndarray:
+    """Indices of the faces the renderer can use (a last guard for assets not built by the loader).
+
+    Loaded and procedural assets are already cleaned by :func:`streetaug.augment.assets.validate.validate_asset`.
 
     Raises:
         InputError: no faces, non-finite vertices or normals, face indices out of range,
@@ -106,7 +108,7 @@ def prepare_asset(asset: Asset, backend: str = "embree") -> PreparedAsset:
 
 
 def _prepare(asset: Asset, backend: str) -> PreparedAsset:
-    keep = validate_asset(asset)
+    keep = renderable_faces(asset)
     V = np.asarray(asset.vertices, dtype=np.float64)
     F = np.asarray(asset.faces, dtype=np.int64)[keep]
     tri = V[F]
