@@ -24,6 +24,9 @@ import click  # noqa: E402
 import numpy as np  # noqa: E402
 
 CAMERA_DEFAULT = "CAM_FRONT"
+# Lighting levels offered on the command line (see streetaug.augment.lighting.estimate).
+LIGHT_LEVELS = ("L0", "L1")
+LEVEL_HELP = "Lighting level: L0 constant dome (the no-light baseline), L1 sun + parametric sky."
 
 
 def _parse_floats(value: str | None, n: int, name: str) -> list[float] | None:
@@ -127,8 +130,7 @@ def _view(sample, camera: str):
 @click.option("--intrinsics", help="fx,fy,cx,cy of --image (pixel centres at integers).")
 @click.option("--at", "at", help="X,Y,Z (camera frame, metres): point of the local environment map "
               "(default: the ground point 15 m straight ahead).")
-@click.option("--level", type=click.Choice(["L0", "L1"]), default="L1", show_default=True,
-              help="Lighting level: L0 constant dome (no-light baseline), L1 sun + parametric sky.")
+@click.option("--level", type=click.Choice(LIGHT_LEVELS), default="L1", show_default=True, help=LEVEL_HELP)
 @click.option("--out", required=True, type=click.Path(file_okay=False, path_type=Path), help="Output folder.")
 @click.option("--debug", is_flag=True, help="Show tracebacks.")
 @_runtime_errors
@@ -218,7 +220,7 @@ def _render_options(func: Callable) -> Callable:
 @_dataset_options
 @_asset_options
 @_render_options
-@click.option("--level", type=click.Choice(["L0", "L1"]), default="L1", show_default=True, help="Lighting level.")
+@click.option("--level", type=click.Choice(LIGHT_LEVELS), default="L1", show_default=True, help=LEVEL_HELP)
 @click.option("--n-objects", type=click.IntRange(1, 8), default=1, show_default=True, help="Objects per image.")
 @click.option("--yaw-sigma", type=float, default=3.0, show_default=True,
               help="Yaw noise (deg) around the ego heading: 3 realistic, 15 augmentation.")
@@ -308,46 +310,6 @@ def _read_depth(path: Path) -> np.ndarray:
     return depth.astype(np.float32)
 
 
-# ----------------------------------------------------------------------------- batch
-
-
-@main.command("batch")
-@click.option("--dataroot", type=click.Path(file_okay=False, path_type=Path),
-              help="nuScenes dataroot (default: the bundled sample scenes).")
-@click.option("--version", "version", default=None, help="Dataset version folder, e.g. v1.0-mini.")
-@click.option("--out", required=True, type=click.Path(file_okay=False, path_type=Path), help="Output folder.")
-@click.option("--cameras", default=CAMERA_DEFAULT, show_default=True, help="Comma-separated camera channels.")
-@click.option("--limit", type=click.IntRange(min=1), help="At most this many samples.")
-@_asset_options
-@_render_options
-@click.option("--level", type=click.Choice(["L0", "L1"]), default="L1", show_default=True, help="Lighting level.")
-@click.option("--fail-fast", is_flag=True, help="Stop at the first failing image.")
-@click.option("--debug", is_flag=True, help="Show tracebacks.")
-@_runtime_errors
-def batch(dataroot, version, out, cameras, limit, asset, assets_dir, asset_front, asset_length, quality, seed, ev,
-          level, fail_fast, debug):
-    """Augment every sample of a dataset (first version: images + labels; resumes when re-run).
-
-    \b
-    Examples:
-      streetaug batch --out out/dataset
-      streetaug batch --dataroot ../shared/data/nuscenes-real --version v1.0-mini \\
-          --cameras CAM_FRONT,CAM_FRONT_LEFT --out out/real-aug
-    """
-    from streetaug.augment.batch import BatchConfig, run_batch
-
-    reader = _open_dataset(dataroot, version)
-    config = BatchConfig(
-        cameras=tuple(c.strip() for c in cameras.split(",") if c.strip()), limit=limit, seed=seed,
-        quality=quality, level=level, ev=ev, asset=asset, assets_dir=assets_dir, asset_front=asset_front,
-        asset_length=asset_length, fail_fast=fail_fast,
-    )
-    t = time.perf_counter()
-    summary = run_batch(reader, out, config)
-    click.echo(f"done in {time.perf_counter() - t:.1f} s: " +
-               ", ".join(f"{k} {v}" for k, v in sorted(summary["counts"].items())) + f"; outputs in {out}")
-
-
 # ----------------------------------------------------------------------------- make-samples
 
 
@@ -371,6 +333,13 @@ def make_samples(out, scenes, width, height, seed, debug):
     names = [s.strip() for s in scenes.split(",")] if scenes else None
     paths = make_sample_scenes(out, names=names, width=width, height=height, seed=seed)
     click.echo(f"wrote {len(paths)} scene(s) into {out}")
+
+
+# ----------------------------------------------------------------------------- commands in their own modules
+# Each module defines one click command (or a few) and is registered here.
+from .batch import batch  # noqa: E402
+
+main.add_command(batch)
 
 
 if __name__ == "__main__":
