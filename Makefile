@@ -6,7 +6,7 @@ PYTHON ?= python3
 BIN    := $(VENV)/bin
 OUT    ?= out/demo
 
-.PHONY: setup demo test bench samples clean
+.PHONY: setup demo test bench samples figure clean
 
 $(BIN)/.installed: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -14,6 +14,14 @@ $(BIN)/.installed: pyproject.toml
 	# torch is pinned to the CPU build (torch==2.13.0); an unpinned torch would pull a multi-GB CUDA build.
 	$(BIN)/python -m pip install --quiet "torch==2.13.0"
 	$(BIN)/python -m pip install --quiet -e ".[test]"
+	touch $@
+
+# The official nuScenes devkit is a test oracle only (it pins numpy<2, so it is installed without its
+# dependencies, plus the light ones it really imports); the tests require it under `make test`.
+$(BIN)/.devkit: $(BIN)/.installed
+	$(BIN)/python -m pip install --quiet --no-deps "nuscenes-devkit==1.2.0"
+	$(BIN)/python -m pip install --quiet cachetools descartes fire matplotlib scikit-learn "shapely~=2.0.3" \
+		parameterized pycocotools pillow
 	touch $@
 
 setup: $(BIN)/.installed
@@ -29,14 +37,17 @@ demo: setup
 	@echo "  $(OUT)/insert-sunny/               one insertion with mask.png and shadow.exr"
 	@echo "  $(OUT)/light-lowsun/               lighting.json, envmap_camera.exr, preview.png"
 
-test: setup
-	$(BIN)/pytest -q
+test: setup $(BIN)/.devkit
+	STREETAUG_REQUIRE_DEVKIT=1 $(BIN)/pytest -q
 
 bench: setup
 	$(BIN)/python benchmarks/bench_render.py
 
 samples: setup
 	$(BIN)/streetaug make-samples --out examples/nuscenes-samples
+
+figure: setup
+	$(BIN)/python examples/readme_figure.py
 
 clean:
 	rm -rf $(VENV) out .pytest_cache

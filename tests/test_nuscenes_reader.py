@@ -14,6 +14,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
+from conftest import devkit
 import shapely
 
 import streetaug.augment.io as sio
@@ -547,8 +548,7 @@ class TestDevkitParity:
     """Our tables-to-frames chain agrees with the nuScenes devkit (skipped when it is not installed)."""
 
     def test_boxes_in_camera_frame_match_devkit(self, real_sample):
-        pytest.importorskip("nuscenes")
-        from nuscenes.nuscenes import NuScenes
+        NuScenes = devkit().NuScenes
 
         nusc = NuScenes(version="v1.0-mini", dataroot=str(REAL), verbose=False)
         sample_row = nusc.get("sample", REAL_SAMPLE)
@@ -566,7 +566,7 @@ class TestDevkitParity:
                 assert ours.category == dk.name
 
     def test_drivable_area_matches_devkit(self):
-        pytest.importorskip("nuscenes")
+        devkit()
         from nuscenes.map_expansion.map_api import NuScenesMap
 
         nmap = NuScenesMap(dataroot=str(REAL), map_name="singapore-onenorth")

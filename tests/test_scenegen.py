@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import devkit
 
 from streetaug.augment.conventions import (
     invert_transform,
@@ -238,7 +239,7 @@ def test_unknown_scene_name_is_refused(tmp_path: Path) -> None:
 
 
 def test_devkit_loads_the_dataset(dataroot: Path) -> None:
-    nuscenes = pytest.importorskip("nuscenes.nuscenes", reason="nuscenes-devkit not installed")
+    nuscenes = devkit()
     nusc = nuscenes.NuScenes(version=VERSION, dataroot=str(dataroot), verbose=False)
     assert len(nusc.scene) == 3
     sample = nusc.get("sample", nusc.scene[0]["first_sample_token"])

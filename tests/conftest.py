@@ -1,0 +1,22 @@
+"""Shared test helpers.
+
+``devkit()`` imports the official nuScenes devkit for parity tests. ``make test`` (and so CI) installs
+it and sets ``STREETAUG_REQUIRE_DEVKIT=1``: there a missing devkit is a failure, not a skip.
+"""
+
+from __future__ import annotations
+
+import importlib
+import os
+
+import pytest
+
+
+def devkit():
+    """The ``nuscenes.nuscenes`` module, or skip (fail when STREETAUG_REQUIRE_DEVKIT=1)."""
+    try:
+        return importlib.import_module("nuscenes.nuscenes")
+    except ImportError as e:
+        if os.environ.get("STREETAUG_REQUIRE_DEVKIT") == "1":
+            pytest.fail(f"nuscenes-devkit is required here (STREETAUG_REQUIRE_DEVKIT=1) but not importable: {e}")
+        pytest.skip("nuscenes-devkit not installed (make test installs it)")
