@@ -5,7 +5,7 @@ Layout read (as in nuScenes)::
     <dataroot>/<version>/{scene,sample,sample_data,...}.json   tables (lists of rows keyed by token)
     <dataroot>/samples/<CHANNEL>/...                          images (.jpg) and LiDAR (.pcd.bin)
     <dataroot>/lidarseg/<version>/<sd_token>_lidarseg.bin     optional lidarseg labels
-    <dataroot>/maps/expansion/<location>.json                 optional map expansion (drivable_area)
+    <dataroot>/maps/expansion/<location>.json                 optional map expansion (drivable_area, lanes)
 
 Frames: ``calibrated_sensor`` gives sensor -> ego (``T_ego_from_cam``; nuScenes camera frames are
 OpenCV frames), ``ego_pose`` gives ego -> global at the sample_data's own timestamp.  Quaternions are
@@ -22,6 +22,7 @@ Usage::
 
 from __future__ import annotations
 
+import copy
 import json
 from collections import defaultdict
 from pathlib import Path
@@ -33,7 +34,7 @@ from streetaug.augment.conventions import ConventionError, make_transform
 
 from .errors import DatasetError
 from .lidarseg import read_lidar_points, read_lidarseg_labels
-from .nuscenes_map import DrivableArea, map_expansion_path
+from .nuscenes_map import DrivableArea, LaneCenterlines, map_expansion_path, read_lanes
 from .sample import Box, CameraView, LidarSweep, Sample
 
 __all__ = ["DatasetError", "NuScenesReader", "read_lidar_points", "read_lidarseg_labels"]
@@ -101,9 +102,23 @@ class NuScenesReader:
         self._annotations_by_sample: dict[str, list[dict]] | None = None
         self._lidarseg_by_sd: dict[str, dict] | None = None
         self._drivable: dict[str, DrivableArea | None] = {}
+        self._lanes: dict[str, LaneCenterlines | None] = {}
 
     def __repr__(self) -> str:
         return f"NuScenesReader({str(self.dataroot)!r}, {self.version!r})"
+
+    def with_tables(self, tables: dict[str, list[dict]]) -> "NuScenesReader":
+        """A reader of the same files whose tables ``tables`` (name -> rows) replace the table files.
+
+        Lets a batch worker build one ``Sample`` from that sample's rows without parsing the whole
+        (multi-GB for trainval) tables; tables not given still load from their files. The parsed map
+        (drivable area) is shared with this reader.
+        """
+        other = copy.copy(self)
+        other._rows = dict(tables)
+        other._by_token, other._sample_data_by_sample, other._annotations_by_sample = {}, None, None
+        other._lidarseg_by_sd = None
+        return other
 
     # ------------------------------------------------------------------ tables
 
@@ -276,6 +291,12 @@ class NuScenesReader:
                 f"{self.table_dir / 'calibrated_sensor.json'}: row '{calib['token']}' "
                 f"({sensor.get('channel')}): camera_intrinsic must be a finite 3x3 matrix, got shape {K.shape}"
             )
+        if K[0, 0] <= 0 or K[1, 1] <= 0 or not np.allclose(K[2], [0.0, 0.0, 1.0]):
+            raise DatasetError(
+                f"{self.table_dir / 'calibrated_sensor.json'}: row '{calib['token']}' "
+                f"({sensor.get('channel')}): camera_intrinsic must be [[fx, s, cx], [0, fy, cy], [0, 0, 1]] "
+                f"with fx, fy > 0, got {K.tolist()}"
+            )
         return CameraView(
             channel=sensor["channel"],
             sample_data_token=sd["token"],
@@ -346,6 +367,13 @@ class NuScenesReader:
             self._drivable[location] = DrivableArea.from_file(path) if path.is_file() else None
         return self._drivable[location]
 
+    def lanes(self, location: str) -> LaneCenterlines | None:
+        """Lane centre lines of ``location`` (parsed once), or None without a map or without lanes."""
+        if location not in self._lanes:
+            path = map_expansion_path(self.dataroot, location)
+            self._lanes[location] = read_lanes(path) if path.is_file() else None
+        return self._lanes[location]
+
     def drivable_area_global(self, location: str) -> list | None:
         """Drivable-area (Multi)Polygons of ``location`` in global x/y (metres); None without a map."""
         area = self.drivable_area(location)
@@ -383,4 +411,5 @@ class NuScenesReader:
             boxes=boxes,
             drivable_area_global=self.drivable_area_global(location) if self.with_map else None,
             _load_lidar=load_lidar,
+            lanes=self.lanes(location) if self.with_map else None,
         )
