@@ -14,12 +14,15 @@ from .main import _dataset_options, _open_dataset, _resolve_sample, _runtime_err
 @click.option("--families", default=None,
               help="Comma-separated perturbation families (default: all: exposure, noise, jpeg, focal, depth_bias, "
                    "depth_noise, lidar_dropout, calibration).")
+@click.option("--failure-modes", is_flag=True,
+              help="Instead: run the failure cases (night, sun at the horizon/zenith/behind, a wall, wet road, no "
+                   "LiDAR, no map...) and write failure_modes.json and a contact sheet failure_modes.jpg.")
 @click.option("--quality", type=click.Choice(["draft", "default", "high"]), default="draft", show_default=True)
 @click.option("--seed", type=int, default=0, show_default=True)
 @click.option("--out", required=True, type=click.Path(file_okay=False, path_type=Path), help="Output folder.")
 @click.option("--debug", is_flag=True, help="Show tracebacks.")
 @_runtime_errors
-def stability(dataroot, version, scene, sample_token, camera, families, quality, seed, out, debug):
+def stability(dataroot, version, scene, sample_token, camera, families, failure_modes, quality, seed, out, debug):
     """Perturb one sample's inputs and measure how the sun, env map, placement and composite change.
 
     Writes stability.json (one row per family and strength) and stability.png (curves).
@@ -31,14 +34,23 @@ def stability(dataroot, version, scene, sample_token, camera, families, quality,
     from streetaug.augment.assets.select import select_assets
     from streetaug.augment.io import write_json_atomic
     from streetaug.augment.pipeline import InsertOptions, item_seed
-    from streetaug.augment.stability import plot_report, stability_report
+    from streetaug.augment.io import write_image_rgb
+    from streetaug.augment.stability import contact_sheet, plot_report, run_failure_cases, stability_report
 
     reader = _open_dataset(dataroot, version)
     sample = reader.sample(_resolve_sample(reader, scene, sample_token))
     view = _view(sample, camera)
     assets = select_assets(item_seed(seed, "asset", sample.token, camera), 1)
+    options = InsertOptions(quality=quality, seed=seed)
+    if failure_modes:
+        rows, images = run_failure_cases(sample, view, assets, options)
+        write_json_atomic(out / "failure_modes.json", {"schema": "streetaug.failure_modes/1", "cases": rows})
+        write_image_rgb(out / "failure_modes.jpg", contact_sheet(rows, images))
+        for row in rows:
+            click.echo(f"{row['case']:>20}: {row['outcome']:<8} {row['detail']}")
+        return
     names = [f.strip() for f in families.split(",")] if families else None
-    report = stability_report(sample, view, assets, InsertOptions(quality=quality, seed=seed), names, seed=seed)
+    report = stability_report(sample, view, assets, options, names, seed=seed)
     write_json_atomic(out / "stability.json", report)
     plot_report(report, out / "stability.png")
     click.echo(f"wrote {out}/stability.json and stability.png ({len(report['rows'])} perturbed runs)")
