@@ -164,6 +164,8 @@ class Sample:
         boxes: annotated boxes in the global frame.
         drivable_area_global: list of shapely (Multi)Polygons in global x/y, or None when no map.
         load_lidar: callable returning the LiDAR sweep (or None when the sample has none).
+        lanes: lane centre lines of the map (:class:`streetaug.datasets.nuscenes_map.LaneCenterlines`),
+            or None when the map has no lanes.
     """
 
     token: str
@@ -174,6 +176,7 @@ class Sample:
     boxes: tuple[Box, ...]
     drivable_area_global: list | None = None
     _load_lidar: Callable[[], LidarSweep | None] = field(repr=False, compare=False, default=None)
+    lanes: object | None = field(repr=False, compare=False, default=None)
 
     @functools.cached_property
     def lidar(self) -> LidarSweep | None:

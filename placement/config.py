@@ -31,10 +31,13 @@ class PlacementConfig:
             points are not allowed (the paper's 1 m from static background classes).
         mutual_clearance_m: minimum footprint distance between objects inserted into the same image
             (inserted objects are vehicles, so the dynamic clearance by default).
-        yaw_sigma_deg: std of the Gaussian yaw noise around the ego heading (3 realistic, 15 augmentation).
-        opposite_heading_probability: probability of facing against the ego heading.
+        yaw_sigma_deg: std of the Gaussian yaw noise around the lane / ego heading (3 realistic, 15 augmentation).
+        opposite_heading_probability: probability of facing against the ego heading (not used on lanes,
+            whose direction of travel is known).
         min_visible_fraction: minimum fraction of the projected 3D box (convex hull of its corners)
-            inside the image; the whole box must also be in front of the camera (z >= near_plane_m).
+            inside the image, and minimum fraction of the box's image that is both inside the image and
+            not hidden behind LiDAR returns nearer by more than ``occlusion_tolerance_m`` (a wall, a
+            bus); the whole box must also be in front of the camera (z >= near_plane_m).
         near_plane_m: minimum camera-frame z of every box corner.
         n_candidates: candidates sampled per object.
         n_objects: objects to place per image (each mutually non-colliding); the caller passes that many
@@ -47,6 +50,9 @@ class PlacementConfig:
         ground_min_points: fewer ground points than this -> fall back to the ego ground plane.
         ground_inlier_m: plane-fit inlier band (metres, along the normal).
         ground_max_tilt_deg: fitted planes steeper than this are rejected (fallback to the ego plane).
+        ground_max_offset_m, ground_max_offset_per_m: fitted planes whose height differs from the ego's
+            ground plane by more than ``offset_m + offset_per_m * distance from the ego`` are rejected
+            (10 % grade by default: a road does not climb faster).
         grid_resolution_m: cell size of bird's-eye drivable grids built from LiDAR.
         closing_radius_m: morphological closing radius applied to those grids.
         ray_fill_max_gap_m: along one azimuth, two consecutive drivable points closer than this fill the
@@ -58,9 +64,12 @@ class PlacementConfig:
         require_unoccluded_corners: the paper's occlusion rule (for realism; off for augmentation, where
             the renderer's depth test handles occlusion): no top box corner hidden behind LiDAR points
             nearer by more than ``occlusion_tolerance_m``.
-        occlusion_tolerance_m: depth margin of that rule.
+        occlusion_tolerance_m: depth margin of that rule and of the visible fraction.
         kerb_distance_m: an object whose footprint is this close to the edge of the drivable area is
             labelled ``vehicle.parked``; otherwise ``vehicle.moving``.
+        use_lanes: orient objects along the map's lanes where it has them (else the ego heading).
+        lane_max_distance_m: a candidate takes the direction of the nearest lane centre line within
+            this distance (about half a lane plus margin); farther candidates use the ego heading.
     """
 
     min_distance_m: float = 10.0
@@ -82,6 +91,8 @@ class PlacementConfig:
     ground_min_points: int = 8
     ground_inlier_m: float = 0.08
     ground_max_tilt_deg: float = 12.0
+    ground_max_offset_m: float = 0.5
+    ground_max_offset_per_m: float = 0.1
     grid_resolution_m: float = 0.25
     closing_radius_m: float = 0.75
     ray_fill_max_gap_m: float = 15.0
@@ -92,6 +103,8 @@ class PlacementConfig:
     require_unoccluded_corners: bool = False
     occlusion_tolerance_m: float = 1.0
     kerb_distance_m: float = 1.0
+    use_lanes: bool = True
+    lane_max_distance_m: float = 2.0
 
     def __post_init__(self) -> None:
         if not 0.0 <= self.min_distance_m < self.max_distance_m:

@@ -67,8 +67,9 @@ class DrivableArea:
     def contains_footprints(self, corners_xy: np.ndarray) -> np.ndarray:
         """(M,) bool: whether each whole footprint (corners (M, 4, 2), global x/y, in order) is drivable.
 
-        Polygon sources test polygon containment (all corners and edges); grid sources test a dense
-        lattice of points over each footprint (spacing <= half a cell, edges included).
+        Polygon sources test polygon containment (all corners and edges); grid sources are exact too:
+        every cell the footprint overlaps with positive area must be drivable (separating-axis test of
+        each cell square against the footprint; cells outside the grid are not drivable).
         """
         corners_xy = np.asarray(corners_xy, dtype=np.float64)
         check_shape(corners_xy, ("M", 4, 2), "corners_xy")
@@ -76,9 +77,25 @@ class DrivableArea:
             return np.zeros(0, dtype=bool)
         if self.region is not None:
             return shapely.contains(self.region, shapely.polygons(corners_xy))
-        pts = _footprint_lattice(corners_xy, self.resolution_m / 2.0)  # (M, S, 2)
-        ok = self.contains_points(pts.reshape(-1, 2)).reshape(pts.shape[:2])
-        return ok.all(axis=1)
+        # fast reject: a strictly interior point in a non-drivable cell means that cell overlaps the footprint
+        centre = corners_xy.mean(axis=1, keepdims=True)
+        interior = _footprint_lattice(centre + 0.999 * (corners_xy - centre), self.resolution_m)
+        ok = self.contains_points(interior.reshape(-1, 2)).reshape(interior.shape[:2]).all(axis=1)
+        result = np.zeros(len(corners_xy), dtype=bool)
+        if ok.any():
+            result[ok] = self._grid_contains_exact(corners_xy[ok])
+        return result
+
+    def _grid_contains_exact(self, corners_xy: np.ndarray) -> np.ndarray:
+        fp, ix, iy = _cells_in_bounds(corners_xy, self.grid_origin_xy, self.resolution_m)
+        H, W = self.grid.shape
+        inside = (ix >= 0) & (ix < W) & (iy >= 0) & (iy < H)
+        good = np.zeros(len(fp), dtype=bool)
+        good[inside] = self.grid[iy[inside], ix[inside]]
+        fp, ix, iy = fp[~good], ix[~good], iy[~good]  # only non-drivable cells can fail a footprint
+        hit = _rect_overlaps_cell(corners_xy[fp], self.grid_origin_xy + np.stack([ix, iy], 1) * self.resolution_m,
+                                  self.resolution_m)
+        return np.bincount(fp[hit], minlength=len(corners_xy)) == 0
 
     def edge_distance(self, corners_xy: np.ndarray) -> np.ndarray:
         """(M,) float64 distance (m) from each footprint to the nearest non-drivable place (0 if it overlaps)."""
@@ -107,6 +124,37 @@ class DrivableArea:
         H, W = self.grid.shape
         inside = (ix >= 0) & (ix < W) & (iy >= 0) & (iy < H)
         return ix, iy, inside
+
+
+def _cells_in_bounds(
+    corners_xy: np.ndarray, origin_xy: np.ndarray, res: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(footprint index (K,), ix (K,), iy (K,)): every grid cell of each footprint's (M, 4, 2) bounding box."""
+    lo = np.floor((corners_xy.min(axis=1) - origin_xy) / res).astype(np.int64)  # (M, 2)
+    hi = np.floor((corners_xy.max(axis=1) - origin_xy) / res).astype(np.int64)
+    nx, ny = hi[:, 0] - lo[:, 0] + 1, hi[:, 1] - lo[:, 1] + 1
+    count = nx * ny
+    fp = np.repeat(np.arange(len(corners_xy)), count)
+    k = np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count)
+    return fp, lo[fp, 0] + k % nx[fp], lo[fp, 1] + k // nx[fp]
+
+
+def _rect_overlaps_cell(rect: np.ndarray, cell_lo: np.ndarray, res: float) -> np.ndarray:
+    """(K,) bool: whether rectangles (K, 4, 2) and square cells [lo, lo + res]^2 (K, 2) overlap with positive area.
+
+    Separating-axis test: two convex polygons overlap iff their projections overlap on every edge
+    normal of both (here x, y and the rectangle's two edge directions).
+    """
+    cell_pts = cell_lo[:, None, :] + np.array([[0, 0], [res, 0], [res, res], [0, res]], float)[None]  # (K, 4, 2)
+    e1, e2 = rect[:, 1] - rect[:, 0], rect[:, 3] - rect[:, 0]
+    hit = np.ones(len(rect), dtype=bool)
+    for axis in (np.array([1.0, 0.0])[None], np.array([0.0, 1.0])[None], np.c_[-e1[:, 1], e1[:, 0]],
+                 np.c_[-e2[:, 1], e2[:, 0]]):
+        axis = axis / np.maximum(np.linalg.norm(axis, axis=1, keepdims=True), 1e-12)
+        pa = (rect * axis[:, None, :]).sum(axis=2)
+        pb = (cell_pts * axis[:, None, :]).sum(axis=2)
+        hit &= np.minimum(pa.max(axis=1), pb.max(axis=1)) - np.maximum(pa.min(axis=1), pb.min(axis=1)) > 1e-9
+    return hit
 
 
 def _footprint_lattice(corners_xy: np.ndarray, spacing_m: float) -> np.ndarray:

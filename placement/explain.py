@@ -1,8 +1,11 @@
 """Bird's-eye-view picture of a placement attempt (for ``insert --explain``).
 
 The view is centred on the camera, north (global +y) up, east (global +x) right. Drawn: the drivable
-area (grey), LiDAR points (white), annotated boxes (blue), the camera and its viewing direction (yellow),
-every candidate coloured by the rule that rejected it (see ``RULE_COLORS_RGB``), placed objects (green).
+area (grey) and its source, lane centre lines (brown, when the map has lanes), LiDAR points (white),
+annotated boxes (blue), the camera and its viewing direction (yellow), the sampled region (camera field
+of view between the minimum and maximum distance, olive outline), every candidate coloured by the
+rule that rejected it (see ``RULE_COLORS_RGB``; "unused" = passed the checks made, not needed), placed
+objects (green, with their heading).
 """
 
 from __future__ import annotations
@@ -12,7 +15,9 @@ import numpy as np
 
 from streetaug.datasets.sample import CameraView, Sample
 
-from .place import PlacementResult
+from .place import PlacementResult, _camera_azimuth_range
+
+LANE_COLOR_RGB = (150, 120, 40)
 
 RULE_COLORS_RGB: dict[str, tuple[int, int, int]] = {
     "": (0, 255, 0),  # passed and chosen
@@ -55,6 +60,11 @@ def draw_placement_bev(
         img[q[ok, 1], q[ok, 0]] = (70, 70, 70)
         r = max(int(np.ceil(area.resolution_m / m_per_px / 2)), 1)
         img = cv2.dilate(img, np.ones((2 * r + 1, 2 * r + 1), np.uint8))
+    lanes = getattr(sample, "lanes", None)
+    if lanes is not None and len(lanes.points_xy):
+        q = to_px(lanes.points_xy)
+        ok = (q[:, 0] >= 0) & (q[:, 0] < size_px) & (q[:, 1] >= 0) & (q[:, 1] < size_px)
+        img[q[ok, 1], q[ok, 0]] = LANE_COLOR_RGB
     lidar = sample.lidar
     if lidar is not None:
         q = to_px(lidar.points_global[:, :2])
@@ -66,6 +76,15 @@ def draw_placement_bev(
         cv2.circle(img, (int(xy[0]), int(xy[1])), 1, RULE_COLORS_RGB.get(str(rule), (128, 128, 128)), -1)
     for p in result.placements:
         cv2.polylines(img, [to_px(p.box.corners()[[0, 1, 5, 4], :2])], True, (0, 255, 0), 2)
+        a, b = to_px(np.stack([p.box.center[:2], p.box.center[:2] + 0.6 * p.wlh[1] * p.T_global_from_object[:2, 0]]))
+        cv2.arrowedLine(img, (int(a[0]), int(a[1])), (int(b[0]), int(b[1])), (0, 255, 0), 1, tipLength=0.3)
+    if result.config is not None:  # the sampled region: camera field of view x [min, max] distance
+        base, left, right = _camera_azimuth_range(view)
+        az = np.linspace(base - right, base + left, 64)
+        ring = np.c_[np.cos(az), np.sin(az)]
+        wedge = np.concatenate([cam_xy + result.config.min_distance_m * ring,
+                                cam_xy + result.config.max_distance_m * ring[::-1]])
+        cv2.polylines(img, [to_px(wedge)], True, (120, 110, 0), 1)
     c = to_px(cam_xy)[0]
     fwd = view.T_global_from_cam[:2, 2]
     tip = to_px(cam_xy + 5.0 * fwd / max(np.linalg.norm(fwd), 1e-9))[0]
@@ -74,6 +93,9 @@ def draw_placement_bev(
     for name, count in result.report.items():
         cv2.putText(img, f"{name}: {count}", (6, y), cv2.FONT_HERSHEY_SIMPLEX, 0.4, RULE_COLORS_RGB[name], 1)
         y += 14
+    if area is not None:
+        cv2.putText(img, f"road: {area.source} ({area.confidence} confidence)", (6, y + 4),
+                    cv2.FONT_HERSHEY_SIMPLEX, 0.4, (200, 200, 200), 1)
     if result.reason:
         cv2.putText(img, result.reason[:110], (6, size_px - 8), cv2.FONT_HERSHEY_SIMPLEX, 0.35, (255, 255, 255), 1)
     return img

@@ -13,7 +13,7 @@ from scipy.spatial import cKDTree
 
 from streetaug.augment.conventions import check_shape
 
-from .config import LIDARSEG_GROUND, PlacementConfig
+from .config import LIDARSEG_DRIVEABLE, LIDARSEG_GROUND, PlacementConfig
 
 
 @dataclass(frozen=True)
@@ -23,7 +23,8 @@ class GroundPlane:
     Attributes:
         point_global: (3,) float64 the plane point below the query x/y, metres.
         normal_global: (3,) float64 unit normal pointing up (z > 0).
-        source: ``"lidarseg"`` (fit on flat.* points), ``"lidar-plane"`` (robust fit on low points) or
+        source: ``"lidarseg"`` (fit on driveable-surface points, else all flat.* points), ``"lidar-plane"``
+            (robust fit on low points) or
             ``"ego-plane"`` (fallback: the ego's z = 0 plane).
         n_points: LiDAR points supporting the fit (0 for the fallback).
     """
@@ -68,8 +69,12 @@ class LocalGroundFitter:
     Args:
         points_global: (N, 3) float64 LiDAR points, global frame, metres.
         T_global_from_ego: (4, 4) ego pose used for the fallback plane and the tilt check.
-        labels: (N,) lidarseg labels or None; with labels only flat.* points are used.
-        config: thresholds (``ground_radius_m``, ``ground_min_points``, ``ground_inlier_m``, ``ground_max_tilt_deg``).
+        labels: (N,) lidarseg labels or None; with labels only flat.driveable_surface points are used
+            (all flat.* points where those are too few).
+        config: thresholds (``ground_radius_m``, ``ground_min_points``, ``ground_inlier_m``, ``ground_max_tilt_deg``,
+            ``ground_max_offset_m``, ``ground_max_offset_per_m``).
+
+    Pass only points outside the annotated boxes: a car roof is no ground.
     """
 
     def __init__(
@@ -82,37 +87,45 @@ class LocalGroundFitter:
         self.T_global_from_ego = np.asarray(T_global_from_ego, dtype=np.float64)
         self.config = config
         self.use_labels = labels is not None
-        if points_global is None or len(points_global) == 0:
-            self.points = np.zeros((0, 3))
-        else:
+        self.point_sets: list[tuple[np.ndarray, cKDTree]] = []  # tried in order
+        if points_global is not None and len(points_global):
             points_global = np.asarray(points_global, dtype=np.float64)
             check_shape(points_global, ("N", 3), "points_global")
-            if labels is not None:
-                points_global = points_global[np.isin(np.asarray(labels), LIDARSEG_GROUND)]
-            self.points = points_global
-        self.tree = cKDTree(self.points[:, :2]) if len(self.points) else None
+            if labels is None:
+                sets = [points_global]
+            else:
+                labels = np.asarray(labels)
+                check_shape(labels, (len(points_global),), "lidarseg labels")
+                # the road itself first (a car stands on it); all flat.* classes where the road is too sparse
+                sets = [points_global[labels == LIDARSEG_DRIVEABLE], points_global[np.isin(labels, LIDARSEG_GROUND)]]
+            self.point_sets = [(p, cKDTree(p[:, :2])) for p in sets if len(p)]
 
     def fit(self, xy: np.ndarray) -> GroundPlane:
         """Ground plane below global x/y ``xy`` (2,); falls back to the ego plane when LiDAR is insufficient.
 
         The fit uses points within ``ground_radius_m``; where the far LiDAR rings are too sparse the
-        radius grows to 2x and 3x before falling back.
+        radius grows to 2x and 3x before falling back. A fitted plane whose height below ``xy`` differs from
+        the ego's ground plane by more than ``ground_max_offset_m + ground_max_offset_per_m * distance``
+        (distance from the ego, metres) is rejected (canopies, roofs, walls seen without the road).
         """
         xy = np.asarray(xy, dtype=np.float64)
+        ego = ego_ground_plane(self.T_global_from_ego, xy)
+        max_offset = self.config.ground_max_offset_m + self.config.ground_max_offset_per_m * float(
+            np.linalg.norm(xy - self.T_global_from_ego[:2, 3]))
         for scale in (1.0, 2.0, 3.0):
-            plane = self._fit_within(xy, self.config.ground_radius_m * scale)
-            if plane is not None:
-                return plane
-        return ego_ground_plane(self.T_global_from_ego, xy)
+            for points, tree in self.point_sets:
+                plane = self._fit_within(points, tree, xy, self.config.ground_radius_m * scale)
+                # a "ground" far above or below the ego's road (a canopy, a roof) is not the road
+                if plane is not None and abs(plane.point_global[2] - ego.point_global[2]) <= max_offset:
+                    return plane
+        return ego
 
-    def _fit_within(self, xy: np.ndarray, radius_m: float) -> GroundPlane | None:
+    def _fit_within(self, points: np.ndarray, tree: cKDTree, xy: np.ndarray, radius_m: float) -> GroundPlane | None:
         cfg = self.config
-        if self.tree is None:
-            return None
-        idx = self.tree.query_ball_point(xy, radius_m)
+        idx = tree.query_ball_point(xy, radius_m)
         if len(idx) < cfg.ground_min_points:
             return None
-        pts = self.points[np.asarray(idx)]
+        pts = points[np.asarray(idx)]
         up = self.T_global_from_ego[:3, 2]
         source = "lidarseg" if self.use_labels else "lidar-plane"
         if self.use_labels:

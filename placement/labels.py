@@ -12,6 +12,11 @@ Conventions chosen here:
   "4" [0.8, 1] (edges belong to the higher bin).
 * ``truncation`` = fraction of the projected 3D box (convex hull of its corners, clipped at z = 0.1 m)
   outside the image.
+* ``num_lidar_pts`` / ``num_radar_pts`` = 0: the inserted object was not seen by the real sensors.
+* ``box_global`` follows ``sample_annotation``: ``translation`` = box centre (not the bottom), ``size`` =
+  [w, l, h], ``rotation`` = [w, x, y, z] box -> global. On tilted ground the rotation carries the
+  ground's roll/pitch (the box is exactly the rendered object's box), so it is not yaw-only.
+* ``category`` comes from the asset (:mod:`streetaug.placement.categories` maps file names).
 * ``attribute`` = the caller's choice; :func:`streetaug.placement.place.place_objects` records
   ``vehicle.parked`` for footprints within ``kerb_distance_m`` of the drivable edge, else ``vehicle.moving``.
   Default here: ``vehicle.moving``.
@@ -71,7 +76,8 @@ def object_label(
 
     Returns:
         dict with ``category``, ``box_camera`` {center, size_wlh, yaw_deg}, ``bbox_2d``,
-        ``visible_fraction``, ``visibility_token``, ``truncation``, ``num_lidar_pts`` (0), ``attribute``,
+        ``visible_fraction``, ``visibility_token``, ``truncation``, ``num_lidar_pts`` and ``num_radar_pts``
+        (0), ``attribute``,
         and ``box_global`` {translation, size, rotation [w, x, y, z]} when ``T_global_from_cam`` is given.
     """
     T = np.asarray(T_cam_from_object, dtype=np.float64)
@@ -102,6 +108,7 @@ def object_label(
         "visibility_token": visibility_token(visible),
         "truncation": float(1.0 - inside),
         "num_lidar_pts": 0,
+        "num_radar_pts": 0,
         "attribute": attribute or "vehicle.moving",
     }
     if T_global_from_cam is not None:
@@ -114,3 +121,20 @@ def object_label(
             "rotation": [float(v) for v in rotation_to_quat(T_go[:3, :3])],
         }
     return label
+
+
+def placement_label_fields(placement) -> dict:
+    """Extra ``labels.json`` keys describing how a :class:`~streetaug.placement.place.Placement` was made.
+
+    Returns ``{"placement": {drivable_source, drivable_confidence, ground_source, yaw_source, distance_m,
+    edge_distance_m}}`` (sources as in ``Placement``; ``drivable_confidence`` is "high" for the map,
+    "medium" for lidarseg, "low" for the LiDAR ground fallback).
+    """
+    return {"placement": {
+        "drivable_source": placement.drivable_source,
+        "drivable_confidence": placement.drivable_confidence,
+        "ground_source": placement.ground_source,
+        "yaw_source": placement.yaw_source,
+        "distance_m": float(placement.distance_m),
+        "edge_distance_m": float(placement.edge_distance_m),
+    }}

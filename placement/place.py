@@ -2,10 +2,15 @@
 
 For each object: ``n_candidates`` candidates are sampled (deterministically from ``rng``) with the box
 centre at a horizontal distance r ~ U[min, max] from the camera and an azimuth uniform within the
-camera's horizontal field of view, yaw = ego heading (or its opposite, with probability
-``opposite_heading_probability``) + N(0, yaw_sigma_deg). The rules are applied in ``RULE_ORDER``; the
-first surviving candidate (in sampling order) is chosen. Each object stands on the local ground plane
-fitted from LiDAR (roll/pitch from its normal, heading projected onto the plane).
+camera's horizontal field of view. Yaw = the direction of travel of the nearest lane centre line when
+the map has lanes and one lies within ``lane_max_distance_m`` of the candidate, else the ego heading
+(or its opposite, with probability ``opposite_heading_probability``); plus N(0, yaw_sigma_deg) noise.
+
+The rules are applied in ``RULE_ORDER``; the first surviving candidate (in sampling order) is chosen.
+``drivable`` and ``annotated_boxes`` first filter the flat footprints cheaply; each survivor then
+stands on the local ground plane fitted from LiDAR (roll/pitch from its normal, heading projected onto
+the plane) and every footprint rule is (re)applied to the footprint of that tilted box
+(:func:`box_footprint_rect`), so a final placement satisfies each rule as labelled.
 """
 
 from __future__ import annotations
@@ -24,6 +29,7 @@ from .drivable import DrivableArea, drivable_area_for_sample
 from .ground import LocalGroundFitter
 from .rules import (
     box_corners_object,
+    box_footprint_rect,
     box_footprints,
     footprint_corners,
     points_in_boxes,
@@ -36,7 +42,10 @@ from .rules import (
     rule_lidarseg,
     rule_mutual,
     rule_obstacles,
+    visible_fraction_estimate,
 )
+
+_CHUNK = 48  # candidates stood on the ground and checked per round (the first survivor wins)
 
 RULE_ORDER = (
     "drivable",
@@ -66,6 +75,9 @@ class Placement:
             area's edge (standing by the kerb), else ``"vehicle.moving"`` (in the lane).
         distance_m: horizontal distance from the camera centre to the box centre.
         edge_distance_m: distance from the footprint to the edge of the drivable area.
+        yaw_source: ``"lane"`` (heading of the nearest lane centre line of the map) or ``"ego"``
+            (the ego heading or its opposite).
+        footprint_xy: (4, 2) float64 the footprint the rules checked (:func:`box_footprint_rect`), global x/y.
     """
 
     T_global_from_object: np.ndarray
@@ -78,6 +90,8 @@ class Placement:
     attribute: str = "vehicle.moving"
     distance_m: float = float("nan")
     edge_distance_m: float = float("nan")
+    yaw_source: str = "ego"
+    footprint_xy: np.ndarray | None = None
 
     def T_cam_from_object(self, view: CameraView) -> np.ndarray:
         """(4, 4) object -> camera frame of ``view``."""
@@ -95,6 +109,7 @@ class PlacementResult:
         candidates_xy: (C, 2) float64 every sampled candidate's bottom-centre x/y (global), for explanations.
         rejected_by: (C,) the rule that rejected each candidate ('' = passed, 'unused' = not needed).
         drivable: the drivable area used (None when there was none).
+        config: the configuration used.
     """
 
     placements: list[Placement]
@@ -103,6 +118,7 @@ class PlacementResult:
     candidates_xy: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
     rejected_by: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=object))
     drivable: DrivableArea | None = None
+    config: PlacementConfig | None = None
 
 
 def object_transforms(
@@ -170,7 +186,7 @@ def place_objects(
     report = {name: 0 for name in RULE_ORDER}
     drivable, reason = drivable_area_for_sample(sample, view, config)
     if drivable is None:
-        return PlacementResult([], report, reason)
+        return PlacementResult([], report, reason, config=config)
 
     T_cam_from_global = view.T_cam_from_global
     cam_xy = view.T_global_from_cam[:2, 3]
@@ -185,16 +201,23 @@ def place_objects(
     if lidar is not None:
         points = lidar.points_global
         labels = lidar.labels
-        obstacle_pts = points[~points_in_boxes(points, boxes, margin_m=0.1)]
-        non_drivable_xy = points[np.isin(labels, LIDARSEG_NON_DRIVABLE)][:, :2] if labels is not None else np.zeros((0, 2))
+        free = ~points_in_boxes(points, boxes, margin_m=0.1)
+        obstacle_pts = points[free]
+        if labels is not None:
+            non_drivable_xy = points[np.isin(labels, LIDARSEG_NON_DRIVABLE)][:, :2]
+            fitter = LocalGroundFitter(obstacle_pts, view.T_global_from_ego, labels[free], config)
+        else:
+            non_drivable_xy = np.zeros((0, 2))
+            fitter = LocalGroundFitter(obstacle_pts, view.T_global_from_ego, None, config)
     else:
         points, labels = None, None
         obstacle_pts, non_drivable_xy = np.zeros((0, 3)), np.zeros((0, 2))
-    fitter = LocalGroundFitter(points, view.T_global_from_ego, labels, config)
-    depth_m = None
-    if config.require_unoccluded_corners and points is not None:
+        fitter = LocalGroundFitter(None, view.T_global_from_ego, None, config)
+    depth_m = None  # sparse scene depth from LiDAR: what hides a candidate (in_view, corners_unoccluded)
+    if points is not None:
         depth_m = lidar_depth_image(transform_points(T_cam_from_global, points), view.K, view.width, view.height)
 
+    lanes = sample.lanes if config.use_lanes else None
     placements: list[Placement] = []
     all_xy, all_rej = [], []
     placed_fp = np.zeros((0, 4, 2))
@@ -204,70 +227,89 @@ def place_objects(
         r = rng.uniform(config.min_distance_m, config.max_distance_m, n)
         az = base + rng.uniform(-right, left, n)
         flip = rng.random(n) < config.opposite_heading_probability
-        yaw = yaw_ego + np.pi * flip + np.radians(rng.normal(0.0, config.yaw_sigma_deg, n))
-        yaw = np.mod(yaw + np.pi, 2 * np.pi) - np.pi
+        noise = np.radians(rng.normal(0.0, config.yaw_sigma_deg, n))
         xy = cam_xy + r[:, None] * np.stack([np.cos(az), np.sin(az)], axis=1)
+        heading = yaw_ego + np.pi * flip
+        on_lane = np.zeros(n, dtype=bool)
+        if lanes is not None:
+            lane_heading, on_lane = lanes.heading_at(xy, config.lane_max_distance_m)
+            heading = np.where(on_lane, lane_heading, heading)
+        yaw = np.mod(heading + noise + np.pi, 2 * np.pi) - np.pi
         corners = footprint_corners(xy, yaw, l, w)
         rejected = np.full(n, "", dtype=object)
-        alive = np.arange(n)
 
-        def apply(name: str, ok: np.ndarray) -> None:
-            nonlocal alive
-            rejected[alive[~ok]] = name
+        def apply(name: str, idx: np.ndarray, ok: np.ndarray) -> np.ndarray:
+            """Record the rejections of rule ``name`` among candidates ``idx``; return the survivors."""
+            rejected[idx[~ok]] = name
             report[name] += int((~ok).sum())
-            alive = alive[ok]
+            return idx[ok]
 
-        apply("drivable", rule_drivable(drivable, corners))
-        apply("annotated_boxes", rule_box_clearance(corners[alive], box_fp, box_dyn,
-                                                    config.dynamic_clearance_m, config.static_clearance_m))
-        planes = [fitter.fit(p) for p in xy[alive]]
-        g_point = np.array([p.point_global for p in planes]).reshape(-1, 3)
-        g_normal = np.array([p.normal_global for p in planes]).reshape(-1, 3)
-        g_source = np.array([p.source for p in planes], dtype=object)
-        T_go = object_transforms(xy[alive], yaw[alive], g_point[:, 2], g_normal)
-        centers = T_go[:, :3, 3] + 0.5 * h * T_go[:, :3, 2]
-        keep = np.arange(len(alive))
+        # cheap vectorised pre-filters on the flat footprints of all candidates
+        alive = apply("drivable", np.arange(n), rule_drivable(drivable, corners))
+        alive = apply("annotated_boxes", alive, rule_box_clearance(
+            corners[alive], box_fp, box_dyn, config.dynamic_clearance_m, config.static_clearance_m))
+        # then, in sampling order and in chunks (the first survivor wins, so later chunks are only
+        # evaluated when needed): stand each candidate on its local ground and apply every rule to the
+        # box as placed (footprint of the tilted box, its corners in the camera)
+        chosen = None
+        for start in range(0, len(alive), _CHUNK):
+            idx = alive[start:start + _CHUNK]
+            planes = [fitter.fit(p) for p in xy[idx]]
+            g_point = np.array([p.point_global for p in planes]).reshape(-1, 3)
+            g_normal = np.array([p.normal_global for p in planes]).reshape(-1, 3)
+            T_go = object_transforms(xy[idx], yaw[idx], g_point[:, 2], g_normal)
+            centers = T_go[:, :3, 3] + 0.5 * h * T_go[:, :3, 2]
+            rect = box_footprint_rect(T_go, wlh)
+            T_co = T_cam_from_global[None] @ T_go
+            corners_cam = np.einsum("nij,kj->nki", T_co[:, :3, :3], box_corners_object(wlh)) + T_co[:, None, :3, 3]
+            k = np.arange(len(idx))  # positions in this chunk still alive
 
-        def apply_k(name: str, ok: np.ndarray) -> None:
-            nonlocal keep
-            apply(name, ok)
-            keep = keep[ok]
+            def apply_k(name: str, ok: np.ndarray) -> np.ndarray:
+                return k[np.isin(idx[k], apply(name, idx[k], ok))]
 
-        apply_k("distance", rule_distance(centers[keep, :2], cam_xy, config.min_distance_m, config.max_distance_m))
-        apply_k("lidar_obstacles", rule_obstacles(
-            corners[alive], g_point[keep], g_normal[keep], obstacle_pts, config.static_clearance_m,
-            config.obstacle_min_height_m, config.obstacle_max_height_m, config.obstacle_max_points))
-        apply_k("lidarseg", rule_lidarseg(corners[alive], non_drivable_xy, config.static_clearance_m,
-                                          config.lidarseg_max_points))
-        corners_obj = box_corners_object(wlh)
-        T_co = T_cam_from_global[None] @ T_go
-        corners_cam = np.einsum("nij,kj->nki", T_co[:, :3, :3], corners_obj) + T_co[:, None, :3, 3]
-        apply_k("in_view", rule_in_view(corners_cam[keep], view.K, view.width, view.height,
-                                        config.min_visible_fraction, config.near_plane_m))
-        if depth_m is not None:
-            apply_k("corners_unoccluded", rule_corners_unoccluded(
-                corners_cam[keep], view.K, depth_m, config.occlusion_tolerance_m))
-        apply_k("mutual_collision", rule_mutual(corners[alive], placed_fp, config.mutual_clearance_m))
+            k = apply_k("drivable", rule_drivable(drivable, rect[k]))
+            k = apply_k("annotated_boxes", rule_box_clearance(
+                rect[k], box_fp, box_dyn, config.dynamic_clearance_m, config.static_clearance_m))
+            k = apply_k("distance", rule_distance(centers[k, :2], cam_xy, config.min_distance_m, config.max_distance_m))
+            k = apply_k("lidar_obstacles", rule_obstacles(
+                rect[k], g_point[k], g_normal[k], obstacle_pts, config.static_clearance_m,
+                config.obstacle_min_height_m, config.obstacle_max_height_m, config.obstacle_max_points))
+            k = apply_k("lidarseg", rule_lidarseg(rect[k], non_drivable_xy, config.static_clearance_m,
+                                                  config.lidarseg_max_points))
+            visible = visible_fraction_estimate(T_co[k], wlh, view.K, view.width, view.height, depth_m,
+                                                config.occlusion_tolerance_m)
+            k = apply_k("in_view", rule_in_view(corners_cam[k], view.K, view.width, view.height,
+                                                config.min_visible_fraction, config.near_plane_m, visible))
+            if config.require_unoccluded_corners and depth_m is not None:
+                k = apply_k("corners_unoccluded", rule_corners_unoccluded(
+                    corners_cam[k], view.K, depth_m, config.occlusion_tolerance_m))
+            k = apply_k("mutual_collision", rule_mutual(rect[k], placed_fp, config.mutual_clearance_m))
+            if len(k):
+                j = k[0]
+                chosen = (idx[j], T_go[j], centers[j], rect[j], g_normal[j], planes[j].source)
+                rejected[idx[k[1:]]] = "unused"
+                rejected[alive[start + _CHUNK:]] = "unused"  # passed the pre-filters, not evaluated further
+                break
 
-        if len(alive):
-            i, j = alive[0], keep[0]
-            rejected[alive[1:]] = "unused"
-            T = T_go[j]
-            box = Box(centers[j].copy(), wlh.copy(), rotation_to_quat(T[:3, :3]), category)
-            edge = float(drivable.edge_distance(corners[i:i + 1])[0])
+        if chosen is not None:
+            i, T, center, fp, normal, g_source = chosen
+            box = Box(center.copy(), wlh.copy(), rotation_to_quat(T[:3, :3]), category)
+            edge = float(drivable.edge_distance(fp[None])[0])
             placements.append(Placement(
                 T_global_from_object=T,
                 box=box,
                 wlh=wlh.copy(),
-                ground_normal_global=g_normal[j].copy(),
-                ground_source=str(g_source[j]),
+                ground_normal_global=normal.copy(),
+                ground_source=str(g_source),
                 drivable_source=drivable.source,
                 drivable_confidence=drivable.confidence,
                 attribute="vehicle.parked" if edge <= config.kerb_distance_m else "vehicle.moving",
-                distance_m=float(np.linalg.norm(centers[j, :2] - cam_xy)),
+                distance_m=float(np.linalg.norm(center[:2] - cam_xy)),
                 edge_distance_m=edge,
+                yaw_source="lane" if on_lane[i] else "ego",
+                footprint_xy=fp.copy(),
             ))
-            placed_fp = np.concatenate([placed_fp, corners[i:i + 1]])
+            placed_fp = np.concatenate([placed_fp, fp[None]])
         all_xy.append(xy)
         all_rej.append(rejected)
 
@@ -277,4 +319,5 @@ def place_objects(
         worst = ", ".join(f"{k}: {v}" for k, v in report.items() if v)
         reason = (f"placed {len(placements)} of {len(wlhs)} objects: no candidate passed every rule "
                   f"({len(wlhs) * n} candidates; rejected by {worst})")
-    return PlacementResult(placements, report, reason, np.concatenate(all_xy), np.concatenate(all_rej), drivable)
+    return PlacementResult(placements, report, reason, np.concatenate(all_xy), np.concatenate(all_rej), drivable,
+                           config)

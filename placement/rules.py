@@ -49,6 +49,30 @@ def box_corners_object(wlh: np.ndarray) -> np.ndarray:
     return np.stack([x, y, z], axis=1)
 
 
+def box_footprint_rect(T_global_from_object: np.ndarray, wlh: np.ndarray) -> np.ndarray:
+    """Footprints (N, 4, 2) of 3D boxes standing on (possibly tilted) ground, as heading-aligned rectangles.
+
+    The rectangle is aligned with each object's heading (its x axis projected on global x/y) and
+    bounds the vertical projection of all 8 box corners, so it contains the box's whole shadow on
+    the x/y plane (on flat ground it is exactly the box's bottom face). Corner order as
+    :func:`footprint_corners`.
+
+    Args:
+        T_global_from_object: (N, 4, 4) object (x front, y left, z up, origin at the bottom centre) -> global.
+        wlh: (3,) box size [w, l, h] in metres.
+    """
+    T = np.asarray(T_global_from_object, dtype=np.float64).reshape(-1, 4, 4)
+    corners = np.einsum("nij,kj->nki", T[:, :3, :3], box_corners_object(wlh))[..., :2]  # (N, 8, 2) rel. origin
+    u = T[:, :2, 0] / np.maximum(np.linalg.norm(T[:, :2, 0], axis=1, keepdims=True), 1e-12)
+    v = np.c_[-u[:, 1], u[:, 0]]
+    a = np.einsum("nkd,nd->nk", corners, u)
+    b = np.einsum("nkd,nd->nk", corners, v)
+    a0, a1, b0, b1 = a.min(1), a.max(1), b.min(1), b.max(1)
+    ca = np.stack([a1, a1, a0, a0], axis=1)
+    cb = np.stack([b1, b0, b0, b1], axis=1)
+    return T[:, None, :2, 3] + ca[..., None] * u[:, None] + cb[..., None] * v[:, None]
+
+
 def box_footprints(boxes: Sequence) -> np.ndarray:
     """Footprints (B, 4, 2) of nuScenes :class:`Box` objects (global frame, bottom face corners in x/y)."""
     if len(boxes) == 0:
@@ -170,11 +194,20 @@ def rule_box_clearance(
     N = len(corners_xy)
     if N == 0 or len(box_corners_xy) == 0:
         return np.ones(N, dtype=bool)
-    cand = shapely.polygons(np.asarray(corners_xy, float))
-    boxes = shapely.polygons(np.asarray(box_corners_xy, float))
-    d = shapely.distance(cand[:, None], boxes[None, :])  # (N, B)
+    corners_xy = np.asarray(corners_xy, float)
+    box_corners_xy = np.asarray(box_corners_xy, float)
     need = np.where(np.asarray(box_is_dynamic, bool), dynamic_m, static_m)
-    return np.all(d >= need[None, :], axis=1)
+    # only pairs whose bounding circles come closer than the clearance need the polygon distance
+    c_cand, c_box = corners_xy.mean(axis=1), box_corners_xy.mean(axis=1)
+    r_cand = np.linalg.norm(corners_xy - c_cand[:, None], axis=2).max(axis=1)
+    r_box = np.linalg.norm(box_corners_xy - c_box[:, None], axis=2).max(axis=1)
+    gap_bound = np.linalg.norm(c_cand[:, None] - c_box[None], axis=2) - r_cand[:, None] - r_box[None]
+    ci, bi = np.nonzero(gap_bound < need[None, :])
+    ok = np.ones(N, dtype=bool)
+    if len(ci):
+        d = shapely.distance(shapely.polygons(corners_xy[ci]), shapely.polygons(box_corners_xy[bi]))
+        ok[ci[d < need[bi]]] = False
+    return ok
 
 
 def rule_obstacles(
@@ -213,14 +246,89 @@ def rule_lidarseg(corners_xy: np.ndarray, non_drivable_xy: np.ndarray, margin_m:
     return np.bincount(cand, minlength=N) <= max_points
 
 
-def rule_in_view(
-    corners_cam: np.ndarray, K: np.ndarray, width: int, height: int, min_fraction: float, near_m: float
+def visible_fraction_estimate(
+    T_cam_from_object: np.ndarray,
+    wlh: np.ndarray,
+    K: np.ndarray,
+    width: int,
+    height: int,
+    depth_m: np.ndarray | None,
+    tolerance_m: float,
+    grid: int = 16,
 ) -> np.ndarray:
-    """Every box corner (N, 8, 3) at camera z >= near_m and >= min_fraction of the projected box in the image."""
+    """(N,) estimated fraction of each box's image that is inside the image and not hidden by the scene.
+
+    A ``grid`` x ``grid`` lattice of rays spans the bounding rectangle of each projected box; the rays
+    that hit the box (slab test in the object frame) are its samples, with the box surface's camera
+    z. A sample counts as visible when its pixel is in the image and the scene depth there (``depth_m``,
+    (H, W) camera z in metres, inf = unknown; None = no scene) is not nearer than the box surface by more
+    than ``tolerance_m``. Boxes not wholly in front of the camera (z > 0.1 m) give 0.
+
+    Args:
+        T_cam_from_object: (N, 4, 4) object (x front, y left, z up, origin at the bottom centre) -> camera.
+        wlh: (3,) box size [w, l, h] in metres.
+    """
+    T = np.asarray(T_cam_from_object, dtype=np.float64).reshape(-1, 4, 4)
+    N = len(T)
+    corners = np.einsum("nij,kj->nki", T[:, :3, :3], box_corners_object(wlh)) + T[:, None, :3, 3]
+    front = np.all(corners[..., 2] > 0.1, axis=1)
+    out = np.zeros(N)
+    if not front.any():
+        return out
+    T, corners = T[front], corners[front]
+    uv = corners @ np.asarray(K, dtype=np.float64).T
+    uv = uv[..., :2] / uv[..., 2:3]
+    lo, hi = uv.min(axis=1), uv.max(axis=1)  # (M, 2)
+    t = (np.arange(grid) + 0.5) / grid
+    gu = lo[:, None, 0] + (hi - lo)[:, None, 0] * np.repeat(t, grid)[None]  # (M, S)
+    gv = lo[:, None, 1] + (hi - lo)[:, None, 1] * np.tile(t, grid)[None]
+    d_cam = np.stack([(gu - K[0, 2]) / K[0, 0], (gv - K[1, 2]) / K[1, 1], np.ones_like(gu)], axis=2)  # z = 1
+    R, o = T[:, :3, :3], T[:, :3, 3]
+    d_obj = np.einsum("mji,msj->msi", R, d_cam)  # R^T d
+    o_obj = -np.einsum("mji,mj->mi", R, o)[:, None, :]  # camera centre in the object frame
+    w, l, h = np.asarray(wlh, dtype=np.float64)
+    box_lo, box_hi = np.array([-l / 2, -w / 2, 0.0]), np.array([l / 2, w / 2, h])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t0 = (box_lo - o_obj) / d_obj
+        t1 = (box_hi - o_obj) / d_obj
+    t_near = np.nanmax(np.minimum(t0, t1), axis=2)
+    t_far = np.nanmin(np.maximum(t0, t1), axis=2)
+    hit = (t_near < t_far) & (t_far > 0)
+    z_surface = np.maximum(t_near, 0.0)  # d_cam has z = 1: the ray parameter is the camera z
+    ui, vi = np.round(gu).astype(np.int64), np.round(gv).astype(np.int64)
+    in_image = (ui >= 0) & (ui < width) & (vi >= 0) & (vi < height)
+    visible = hit & in_image
+    if depth_m is not None:
+        scene = np.full(gu.shape, np.inf)
+        scene[in_image] = depth_m[vi[in_image], ui[in_image]]
+        visible &= ~(scene < z_surface - tolerance_m)
+    n_hit = hit.sum(axis=1)
+    out[front] = np.where(n_hit > 0, visible.sum(axis=1) / np.maximum(n_hit, 1), 0.0)
+    return out
+
+
+def rule_in_view(
+    corners_cam: np.ndarray,
+    K: np.ndarray,
+    width: int,
+    height: int,
+    min_fraction: float,
+    near_m: float,
+    visible_fraction: np.ndarray | None = None,
+) -> np.ndarray:
+    """In front of the camera and visible enough.
+
+    Every box corner (N, 8, 3) at camera z >= near_m, >= min_fraction of the projected box inside the
+    image, and, when given, the occlusion-aware ``visible_fraction`` (N,) (see
+    :func:`visible_fraction_estimate`) >= min_fraction too.
+    """
     corners_cam = np.asarray(corners_cam, dtype=np.float64)
     front = np.all(corners_cam[..., 2] >= near_m, axis=1)
     frac = projected_inside_fraction(corners_cam, K, width, height, near_m)
-    return front & (frac >= min_fraction)
+    ok = front & (frac >= min_fraction)
+    if visible_fraction is not None:
+        ok &= np.asarray(visible_fraction) >= min_fraction
+    return ok
 
 
 def rule_mutual(corners_xy: np.ndarray, placed_corners_xy: np.ndarray, clearance_m: float) -> np.ndarray:
@@ -230,9 +338,23 @@ def rule_mutual(corners_xy: np.ndarray, placed_corners_xy: np.ndarray, clearance
     )
 
 
-def lidar_depth_image(points_cam: np.ndarray, K: np.ndarray, width: int, height: int, spread_px: int = 3) -> np.ndarray:
-    """Sparse scene depth (H, W) float32 from camera-frame LiDAR points (P, 3): nearest z per pixel,
-    spread to a (2 spread_px + 1)^2 neighbourhood by a min filter; inf where no point."""
+def lidar_depth_image(
+    points_cam: np.ndarray,
+    K: np.ndarray,
+    width: int,
+    height: int,
+    spread_px: int = 3,
+    fill_gap_px: int = 48,
+    fill_rel_tol: float = 0.05,
+) -> np.ndarray:
+    """Scene depth (H, W) float32 from camera-frame LiDAR points (P, 3); inf where unknown.
+
+    Nearest z per pixel, spread to a (2 spread_px + 1)^2 neighbourhood by a min filter; then, per image
+    column, the rows between two returns at most ``fill_gap_px`` apart whose depths agree within
+    ``fill_rel_tol`` (a wall, a vehicle side: the gaps between LiDAR beams) take the farther of the two.
+    Ground rings, whose depths differ a lot from one beam to the next, are not filled: a hole there
+    stays unknown and hides nothing.
+    """
     points_cam = np.asarray(points_cam, dtype=np.float64).reshape(-1, 3)
     depth = np.full((height, width), np.inf, np.float32)
     front = points_cam[:, 2] > 0.1
@@ -245,7 +367,49 @@ def lidar_depth_image(points_cam: np.ndarray, K: np.ndarray, width: int, height:
         finite = np.where(np.isfinite(depth), depth, np.float32(1e9))
         finite = cv2.erode(finite, np.ones((2 * spread_px + 1, 2 * spread_px + 1), np.uint8))
         depth = np.where(finite < 1e9, finite, np.inf).astype(np.float32)
+    if fill_gap_px > 0:
+        # on a 4x min-pooled image, per depth layer (so that returns from behind a near surface, which a
+        # real LiDAR would not see but merged or synthetic sweeps may hold, do not break its gaps)
+        f = _FILL_POOL
+        H2, W2 = -(-height // f), -(-width // f)
+        padded = np.full((H2 * f, W2 * f), np.inf, np.float32)
+        padded[:height, :width] = depth
+        pooled = cv2.erode(padded, np.ones((f, f), np.uint8), anchor=(0, 0))[::f, ::f]
+        filled = np.full_like(pooled, np.inf)
+        for limit in _FILL_LAYERS_M:
+            layer = np.where(pooled <= limit, pooled, np.inf)
+            filled = np.minimum(filled, _fill_vertical_gaps(layer, fill_gap_px // f, fill_rel_tol))
+        # the blocks just above and below a filled run hold its end points: they fill their own holes too
+        run = np.isfinite(filled)
+        ends = np.zeros_like(run)
+        ends[1:] |= run[:-1]
+        ends[:-1] |= run[1:]
+        coarse = np.where(run, filled, np.where(ends & ~run, pooled, np.inf))
+        up = np.repeat(np.repeat(coarse, f, axis=0), f, axis=1)[:height, :width]
+        depth = np.minimum(depth, up).astype(np.float32)
     return depth
+
+
+_FILL_POOL = 4
+_FILL_LAYERS_M = (8.0, 20.0, 50.0, np.inf)
+
+
+def _fill_vertical_gaps(depth: np.ndarray, max_gap_px: int, rel_tol: float) -> np.ndarray:
+    """Per column, the unknown (inf) runs of at most ``max_gap_px`` rows between two known pixels whose
+    depths agree within ``rel_tol``, set to the farther of the two; inf elsewhere."""
+    height, width = depth.shape
+    known = np.isfinite(depth)
+    rows = np.arange(height)[:, None]
+    above = np.maximum.accumulate(np.where(known, rows, -1), axis=0)  # last known row at or above
+    below = np.minimum.accumulate(np.where(known, rows, height)[::-1], axis=0)[::-1]  # first at or below
+    hole = ~known & (above >= 0) & (below < height) & (below - above <= max_gap_px)
+    cols = np.broadcast_to(np.arange(width)[None, :], depth.shape)
+    z_above = depth[np.clip(above, 0, height - 1), cols]
+    z_below = depth[np.clip(below, 0, height - 1), cols]
+    near, far = np.minimum(z_above, z_below), np.maximum(z_above, z_below)
+    with np.errstate(invalid="ignore"):
+        fill = hole & (far - near <= rel_tol * near)
+    return np.where(fill, far, np.inf)  # only the filled pixels
 
 
 def rule_corners_unoccluded(

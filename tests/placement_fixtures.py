@@ -82,7 +82,28 @@ def lidar_sweep(points_ego: np.ndarray, labels: np.ndarray | None = None) -> Lid
     )
 
 
-def make_sample(boxes=(), polygons="road", lidar: LidarSweep | None = None) -> Sample:
+def lane_ego(y: float, heading_ego: float = 0.0, x_range=(-20.0, 90.0), resolution_m: float = 0.5) -> np.ndarray:
+    """Samples (N, 3) = (global x, global y, heading rad) of a straight lane centre line through ego
+    (x, y) for x in ``x_range``, heading ``heading_ego`` relative to the ego (0 = along ego +x)."""
+    x = np.arange(x_range[0], x_range[1], resolution_m)
+    xy_ego = np.c_[x, np.full_like(x, y)]
+    if heading_ego:
+        c, s_ = np.cos(heading_ego), np.sin(heading_ego)
+        xy_ego = np.c_[x * c, y + x * s_]
+    return np.c_[ego_to_global_xy(xy_ego), np.full(len(x), EGO_YAW_RAD + heading_ego)]
+
+
+def lanes_from(*centre_lines: np.ndarray):
+    """LaneCenterlines from centre-line samples (N_i, 3) (global x, y, heading)."""
+    from streetaug.datasets.nuscenes_map import LaneCenterlines
+
+    allp = np.concatenate(centre_lines)
+    idx = np.concatenate([np.full(len(c), i) for i, c in enumerate(centre_lines)])
+    heading = np.mod(allp[:, 2] + np.pi, 2 * np.pi) - np.pi
+    return LaneCenterlines(allp[:, :2].copy(), heading, idx, tuple(f"lane-{i}" for i in range(len(centre_lines))))
+
+
+def make_sample(boxes=(), polygons="road", lidar: LidarSweep | None = None, lanes=None) -> Sample:
     view = camera_view()
     polys = [road_polygon_global()] if polygons == "road" else polygons
     return Sample(
@@ -94,4 +115,5 @@ def make_sample(boxes=(), polygons="road", lidar: LidarSweep | None = None) -> S
         boxes=tuple(boxes),
         drivable_area_global=polys,
         _load_lidar=(lambda: lidar),
+        lanes=lanes,
     )

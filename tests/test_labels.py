@@ -43,7 +43,7 @@ def test_box_camera_matches_pose_and_box_global_through_transforms(yaw_deg):
     front_cam = T_cam_from_global[:3, :3] @ quat_to_rotation(g["rotation"])[:, 0]
     assert np.degrees(np.arctan2(front_cam[0], front_cam[2])) == pytest.approx(yaw_deg, abs=1e-6)
     assert g["size"] == WLH.tolist() and g["rotation"][0] >= 0
-    assert lab["num_lidar_pts"] == 0 and lab["attribute"] == "vehicle.moving"
+    assert lab["num_lidar_pts"] == 0 and lab["num_radar_pts"] == 0 and lab["attribute"] == "vehicle.moving"
 
 
 def test_no_box_global_without_poses():
@@ -95,3 +95,19 @@ def test_truncation():
 def test_label_rejects_mismatched_mask():
     with pytest.raises(ValueError, match="mask"):
         object_label(np.eye(4), WLH, "vehicle.car", K, WIDTH, HEIGHT, np.zeros((10, 10)), np.zeros((10, 10)))
+
+
+def test_placement_label_fields_are_json_ready():
+    import json
+
+    from placement_fixtures import ground_grid_ego, lidar_sweep, make_sample
+    from streetaug.placement.labels import placement_label_fields
+    from streetaug.placement.place import place_objects
+
+    pts = ground_grid_ego(0.5)
+    s = make_sample(lidar=lidar_sweep(pts))
+    p = place_objects(s, s.cameras["CAM_FRONT"], [WLH], np.random.default_rng(0)).placements[0]
+    fields = json.loads(json.dumps(placement_label_fields(p)))["placement"]
+    assert fields["drivable_source"] == "map" and fields["drivable_confidence"] == "high"
+    assert fields["ground_source"] == "lidar-plane" and fields["yaw_source"] == "ego"
+    assert 10.0 <= fields["distance_m"] <= 40.0

@@ -151,6 +151,31 @@ def test_ground_falls_back_to_ego_plane_without_points():
     assert ego_ground_plane(T_GLOBAL_FROM_EGO, xy).height_at(xy[None])[0] == pytest.approx(5.0)
 
 
+def test_ground_fit_prefers_the_road_to_a_raised_sidewalk():
+    """Road (24) at z = 0 and a 15 cm kerb-high sidewalk (26) 1.5 m to the side within the fit radius."""
+    pts = ground_grid_ego(0.25, x_range=(15.0, 25.0), y_half=6.0)
+    side = pts[:, 1] > 1.5
+    pts[side, 2] = 0.15
+    labels = np.where(side, 26, 24)
+    pg = transform_points(T_GLOBAL_FROM_EGO, pts)
+    plane = LocalGroundFitter(pg, T_GLOBAL_FROM_EGO, labels, CFG).fit(ego_to_global_xy([[20.0, 0.0]])[0])
+    assert plane.source == "lidarseg"
+    assert abs(plane.point_global[2] - 5.0) < 0.01
+    assert plane.normal_global @ T_GLOBAL_FROM_EGO[:3, 2] > np.cos(np.radians(0.3))
+
+
+@pytest.mark.parametrize("height_m,source", [(0.3, "lidar-plane"), (4.5, "ego-plane")])
+def test_ground_fit_rejects_a_canopy_far_above_the_road(height_m, source):
+    """Only a flat layer of points 4.5 m above the ego's road (a canopy) near the object: not ground.
+    (Allowed offset at 20 m: 0.5 m + 10 % of 20 m = 2.5 m; a 0.3 m rise is accepted.)"""
+    pts = ground_grid_ego(0.5, x_range=(15.0, 25.0), y_half=4.0)
+    pts[:, 2] = height_m
+    plane = LocalGroundFitter(transform_points(T_GLOBAL_FROM_EGO, pts), T_GLOBAL_FROM_EGO, None, CFG).fit(
+        ego_to_global_xy([[20.0, 0.0]])[0])
+    assert plane.source == source
+    assert plane.point_global[2] == pytest.approx(5.0 + (height_m if source == "lidar-plane" else 0.0), abs=0.01)
+
+
 # ---------------------------------------------------------------------- rules, both sides of each threshold
 
 
@@ -508,3 +533,16 @@ def test_place_objects_with_occlusion_rule():
     r = place_objects(s, s.cameras["CAM_FRONT"], [np.array([1.8, 4.5, 1.5])] * 2, np.random.default_rng(1), cfg)
     assert len(r.placements) == 2 and "corners_unoccluded" in r.report
     _check_all_rules(s, s.cameras["CAM_FRONT"], r.placements, cfg)
+
+
+def test_real_sample_front_left_sees_no_road_in_range(real_sample):
+    """CAM_FRONT_LEFT of scene-0061 looks at the kerbside: almost no drivable area 10-40 m inside its view,
+    so no placement, with the drivable rule as the reason; the road it sees is nearer than 7 m."""
+    s = real_sample
+    view = s.cameras["CAM_FRONT_LEFT"]
+    r = place_objects(s, view, [np.array([1.9, 4.6, 1.6])], np.random.default_rng(0))
+    assert r.placements == [] and "drivable" in r.reason
+    assert r.report["drivable"] >= 0.95 * CFG.n_candidates
+    near = dataclasses.replace(CFG, min_distance_m=5.0, n_candidates=3000)
+    placed = place_objects(s, view, [np.array([1.9, 4.6, 1.6])], np.random.default_rng(0), near).placements
+    assert placed and placed[0].distance_m < 7.0

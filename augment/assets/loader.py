@@ -102,7 +102,7 @@ def load_asset(
         up_axis: the file's up axis (glTF: ``+y``).
         scale: multiply file units by this to get metres (default 1).
         length_m: instead of ``scale``, rescale so the extent along the front axis is this length.
-        category: nuScenes category (default ``vehicle.car``).
+        category: nuScenes category (default: from the file name, see :mod:`streetaug.placement.categories`).
         use_cache: reuse an earlier result for the same file (path, mtime, size) and options.
 
     Returns:
@@ -140,7 +140,11 @@ def load_asset(
         parts = _load_obj_parts(path, mtl)
     else:
         parts = _load_ply_parts(path)
-    asset = _assemble(path, parts, R, scale, length_m, category or "vehicle.car")
+    if category is None:
+        from streetaug.placement.categories import category_for_asset  # the asset-name -> category mapping file
+
+        category = category_for_asset(path)
+    asset = _assemble(path, parts, R, scale, length_m, category)
 
     if use_cache:
         asset_cache[key] = asset
