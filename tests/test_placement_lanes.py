@@ -111,18 +111,32 @@ def test_read_lanes_none_and_errors(tmp_path):
 REAL = (Path(__file__).parents[1] / ".." / "shared" / "data" / "nuscenes-real").resolve()
 
 
-def test_real_and_bundled_maps_have_no_lanes():
-    """The nuScenes-mini excerpt and the bundled maps carry only drivable_area: placement uses the ego heading."""
+def test_bundled_maps_have_lanes_the_real_excerpt_has_none():
+    """The bundled maps carry the generated streets' four travel lanes; the nuScenes-mini excerpt has none."""
     from streetaug.datasets.bundled import bundled_dataroot
 
     for path in (bundled_dataroot() / "maps" / "expansion").glob("*.json"):
-        assert read_lanes(path) is None
+        lanes = read_lanes(path)
+        assert lanes is not None and len(lanes.tokens) % 4 == 0 and len(lanes.tokens) > 0
     if REAL.is_dir():
         assert read_lanes(REAL / "maps" / "expansion" / "singapore-onenorth.json") is None
 
 
+def test_bundled_scenes_place_along_their_lanes():
+    from streetaug.augment.assets.procedural import procedural_car
+    from streetaug.augment.pipeline import InsertOptions, insert_into_view
+    from streetaug.datasets.bundled import BUNDLED_VERSION, bundled_dataroot
+    from streetaug.datasets.nuscenes import NuScenesReader
+
+    reader = NuScenesReader(bundled_dataroot(), BUNDLED_VERSION)
+    sample = reader.sample(reader.sample_tokens("sample-sunny")[0])
+    result = insert_into_view(sample, sample.cameras["CAM_FRONT"], [procedural_car(1)], InsertOptions(quality="draft"))
+    (p,) = result.extras["placement"].placements
+    assert p.yaw_source == "lane"
+
+
 def test_reader_attaches_lanes_and_placement_follows_them(tmp_path):
-    """A copy of a bundled scene whose map gains one lane, 20 deg off the ego heading, through the view."""
+    """A copy of a bundled scene whose lanes are replaced by one lane 20 deg off the ego heading, through the view."""
     from streetaug.datasets.bundled import bundled_dataroot
     from streetaug.datasets.nuscenes import NuScenesReader
 
@@ -135,7 +149,7 @@ def test_reader_attaches_lanes_and_placement_follows_them(tmp_path):
     reader = NuScenesReader(root, "v1.0-samples")
     token = reader.sample_tokens()[0]
     sample = reader.sample(token)
-    assert sample.lanes is None
+    assert sample.lanes is not None and len(sample.lanes.tokens) >= 4  # the generated street's own lanes
     view = sample.cameras["CAM_FRONT"]
     T = view.T_global_from_ego
     yaw_ego = np.arctan2(T[1, 0], T[0, 0])

@@ -256,12 +256,22 @@ def test_map_drivable_area_covers_the_road_points_and_the_ego(dataroot: Path) ->
         nodes = {n["token"]: (n["x"], n["y"]) for n in m["node"]}
         polys = {p["token"]: Polygon([nodes[k] for k in p["exterior_node_tokens"]]) for p in m["polygon"]}
         areas = [polys[tok] for da in m["drivable_area"] for tok in da["polygon_tokens"]]
-        assert m["version"] and len(m["canvas_edge"]) == 2 and m["lane"] == []
+        assert m["version"] and len(m["canvas_edge"]) == 2 and len(m["lane"]) >= 4
         p, labels, _ = _lidar_global(dataroot, t, name)
         scene = next(s for s in t["scene"] if s["name"] == name)
         lidar_sd = next(d for d in t["sample_data"] if d["sample_token"] == scene["first_sample_token"] and d["fileformat"] == "pcd")
-        ego_xy = _by_token(t["ego_pose"])[lidar_sd["ego_pose_token"]]["translation"][:2]
+        ego = _by_token(t["ego_pose"])[lidar_sd["ego_pose_token"]]
+        ego_xy = ego["translation"][:2]
         area = next(a for a in areas if a.contains(Point(ego_xy)))
+        # Lanes lie on the drivable area, and the ego drives along the lane it stands in.
+        assert all(area.buffer(0.05).contains(polys[lane["polygon_token"]]) for lane in m["lane"]
+                   if polys[lane["polygon_token"]].intersects(area))
+        w, x, y, z = ego["rotation"]
+        ego_yaw = np.arctan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
+        own = [lane for lane in m["lane"] if polys[lane["polygon_token"]].contains(Point(ego_xy))]
+        assert len(own) == 1
+        (path,) = m["arcline_path_3"][own[0]["token"]]
+        assert abs(np.angle(np.exp(1j * (path["start_pose"][2] - ego_yaw)))) < 1e-3
         road_xy = p[labels == LABEL_DRIVEABLE, :2]
         inside = np.array([area.buffer(0.05).contains(Point(xy)) for xy in road_xy[::20]])
         assert inside.all()

@@ -214,6 +214,8 @@ def _make_scene(spec: SceneSpec, out_dir: Path, tables: NuScenesTables, width: i
     tables.add_sample(sample_token, scene_token, ts)
     for poly in scene.drivable_polygons_global:
         tables.add_map_polygon(spec.location, log_token, poly)
+    for start_xy, end_xy, width_m in scene.lanes_global:
+        tables.add_map_lane(spec.location, start_xy, end_xy, width_m)
 
     # cameras: CAM_FRONT first, it sets the exposure of all cameras of the scene
     channels = sorted(spec.cameras, key=lambda c: c != "CAM_FRONT")
@@ -366,7 +368,8 @@ def _readme(names: list[str], width: int, height: int, seed: int) -> str:
         "Procedural streets rendered by streetaug's own ray tracer (`streetaug.augment.scenegen`), written as a",
         f"nuScenes dataset: `NuScenes(version='{VERSION}', dataroot=<this folder>)`; one keyframe per scene with",
         "CAM_FRONT / CAM_FRONT_LEFT / CAM_BACK (nuScenes-like calibration), LIDAR_TOP (32 beams) with lidarseg",
-        "labels, 3D boxes (`sample_annotation`) and a map expansion whose `drivable_area` is the road surface.",
+        "labels, 3D boxes (`sample_annotation`) and a map expansion whose `drivable_area` is the road surface and",
+        "whose `lane` records (with `arcline_path_3` centre lines) are the four travel lanes.",
         "`ground_truth/<scene>/lighting.json` + `envmap_world.exr` hold the exact light of each scene on the",
         "images' radiometric scale (sun direction/irradiance/visibility, sky parameters, exposure k).",
         "",

@@ -84,6 +84,7 @@ class NuScenesTables:
     version: str
     rows: dict[str, list[dict]] = field(default_factory=dict)
     map_polygons: dict[str, list[np.ndarray]] = field(default_factory=dict)
+    map_lanes: dict[str, list[tuple[np.ndarray, np.ndarray, float]]] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         for name in ("attribute", "calibrated_sensor", "category", "ego_pose", "instance", "log", "map",
@@ -183,6 +184,11 @@ class NuScenesTables:
         if log_token not in row["log_tokens"]:
             row["log_tokens"].append(log_token)
 
+    def add_map_lane(self, location: str, start_xy: np.ndarray, end_xy: np.ndarray, width_m: float) -> None:
+        """Register a straight travel lane of ``location`` (centre line from ``start_xy`` to ``end_xy``)."""
+        self.map_lanes.setdefault(location, []).append(
+            (np.asarray(start_xy, dtype=np.float64), np.asarray(end_xy, dtype=np.float64), float(width_m)))
+
     # ------------------------------------------------------------------ output
 
     def map_expansion(self, location: str) -> dict:
@@ -200,6 +206,28 @@ class NuScenesTables:
             pt = token("polygon", location, k)
             m["polygon"].append({"token": pt, "exterior_node_tokens": node_tokens, "holes": []})
             m["drivable_area"].append({"token": token("drivable_area", location, k), "polygon_tokens": [pt]})
+        for k, (a, b, width) in enumerate(self.map_lanes.get(location, [])):
+            # A lane: its area as a polygon, and its centre line as one straight arcline path ("LSR" with
+            # zero-length arcs), the format of the nuScenes map expansion v1.3.
+            d = (b - a) / np.linalg.norm(b - a)
+            n = np.array([-d[1], d[0]]) * width / 2
+            node_tokens = []
+            for j, (x, y) in enumerate([a - n, b - n, b + n, a + n]):
+                nt = token("lane_node", location, k, j)
+                m["node"].append({"token": nt, "x": _r(x, 4), "y": _r(y, 4)})
+                node_tokens.append(nt)
+            pt = token("lane_polygon", location, k)
+            m["polygon"].append({"token": pt, "exterior_node_tokens": node_tokens, "holes": []})
+            lt = token("lane", location, k)
+            m["lane"].append({"token": lt, "polygon_token": pt, "lane_type": "CAR", "from_edge_line_token": None,
+                              "to_edge_line_token": None, "left_lane_divider_segments": [],
+                              "right_lane_divider_segments": []})
+            yaw = float(np.arctan2(d[1], d[0]))
+            m["arcline_path_3"][lt] = [{
+                "start_pose": [_r(a[0], 4), _r(a[1], 4), _r(yaw, 9)],
+                "end_pose": [_r(b[0], 4), _r(b[1], 4), _r(yaw, 9)],
+                "shape": "LSR", "radius": 999.0, "segment_length": [0.0, _r(float(np.linalg.norm(b - a)), 4), 0.0],
+            }]
         return m
 
     def write(self, dataroot: Path) -> list[Path]:

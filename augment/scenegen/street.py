@@ -113,6 +113,8 @@ class StreetScene:
         T_global_from_street: (4, 4) street frame -> global.
         T_global_from_ego: (4, 4) ego pose at the keyframe.
         drivable_polygons_global: list of (N, 2) float64 counter-clockwise polygons (global x, y).
+        lanes_global: travel lanes as (start_xy (2,), end_xy (2,), width_m): straight centre lines in the
+            direction of travel (global x, y).
     """
 
     vertices_global: np.ndarray
@@ -125,6 +127,7 @@ class StreetScene:
     T_global_from_street: np.ndarray
     T_global_from_ego: np.ndarray
     drivable_polygons_global: list = field(default_factory=list)
+    lanes_global: list = field(default_factory=list)
 
     @property
     def face_label(self) -> np.ndarray:
@@ -510,4 +513,22 @@ def build_street(params: StreetParams, T_global_from_street: np.ndarray) -> Stre
         T_global_from_street=T_global_from_street,
         T_global_from_ego=T_global_from_ego,
         drivable_polygons_global=[road[:, :2]],
+        lanes_global=_travel_lanes(params, T_global_from_street),
     )
+
+
+def _travel_lanes(params: StreetParams, T_global_from_street: np.ndarray) -> list:
+    """The four travel lanes (two each way) as (start_xy, end_xy, width) in the direction of travel.
+
+    Right-hand traffic drives along +x on the y < 0 side; left-hand traffic on the y > 0 side.
+    """
+    x0, x1 = ROAD_X_RANGE_M
+    forward_side = 1 if params.drive_on_left else -1
+    lanes = []
+    for side in (forward_side, -forward_side):
+        for k in (0.5, 1.5):
+            y = side * k * LANE_WIDTH_M
+            a, b = (x0, x1) if side == forward_side else (x1, x0)
+            ends = transform_points(T_global_from_street, np.array([[a, y, 0.0], [b, y, 0.0]]))
+            lanes.append((ends[0, :2], ends[1, :2], LANE_WIDTH_M))
+    return lanes
