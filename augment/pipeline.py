@@ -1,15 +1,19 @@
-"""The insertion pipeline, stage by stage: sample -> lighting -> placement -> render -> labels.
+"""The insertion pipeline, stage by stage: sample -> placement -> lighting -> render -> labels.
 
 Each stage is a plain function call on plain data objects (see ``docs``/architecture); this module
-only wires them together, times them, and writes the contract's output files.  The CLI is a thin
-shell over :func:`insert_into_view`, :func:`insert_into_image` and :func:`write_insert_outputs`.
+only wires them together, times them, and writes the contract's output files.
+
+* :func:`insert_into_sample` - several cameras of one sample: objects placed once in the global frame
+  and rendered into every camera that sees them or their shadows (what multi-camera detectors need).
+* :func:`insert_into_view` - one camera (``streetaug insert``); :func:`insert_into_image` - any image
+  with depth, an env map and a pose; :func:`write_insert_outputs` writes the contract's files.
 """
 
 from __future__ import annotations
 
 import hashlib
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Sequence
 
@@ -102,65 +106,236 @@ def scene_depth_for_view(sample: Sample, view: CameraView) -> np.ndarray:
     return densify_lidar_depth(points_cam, view.K, view.width, view.height, ground_fill=(normal, offset))
 
 
-def insert_into_view(sample: Sample, view: CameraView, assets: Sequence[Asset], options: InsertOptions) -> InsertResult:
-    """Insert ``assets`` (one per object) into one camera image of a sample.
+@dataclass(frozen=True)
+class SampleInsertResult:
+    """What one multi-camera insertion produced: one placement in the global frame, rendered into every camera.
 
-    Stages: lighting estimate (camera frame) -> placement on the drivable ground -> render each object
-    (occluded by scene depth and by previously inserted objects) -> labels.
+    Attributes:
+        views: channel -> :class:`InsertResult` of that camera. A camera that sees neither an inserted
+            object nor its shadow keeps its image unchanged, with ``skipped_reason`` set.
+        placements: every placed object (``streetaug.placement.place.Placement``, global frame); an
+            object's index here is its ``object_index`` in the labels.
+        placed_for: (n_objects,) channel in whose view each object was placed.
+        assets: (n_objects,) the asset of each placement.
+        placement_results: channel -> ``PlacementResult`` of the objects placed in that view.
+        visible_px, coverage_px: (n_objects,) float visible / total (unoccluded) object pixels, summed over
+            the rendered cameras (their ratio is the object's visibility across cameras, as in nuScenes).
+        lighting: channel -> lighting estimate of that camera.
+        skipped_reason: set when no object could be placed in any view.
+        timing_s: seconds of the sample-level stages (``lighting``, ``placement``) and ``total``.
+    """
+
+    views: dict[str, InsertResult]
+    placements: list
+    placed_for: list[str]
+    assets: list[Asset]
+    placement_results: dict
+    visible_px: np.ndarray
+    coverage_px: np.ndarray
+    lighting: dict
+    skipped_reason: str | None
+    timing_s: dict[str, float]
+
+
+def sample_lighting(sample: Sample, views: Sequence[CameraView], level: str,
+                    points_cam: dict[str, np.ndarray] | None = None) -> dict[str, object]:
+    """The lighting estimate of each camera of a sample (channel -> ``LightingEstimate``, camera frame).
+
+    The one place the pipeline estimates lighting. For now one estimate per view (each on its own
+    image's radiometric scale; the sun comes from the ephemeris, so it agrees across cameras).
+    ``points_cam``: channel -> (3,) placement in that camera's frame (where L2 centres its volume).
+    """
+    from .lighting.estimate import estimate_lighting
+
+    points_cam = points_cam or {}
+    return {view.channel: estimate_lighting(view, sample.location, level=level, lidar=sample.lidar,
+                                            boxes=sample.boxes, query_point_cam=points_cam.get(view.channel))
+            for view in views}
+
+
+def object_light(estimate, center_cam: np.ndarray) -> DistantLight:
+    """The distant light an object centred at ``center_cam`` (3,) (camera frame, metres) is shaded with:
+    the estimate's local light there (L2/L3 volume; L0/L1: the same light everywhere)."""
+    return estimate.light_at(np.asarray(center_cam, dtype=np.float64))
+
+
+def place_in_view(sample: Sample, view: CameraView, assets: Sequence[Asset], placed: Sequence, options: InsertOptions):
+    """Place ``assets`` in ``view``, clear (as dynamic boxes) of the objects ``placed`` for other cameras.
+
+    Seeded by (seed, sample token, channel). Returns the ``PlacementResult``.
     """
     from streetaug.placement.config import PlacementConfig
-    from streetaug.placement.labels import object_label
     from streetaug.placement.place import place_objects
 
-    from .lighting.estimate import estimate_lighting
-    from .render.insert import render_insertion
+    if placed:  # earlier objects count as annotated vehicles (3 m clearance); LiDAR is shared, not re-read
+        sample = replace(sample, boxes=sample.boxes + tuple(p.box for p in placed),
+                         _load_lidar=lambda s=sample: s.lidar)
+    config = PlacementConfig(yaw_sigma_deg=options.yaw_sigma_deg, n_objects=len(assets))
+    return place_objects(sample, view, [a.wlh for a in assets], item_seed(options.seed, sample.token, view.channel),
+                         config, categories=[a.category for a in assets])
 
-    timing: dict[str, float] = {}
-    image = view.image  # file decoding is excluded from the contract's "total": decode first
+
+@dataclass(frozen=True)
+class SamplePlacement:
+    """Objects placed for several cameras of one sample (global frame).
+
+    Attributes:
+        placements: every placed object, in placement order (= object index).
+        placed_for: channel in whose view each object was placed.
+        assets: the asset of each object.
+        results: channel -> ``PlacementResult`` (candidates, rule report, reason).
+        seconds: channel -> seconds spent placing in that view.
+    """
+
+    placements: list
+    placed_for: list[str]
+    assets: list[Asset]
+    results: dict
+    seconds: dict[str, float]
+
+    @property
+    def reason(self) -> str | None:
+        """Why nothing was placed (None when something was)."""
+        if self.placements:
+            return None
+        return "; ".join(f"{ch}: {r.reason}" for ch, r in self.results.items() if r.reason) or "no valid placement"
+
+
+def place_in_sample(sample: Sample, views: Sequence[CameraView], assets_by_channel: dict[str, Sequence[Asset]],
+                    options: InsertOptions) -> SamplePlacement:
+    """Place each view's assets in that view in turn, each object clear of those placed before."""
+    placements, placed_for, placed_assets, results, seconds = [], [], [], {}, {}
+    for view in views:
+        t = time.perf_counter()
+        assets = list(assets_by_channel.get(view.channel, ()))
+        if assets:
+            res = place_in_view(sample, view, assets, placements, options)
+            results[view.channel] = res
+            for p, asset in zip(res.placements, _assets_of_placements(assets, res.placements)):
+                placements.append(p)
+                placed_for.append(view.channel)
+                placed_assets.append(asset)
+        seconds[view.channel] = time.perf_counter() - t
+    return SamplePlacement(placements, placed_for, placed_assets, results, seconds)
+
+
+def insert_into_sample(
+    sample: Sample, views: Sequence[CameraView], assets_by_channel: dict[str, Sequence[Asset]], options: InsertOptions,
+) -> SampleInsertResult:
+    """Insert objects into several cameras of one sample consistently (the same cars, seen by every camera).
+
+    Stages: placement in each view in turn (each object clear of those placed before) -> lighting per
+    sample -> for each camera: scene depth, render every object or shadow in its view (occluded by the
+    camera's scene depth and by the other objects) -> labels.
+
+    Args:
+        views: the cameras to augment; objects are placed in each view's field of view.
+        assets_by_channel: channel -> the assets to place in that view (may be empty).
+    """
+    from .render.settings import QUALITY_PRESETS
+
+    if options.quality not in QUALITY_PRESETS:
+        raise InputError(f"quality: expected one of {sorted(QUALITY_PRESETS)}, got {options.quality!r}")
+    t_start = time.perf_counter()
+    for view in views:  # file decoding is excluded from the contract's "total": decode first
+        _ = view.image
     _ = sample.lidar
     t0 = time.perf_counter()
-    rng = item_seed(options.seed, sample.token, view.channel)
-
-    estimate = estimate_lighting(view, sample.location, level=options.level)
-    timing["lighting"] = time.perf_counter() - t0
-
+    placed = place_in_sample(sample, views, assets_by_channel, options)
     t = time.perf_counter()
-    config = PlacementConfig(yaw_sigma_deg=options.yaw_sigma_deg, n_objects=options.n_objects)
-    placement = place_objects(sample, view, [a.wlh for a in assets], rng, config,
-                              categories=[a.category for a in assets])
-    timing["placement"] = time.perf_counter() - t
+    first = {ch: p for p, ch in reversed(list(zip(placed.placements, placed.placed_for)))}  # first per view
+    points_cam = {v.channel: (v.T_cam_from_global @ first[v.channel].T_global_from_object)[:3, 3]
+                  for v in views if v.channel in first}
+    lighting = sample_lighting(sample, views, options.level, points_cam)
+    lighting_s = (time.perf_counter() - t) / max(len(views), 1)
 
+    n = len(placed.placements)
+    visible_px, coverage_px = np.zeros(n), np.zeros(n)
+    out: dict[str, InsertResult] = {}
+    for view in views:
+        timing = {"lighting": lighting_s, "placement": placed.seconds[view.channel]}
+        out[view.channel] = _render_view(sample, view, placed, lighting[view.channel], options, timing,
+                                         visible_px, coverage_px)
+    timing_s = {"lighting": lighting_s * len(views), "placement": sum(placed.seconds.values()),
+                "total": time.perf_counter() - t0, "with_decode": time.perf_counter() - t_start}
+    return SampleInsertResult(out, placed.placements, placed.placed_for, placed.assets, placed.results, visible_px,
+                              coverage_px, lighting, placed.reason, timing_s)
+
+
+def _render_view(sample: Sample, view: CameraView, placed: SamplePlacement, estimate, options: InsertOptions,
+                 timing: dict, visible_px: np.ndarray, coverage_px: np.ndarray) -> InsertResult:
+    """Render every placed object (or its shadow) that reaches ``view``; accumulate visible/coverage pixels."""
+    from streetaug.placement.labels import object_label
+
+    from .render.insert import render_insertion
+
+    placements, placed_for, assets = placed.placements, placed.placed_for, placed.assets
+    placement_result = placed.results.get(view.channel)
+    t0 = time.perf_counter()
+    image = view.image
+    T_cam_from_global = view.T_cam_from_global
+    poses = [T_cam_from_global @ p.T_global_from_object for p in placements]
+    lights = [object_light(estimate, T[:3, 3] + 0.5 * p.wlh[2] * T[:3, 2]) for T, p in zip(poses, placements)]
+    shown = [i for i in range(len(placements)) if _reaches_view(view, assets[i], poses[i], lights[i], options.quality)]
+    report = None if placement_result is None else placement_result.report
+    extras = {"placement": placement_result}
+    if not shown:
+        own = placement_result.reason if placement_result is not None else None
+        if own and placements:
+            reason = f"{own}; no other camera's object or shadow in view"
+        elif own or placement_result is not None:
+            reason = own or "no valid placement"
+        else:
+            reason = "no inserted object or shadow in view" if placements else "no object placed in this sample"
+        timing["total"] = timing["lighting"] + timing["placement"] + time.perf_counter() - t0
+        return InsertResult(image=image, objects=[], mask=np.zeros(image.shape[:2], np.float32),
+                            shadow_ratio=np.ones(image.shape[:2], np.float32), timing_s=timing, lighting=estimate,
+                            placement_report=report, skipped_reason=reason, extras=extras)
     t = time.perf_counter()
     depth_m = scene_depth_for_view(sample, view)
     timing["depth"] = time.perf_counter() - t
+    rng = item_seed(options.seed, "render", sample.token, view.channel)
+    normals = [rotate_vectors(T_cam_from_global, placements[i].ground_normal_global[None])[0] for i in shown]
+    result = _render_objects(image, view.K, depth_m, [lights[i] for i in shown], [assets[i] for i in shown],
+                             [poses[i] for i in shown], normals, options, rng, timing, render_insertion)
+    objects = []
+    for i, (T_cam_from_object, asset, ins) in zip(shown, result["objects"]):
+        coverage = float(ins.coverage.sum())
+        visible_px[i] += float(ins.mask.sum())
+        coverage_px[i] += coverage
+        if coverage <= 0:  # only its shadow reaches this camera
+            continue
+        label = object_label(T_cam_from_object, asset.wlh, asset.category, view.K, view.width, view.height,
+                             ins.mask, ins.coverage, T_global_from_cam=view.T_global_from_cam,
+                             attribute=placements[i].attribute)
+        label.update(object_index=i, placed_for=placed_for[i])
+        objects.append(label)
+    timing["total"] = timing["lighting"] + timing["placement"] + time.perf_counter() - t0
+    return InsertResult(image=result["image"], objects=objects, mask=result["mask"], shadow_ratio=result["shadow"],
+                        timing_s=timing, lighting=estimate, placement_report=report, extras=extras)
 
-    if not placement.placements:
-        timing["total"] = time.perf_counter() - t0
-        return InsertResult(
-            image=image, objects=[], mask=np.zeros(image.shape[:2], np.float32),
-            shadow_ratio=np.ones(image.shape[:2], np.float32), timing_s=timing, lighting=estimate,
-            placement_report=placement.report, skipped_reason=placement.reason or "no valid placement",
-            extras={"placement": placement},
-        )
 
-    placed_assets = _assets_of_placements(assets, placement.placements)
-    result = _render_objects(
-        image, view.K, depth_m, estimate.light_cam, placed_assets,
-        [view.T_cam_from_global @ p.T_global_from_object for p in placement.placements],
-        [rotate_vectors(view.T_cam_from_global, p.ground_normal_global[None])[0] for p in placement.placements],
-        options, rng, timing, render_insertion,
-    )
-    objects = [
-        object_label(T_cam_from_object, asset.wlh, asset.category, view.K, view.width, view.height,
-                     ins.mask, ins.coverage, T_global_from_cam=view.T_global_from_cam, attribute=p.attribute)
-        for (T_cam_from_object, asset, ins), p in zip(result["objects"], placement.placements)
-    ]
-    timing["total"] = time.perf_counter() - t0
-    return InsertResult(
-        image=result["image"], objects=objects, mask=result["mask"], shadow_ratio=result["shadow"],
-        timing_s=timing, lighting=estimate, placement_report=placement.report,
-        extras={"placement": placement},
-    )
+def _reaches_view(view: CameraView, asset: Asset, T_cam_from_object: np.ndarray, light: DistantLight,
+                  quality: str) -> bool:
+    """Whether the object or its shadow can touch any pixel of ``view`` (the renderer's own pixel boxes)."""
+    from .render.geometry import prepare_asset
+    from .render.settings import QUALITY_PRESETS
+    from .render.shade import object_pixel_box
+    from .render.shadow import shadow_pixel_box
+
+    prep = prepare_asset(asset)
+    W, H = view.width, view.height
+    return (object_pixel_box(view.K, W, H, T_cam_from_object, prep.box_corners_object) is not None
+            or shadow_pixel_box(view.K, W, H, T_cam_from_object, prep, light, QUALITY_PRESETS[quality]) is not None)
+
+
+def insert_into_view(sample: Sample, view: CameraView, assets: Sequence[Asset], options: InsertOptions) -> InsertResult:
+    """Insert ``assets`` (one per object) into one camera image of a sample (see :func:`insert_into_sample`)."""
+    result = insert_into_sample(sample, [view], {view.channel: assets}, options)
+    out = result.views[view.channel]
+    if result.skipped_reason:
+        return replace(out, skipped_reason=result.skipped_reason)
+    return out
 
 
 def _assets_of_placements(assets: Sequence[Asset], placements: Sequence) -> list[Asset]:
@@ -201,7 +376,7 @@ def insert_into_image(
     T_cam_from_object = pose_camera_to_transform(*pose_camera)
     ground_normal = _ground_normal_from_depth(K, depth_m, T_cam_from_object, asset)
     result = _render_objects(
-        image, K, depth_m, light, [asset], [T_cam_from_object], [ground_normal], options,
+        image, K, depth_m, [light], [asset], [T_cam_from_object], [ground_normal], options,
         item_seed(options.seed, "image"), timing, render_insertion,
     )
     (_, _, ins), = result["objects"]
@@ -210,13 +385,14 @@ def insert_into_image(
     return InsertResult(result["image"], objects, result["mask"], result["shadow"], timing)
 
 
-def _render_objects(image, K, depth_m, light, assets, T_cam_from_objects, ground_normals_cam, options, rng, timing, render_insertion) -> dict:
-    """Render objects one after the other; each later one is occluded by the earlier ones."""
+def _render_objects(image, K, depth_m, lights, assets, T_cam_from_objects, ground_normals_cam, options, rng, timing,
+                    render_insertion) -> dict:
+    """Render objects one after the other (each with its light); each later one is occluded by the earlier ones."""
     mask_union = np.zeros(image.shape[:2], np.float32)
     shadow = np.ones(image.shape[:2], np.float32)
     rendered = []
     t = time.perf_counter()
-    for asset, T_cam_from_object, normal in zip(assets, T_cam_from_objects, ground_normals_cam):
+    for light, asset, T_cam_from_object, normal in zip(lights, assets, T_cam_from_objects, ground_normals_cam):
         ins = render_insertion(
             image, K, depth_m, light, asset, T_cam_from_object, ground_normal_cam=normal,
             quality=options.quality, ev=options.ev, seed=int(rng.integers(2**31)),
@@ -288,6 +464,7 @@ def write_insert_outputs(result: InsertResult, out_dir: str | Path, image_suffix
 
 
 __all__ = [
-    "InsertOptions", "InsertResult", "insert_into_view", "insert_into_image", "write_insert_outputs",
+    "InsertOptions", "InsertResult", "SampleInsertResult", "insert_into_sample", "insert_into_view",
+    "insert_into_image", "write_insert_outputs", "sample_lighting", "place_in_view",
     "scene_depth_for_view", "item_seed", "labels_document",
 ]

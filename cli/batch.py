@@ -1,47 +1,116 @@
-"""``streetaug batch``: augment a whole dataset (see :mod:`streetaug.augment.batch`)."""
+"""``streetaug batch`` and ``streetaug merge``: augment a whole dataset (see :mod:`streetaug.augment.batch`)."""
 
 from __future__ import annotations
 
-import time
 from pathlib import Path
 
 import click
 
-from .main import CAMERA_DEFAULT, LEVEL_HELP, LIGHT_LEVELS, _asset_options, _open_dataset, _render_options, _runtime_errors
+from .main import LEVEL_HELP, LIGHT_LEVELS, _asset_options, _render_options, _runtime_errors
+
+
+def _dataroot(dataroot: Path | None, version: str | None) -> tuple[str, str]:
+    from streetaug.datasets.bundled import BUNDLED_VERSION, bundled_dataroot
+
+    if dataroot is None:
+        return str(bundled_dataroot().resolve()), version or BUNDLED_VERSION
+    if version is None:
+        raise click.UsageError("--version is required with --dataroot (e.g. --version v1.0-mini)")
+    return str(dataroot.resolve()), version
 
 
 @click.command("batch")
 @click.option("--dataroot", type=click.Path(file_okay=False, path_type=Path),
               help="nuScenes dataroot (default: the bundled sample scenes).")
 @click.option("--version", "version", default=None, help="Dataset version folder, e.g. v1.0-mini.")
-@click.option("--out", required=True, type=click.Path(file_okay=False, path_type=Path), help="Output folder.")
-@click.option("--cameras", default=CAMERA_DEFAULT, show_default=True, help="Comma-separated camera channels.")
-@click.option("--limit", type=click.IntRange(min=1), help="At most this many samples.")
+@click.option("--out", required=True, type=click.Path(file_okay=False, path_type=Path),
+              help="Output folder: becomes a nuScenes dataset (NuScenes(version, dataroot=OUT)).")
+@click.option("--cameras", default="all", show_default=True,
+              help="Comma-separated camera channels to augment, or 'all'. Objects are placed in each camera's "
+                   "view and rendered into every selected camera that sees them.")
+@click.option("--limit", type=click.IntRange(min=1), help="At most this many samples (the first, in scene order).")
+@click.option("--n-objects", type=click.IntRange(1, 8), default=1, show_default=True,
+              help="Objects placed in each camera's view.")
+@click.option("--yaw-sigma", type=float, default=15.0, show_default=True,
+              help="Yaw noise (deg) around the ego heading: 15 augmentation (paper), 3 realistic.")
 @_asset_options
 @_render_options
 @click.option("--level", type=click.Choice(LIGHT_LEVELS), default="L1", show_default=True, help=LEVEL_HELP)
-@click.option("--fail-fast", is_flag=True, help="Stop at the first failing image.")
+@click.option("--workers", type=click.IntRange(min=1), default=None,
+              help="Local worker processes [default: all cores].")
+@click.option("--scheduler", default=None, metavar="ADDRESS",
+              help="Run on a Dask cluster, e.g. tcp://HOST:8786 (workers need the same --dataroot and --out paths).")
+@click.option("--dask-local", type=click.IntRange(min=1), default=None, metavar="N",
+              help="Run on a Dask LocalCluster of N worker processes.")
+@click.option("--shard", default=None, metavar="I/N",
+              help="Process only shard I of N (0-based, e.g. $SLURM_ARRAY_TASK_ID/8); then 'streetaug merge --out'.")
+@click.option("--dry-run", is_flag=True, help="Plan placements only (writes OUT/plan.jsonl), render nothing.")
+@click.option("--contact-sheet", type=click.IntRange(min=0), default=12, show_default=True,
+              help="Random augmented images in OUT/contact_sheet.png (0: none).")
+@click.option("--fail-fast", is_flag=True, help="Stop at the first failing sample (with --debug: its traceback).")
+@click.option("--no-progress", is_flag=True, help="No progress bar.")
 @click.option("--debug", is_flag=True, help="Show tracebacks.")
 @_runtime_errors
-def batch(dataroot, version, out, cameras, limit, asset, assets_dir, asset_front, asset_length, quality, seed, ev,
-          level, fail_fast, debug):
-    """Augment every sample of a dataset (first version: images + labels; resumes when re-run).
+def batch(dataroot, version, out, cameras, limit, n_objects, yaw_sigma, asset, assets_dir, asset_front, asset_length,
+          quality, seed, ev, level, workers, scheduler, dask_local, shard, dry_run, contact_sheet, fail_fast,
+          no_progress, debug):
+    """Augment every sample of a dataset into a new nuScenes-format dataset; rerunning resumes.
 
     \b
     Examples:
       streetaug batch --out out/dataset
-      streetaug batch --dataroot ../shared/data/nuscenes-real --version v1.0-mini \\
-          --cameras CAM_FRONT,CAM_FRONT_LEFT --out out/real-aug
+      streetaug batch --dataroot ../shared/data/nuscenes-real --version v1.0-mini --out out/real-aug
+      streetaug batch --dataroot /data/nuscenes --version v1.0-trainval --out /shared/aug \\
+          --shard $SLURM_ARRAY_TASK_ID/64 --no-progress      # one job of an array, then:
+      streetaug merge --out /shared/aug
     """
-    from streetaug.augment.batch import BatchConfig, run_batch
+    from streetaug.augment.batch import BatchConfig, RunOptions, default_workers, format_summary, parse_shard, run_batch
 
-    reader = _open_dataset(dataroot, version)
+    if scheduler and dask_local:
+        raise click.UsageError("give --scheduler ADDRESS or --dask-local N, not both")
+    if dry_run and shard:
+        raise click.UsageError("--dry-run plans the whole dataset; drop --shard")
+    root, version = _dataroot(dataroot, version)
+    names = tuple(c.strip() for c in cameras.split(",") if c.strip())
     config = BatchConfig(
-        cameras=tuple(c.strip() for c in cameras.split(",") if c.strip()), limit=limit, seed=seed,
-        quality=quality, level=level, ev=ev, asset=asset, assets_dir=assets_dir, asset_front=asset_front,
-        asset_length=asset_length, fail_fast=fail_fast,
+        dataroot=root, version=version, cameras=() if names in ((), ("all",)) else names, limit=limit, seed=seed,
+        quality=quality, level=level, ev=ev, n_objects=n_objects, yaw_sigma_deg=yaw_sigma,
+        asset=str(asset.resolve()) if asset else None, assets_dir=str(assets_dir.resolve()) if assets_dir else None,
+        asset_front=asset_front, asset_length=asset_length,
     )
-    t = time.perf_counter()
-    summary = run_batch(reader, out, config)
-    click.echo(f"done in {time.perf_counter() - t:.1f} s: " +
-               ", ".join(f"{k} {v}" for k, v in sorted(summary["counts"].items())) + f"; outputs in {out}")
+    run = RunOptions(workers=workers or default_workers(), scheduler=scheduler, dask_local=dask_local,
+                     shard=parse_shard(shard) if shard else None, fail_fast=fail_fast, dry_run=dry_run,
+                     contact_sheet=contact_sheet, progress=not no_progress)
+    summary = run_batch(config, out, run, echo=lambda msg: click.echo(msg, err=True))
+    click.echo(format_summary(summary))
+    if dry_run:
+        rejected = ", ".join(f"{k} {v}" for k, v in summary["rejections"].items() if v)
+        click.echo(f"  planned {summary['objects_planned']} objects; candidates rejected by rule: {rejected}\n"
+                   f"  plan: {out}/plan.jsonl")
+    elif run.shard:
+        click.echo(f"  shard {shard} done; when every shard is: streetaug merge --out {out}")
+    else:
+        click.echo(f"  dataset: NuScenes(version='{version}', dataroot='{out}')"
+                   + (f"; look: {out}/contact_sheet.png" if summary.get("outputs", {}).get("contact_sheet") else ""))
+
+
+@click.command("merge")
+@click.option("--out", required=True, type=click.Path(file_okay=False, exists=True, path_type=Path),
+              help="The output folder the shards wrote into.")
+@click.option("--allow-incomplete", is_flag=True,
+              help="Merge even if some planned samples have no result (their images stay the source's).")
+@click.option("--contact-sheet", type=click.IntRange(min=0), default=12, show_default=True,
+              help="Random augmented images in OUT/contact_sheet.png (0: none).")
+@click.option("--debug", is_flag=True, help="Show tracebacks.")
+@_runtime_errors
+def merge(out, allow_incomplete, contact_sheet, debug):
+    """Join the shards of 'streetaug batch --shard I/N' into one nuScenes dataset (log, tables, summary).
+
+    \b
+    Example:
+      streetaug merge --out /shared/aug
+    """
+    from streetaug.augment.batch import format_summary, merge as merge_shards
+
+    summary = merge_shards(out, allow_incomplete, contact_sheet, echo=lambda msg: click.echo(msg, err=True))
+    click.echo(format_summary(summary))

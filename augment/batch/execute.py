@@ -1,0 +1,85 @@
+"""Run tasks inline, in local worker processes, or on a Dask cluster; yield results as they complete.
+
+Every executor keeps at most ``2 x workers`` tasks in flight, so memory stays bounded however many
+tasks there are. Results arrive in completion order; the batch's outputs do not depend on it
+(per-item seeds). Worker processes inherit the environment: set ``OPENBLAS_NUM_THREADS=1`` (and
+OMP/MKL) before they start (:func:`single_threaded_env`); Dask's nanny sets them by default.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import os
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from itertools import islice
+from typing import Callable, Iterable, Iterator
+
+from ..io import InputError
+
+THREAD_VARS = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
+
+
+def single_threaded_env() -> None:
+    """Make worker processes started from now on use one BLAS/OpenMP thread (parallelism is by processes)."""
+    for var in THREAD_VARS:
+        os.environ.setdefault(var, "1")
+
+
+def run_inline(fn: Callable, tasks: Iterable[tuple]) -> Iterator:
+    for args in tasks:
+        yield fn(*args)
+
+
+def run_processes(fn: Callable, tasks: Iterable[tuple], workers: int) -> Iterator:
+    """``fn(*args)`` in ``workers`` spawned processes (spawn: no fork of a process holding threads)."""
+    single_threaded_env()
+    tasks = iter(tasks)
+    with ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn")) as pool:
+        pending = {pool.submit(fn, *args) for args in islice(tasks, 2 * workers)}
+        try:
+            while pending:
+                finished, pending = wait(pending, return_when=FIRST_COMPLETED)
+                for future in finished:
+                    yield future.result()
+                    for args in islice(tasks, 1):
+                        pending.add(pool.submit(fn, *args))
+        except BaseException:
+            for future in pending:
+                future.cancel()
+            raise
+
+
+def run_dask(fn: Callable, tasks: Iterable[tuple], scheduler: str | None = None, local_workers: int | None = None,
+             on_start: Callable[[str], None] | None = None) -> Iterator:
+    """``fn(*args)`` on a Dask cluster: the scheduler at ``scheduler``, or a LocalCluster of ``local_workers``."""
+    try:
+        from distributed import Client, LocalCluster, as_completed
+    except ImportError:
+        raise InputError("--scheduler/--dask-local need Dask: pip install 'streetaug[distributed]' "
+                         "(dask and distributed)") from None
+    single_threaded_env()
+    cluster = None
+    if scheduler is None:
+        cluster = LocalCluster(n_workers=local_workers or 1, threads_per_worker=1, processes=True,
+                               dashboard_address=":0")  # any free port: never clashes
+    try:
+        with Client(cluster if cluster is not None else scheduler) as client:
+            n_workers = max(1, len(client.scheduler_info().get("workers", {})))
+            if on_start is not None:
+                on_start(f"Dask: {n_workers} worker(s) at {client.scheduler.address}")
+            tasks = iter(tasks)
+            futures = [client.submit(fn, *args, pure=False) for args in islice(tasks, 2 * n_workers)]
+            completed = as_completed(futures)
+            try:
+                for future in completed:
+                    result = future.result()
+                    future.release()
+                    yield result
+                    for args in islice(tasks, 1):
+                        completed.add(client.submit(fn, *args, pure=False))
+            except BaseException:
+                client.cancel(futures)
+                raise
+    finally:
+        if cluster is not None:
+            cluster.close()

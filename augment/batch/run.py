@@ -1,0 +1,230 @@
+"""The batch driver: plan, resume, dispatch samples to workers, log, and write the nuScenes dataset.
+
+Only the driver writes the log and the tables; workers write images and labels (atomically). Output
+folder (see :mod:`streetaug.datasets.nuscenes_writer` for the tables and links)::
+
+    OUTDIR/batch_config.json              what was asked (a rerun must ask the same to resume)
+    OUTDIR/samples/<CAMERA>/<name>        augmented images; OUTDIR/labels/<CAMERA>/<stem>.json their labels
+    OUTDIR/<version>/*.json, source, maps the nuScenes dataset: NuScenes(version, dataroot=OUTDIR)
+    OUTDIR/augment_log.jsonl              one line per attempted image (sample_token, camera, status, reason,
+                                          timing_s, objects placed in that camera's view, ...)
+    OUTDIR/summary.json, contact_sheet.png
+    OUTDIR/shards/<I>-of-<N>/             per-shard log and summary (``--shard``; ``merge`` joins them)
+    OUTDIR/plan.jsonl                     ``--dry-run``: planned placements only
+"""
+
+from __future__ import annotations
+
+import shutil
+import time
+from collections import Counter
+from pathlib import Path
+from typing import Callable
+
+from tqdm import tqdm
+
+from streetaug.datasets.nuscenes import NuScenesReader
+from streetaug.datasets.nuscenes_writer import InsertedObject, link_source, write_augmented_tables
+
+from ..io import InputError, write_json_atomic
+from .config import BatchConfig, RunOptions, check_and_save_config, load_config
+from .execute import run_dask, run_inline, run_processes
+from .log import append_rows, compact_log, done_samples, latest_rows, read_log, write_log
+from .report import contact_sheet, summarize
+from .worker import TableSlicer, process_sample
+
+LOG_FILE = "augment_log.jsonl"
+SUMMARY_FILE = "summary.json"
+
+
+def _echo_none(_: str) -> None:
+    pass
+
+
+def shard_dir(out_dir: Path, shard: tuple[int, int]) -> Path:
+    return out_dir / "shards" / f"{shard[0]}-of-{shard[1]}"
+
+
+def planned_samples(reader: NuScenesReader, limit: int | None, shard: tuple[int, int] | None = None) -> list[str]:
+    """Sample tokens to process, in scene order: the first ``limit``, then every N-th from I for shard I/N."""
+    tokens = reader.sample_tokens()
+    if limit is not None:
+        tokens = tokens[:limit]
+    if shard is not None:
+        tokens = tokens[shard[0]::shard[1]]
+    return tokens
+
+
+def _check_cameras(reader: NuScenesReader, cameras: tuple[str, ...]) -> None:
+    known = sorted({s["channel"] for s in reader.table("sensor") if s.get("modality") == "camera"})
+    unknown = [c for c in cameras if c not in known]
+    if unknown:
+        raise InputError(f"--cameras: unknown camera(s) {', '.join(unknown)}; cameras of this dataset: "
+                         f"{', '.join(known)} (or 'all')")
+
+
+def _remove_stale_temp_files(out_dir: Path, version: str) -> None:
+    """Temporary files a killed run left behind (never seen under their final names)."""
+    for pattern in ("samples/*/.*.tmp*", "labels/*/.*.tmp*", ".*.tmp*"):
+        for path in out_dir.glob(pattern):
+            if path.is_file():
+                path.unlink(missing_ok=True)
+    for pattern in (f".{version}.tmp-*", f".{version}.old-*"):
+        for path in out_dir.glob(pattern):
+            shutil.rmtree(path, ignore_errors=True)
+
+
+def run_batch(config: BatchConfig, out_dir: str | Path, run: RunOptions = RunOptions(),
+              echo: Callable[[str], None] = _echo_none) -> dict:
+    """Augment the samples of ``config`` into ``out_dir``; resume whatever an earlier run finished.
+
+    Returns the summary (also ``summary.json``; for a shard ``shards/I-of-N/summary.json``; with
+    ``dry_run`` the plan's summary, and ``plan.jsonl``).
+    """
+    out_dir = Path(out_dir)
+    reader = NuScenesReader(config.dataroot, config.version)
+    _check_cameras(reader, config.cameras)
+    link_source(out_dir, config.dataroot)  # also refuses an output folder overlapping the source
+    if not run.dry_run:
+        check_and_save_config(out_dir, config)
+    tokens = planned_samples(reader, config.limit, run.shard)
+    slicer = TableSlicer(reader)
+
+    def expected(token: str) -> list[str]:
+        return list(config.cameras) or slicer.cameras(token)
+
+    log_path = (shard_dir(out_dir, run.shard) if run.shard else out_dir) / LOG_FILE
+    if run.shard is None:
+        _remove_stale_temp_files(out_dir, config.version)
+    done = set() if run.dry_run else done_samples(read_log(log_path), out_dir, expected)
+    if not run.dry_run:
+        compact_log(log_path, keep=lambda r: r["sample_token"] in done)
+    pending = [t for t in tokens if t not in done]
+    if done:
+        echo(f"resuming: {len(tokens) - len(pending)} of {len(tokens)} samples already done")
+    cameras = {t: expected(t) for t in pending}
+    tasks = ((config, str(out_dir), t, cameras[t], slicer.tables(t), run.dry_run, run.fail_fast) for t in pending)
+    workers = max(1, min(run.workers, len(pending)))
+    if run.scheduler or run.dask_local:
+        executor = f"Dask {run.scheduler or f'LocalCluster({run.dask_local})'}"
+        results = run_dask(process_sample, tasks, run.scheduler, run.dask_local, on_start=echo)
+    elif workers > 1:
+        executor = f"{workers} local processes"
+        results = run_processes(process_sample, tasks, workers)
+    else:
+        executor = "1 process (inline)"
+        results = run_inline(process_sample, tasks)
+
+    t0 = time.perf_counter()
+    status: Counter = Counter()
+    new_rows: list[dict] = []
+    with tqdm(total=sum(map(len, cameras.values())), unit="img", desc="plan" if run.dry_run else "augment",
+              disable=not run.progress, dynamic_ncols=True, smoothing=0.05) as bar:
+        for rows in results:
+            if not run.dry_run:
+                append_rows(log_path, rows)
+            new_rows.extend(rows)
+            status.update(r["status"] for r in rows)
+            bar.update(len(rows))
+            bar.set_postfix({k: status[k] for k in sorted(status)}, refresh=False)
+    wall = time.perf_counter() - t0
+    cpu_s = sum(r.get("cpu_s", 0.0) for r in new_rows)
+    this_run = {"samples": len(pending), "images": len(new_rows), "resumed_samples": len(tokens) - len(pending),
+                "wall_s": round(wall, 3),
+                "images_per_s": round(len(new_rows) / wall, 4) if wall > 0 and new_rows else None,
+                "executor": executor, "worker_cpu_s": round(cpu_s, 2),
+                # worker CPU seconds per wall second: ~ the number of workers when none waits for a core
+                "busy_workers": round(cpu_s / wall, 2) if wall > 0 else None}
+    if run.dry_run:
+        return _write_plan(out_dir, new_rows, tokens, this_run)
+    if run.shard is not None:
+        summary = summarize(read_log(log_path), {**this_run, "shard": f"{run.shard[0]}/{run.shard[1]}"})
+        write_json_atomic(shard_dir(out_dir, run.shard) / SUMMARY_FILE, summary)
+        return summary
+    return finalize(out_dir, config, reader, read_log(log_path), this_run, run.contact_sheet)
+
+
+def finalize(out_dir: Path, config: BatchConfig, reader: NuScenesReader, rows: list[dict], this_run: dict,
+             contact_sheet_n: int = 12) -> dict:
+    """Write the nuScenes tables, ``summary.json`` and the contact sheet from the final log rows."""
+    order = {t: i for i, t in enumerate(reader.sample_tokens())}
+    rows = sorted(latest_rows(rows).values(), key=lambda r: (order.get(r["sample_token"], len(order)), r["camera"]))
+    augmented = {r["sample_data_token"]: r["image"] for r in rows if r["status"] == "ok"}
+    objects = []
+    for r in rows:
+        if r["status"] not in ("ok", "skipped"):
+            continue
+        for o in r.get("objects", []):
+            box = o["box_global"]
+            objects.append(InsertedObject(
+                sample_token=r["sample_token"], object_index=o["object_index"], category=o["category"],
+                attribute=o.get("attribute"), translation=box["translation"], size=box["size"],
+                rotation=box["rotation"], visibility_token=_visibility(o), seed=config.seed))
+    objects.sort(key=lambda o: (order.get(o.sample_token, len(order)), o.object_index))
+    link_source(out_dir, config.dataroot)
+    tables = write_augmented_tables(config.dataroot, config.version, out_dir, augmented, objects)
+    summary = summarize(rows, this_run)
+    sheet = contact_sheet(out_dir, rows, contact_sheet_n, config.seed)
+    summary["outputs"] = {"tables": str(tables.relative_to(out_dir)), "log": LOG_FILE,
+                          "contact_sheet": sheet.name if sheet else None}
+    write_json_atomic(out_dir / SUMMARY_FILE, summary)
+    return summary
+
+
+def _visibility(obj: dict) -> str:
+    from streetaug.placement.labels import visibility_token
+
+    coverage = float(obj.get("coverage_px", 0.0))
+    return visibility_token(float(obj.get("visible_px", 0.0)) / coverage if coverage > 0 else 0.0)
+
+
+def _write_plan(out_dir: Path, rows: list[dict], tokens: list[str], this_run: dict) -> dict:
+    order = {t: i for i, t in enumerate(tokens)}
+    rows = sorted(rows, key=lambda r: (order.get(r["sample_token"], 0), r["camera"]))
+    write_log(out_dir / "plan.jsonl", rows)
+    summary = summarize(rows, this_run)
+    summary["objects_planned"] = sum(len(r.get("objects", [])) for r in rows)
+    summary["rejections"] = dict(sum((Counter(r.get("placement_report") or {}) for r in rows), Counter()))
+    return summary
+
+
+def merge(out_dir: str | Path, allow_incomplete: bool = False, contact_sheet_n: int = 12,
+          echo: Callable[[str], None] = _echo_none) -> dict:
+    """Join the shards' logs of ``out_dir`` into ``augment_log.jsonl`` and write the dataset and summary.
+
+    Raises:
+        InputError: no batch in ``out_dir``, or planned samples were not processed by any shard (unless
+            ``allow_incomplete``; their images then stay the source's).
+    """
+    out_dir = Path(out_dir)
+    config = load_config(out_dir)
+    if config is None:
+        raise InputError(f"{out_dir}: no batch_config.json; run 'streetaug batch --shard I/N --out {out_dir}' first")
+    logs = sorted(out_dir.glob(f"shards/*/{LOG_FILE}"))
+    if not logs:
+        raise InputError(f"{out_dir / 'shards'}: no shard logs (shards/I-of-N/{LOG_FILE}); "
+                         f"run 'streetaug batch --shard I/N --out {out_dir}' for every I first")
+    rows = read_log(out_dir / LOG_FILE)
+    for path in logs:
+        rows.extend(read_log(path))
+    reader = NuScenesReader(config.dataroot, config.version)
+    slicer = TableSlicer(reader)
+    latest = latest_rows(rows)
+    attempted = {t for t in {t for t, _ in latest}
+                 if all((t, c) in latest for c in (list(config.cameras) or slicer.cameras(t)))}
+    planned = planned_samples(reader, config.limit)
+    missing = [t for t in planned if t not in attempted]
+    if missing and not allow_incomplete:
+        raise InputError(f"{out_dir}: {len(missing)} of {len(planned)} planned samples have no result in "
+                         f"{len(logs)} shard log(s) (e.g. {', '.join(missing[:3])}); run the missing shards "
+                         "(or rerun failed ones: they resume), or merge with --allow-incomplete")
+    kept = [r for r in latest.values() if r["sample_token"] in attempted]
+    order = {t: i for i, t in enumerate(reader.sample_tokens())}
+    kept.sort(key=lambda r: (order.get(r["sample_token"], len(order)), r["camera"]))
+    _remove_stale_temp_files(out_dir, config.version)
+    write_log(out_dir / LOG_FILE, kept)
+    echo(f"merged {len(logs)} shard log(s): {len(kept)} images of {len(attempted)} samples"
+         + (f"; {len(missing)} samples missing" if missing else ""))
+    return finalize(out_dir, config, reader, kept,
+                    {"merged_shards": len(logs), "missing_samples": len(missing), "images": len(kept)},
+                    contact_sheet_n)

@@ -1,0 +1,191 @@
+"""Batch throughput: images/s with 1 and 2 local workers and a 2-worker Dask LocalCluster, peak RSS per
+worker, and the projected wall time / cost of all nuScenes trainval keyframes (34,149 samples x 6 cameras).
+
+Usage: ``python benchmarks/bench_batch.py [--replicas 4] [--quality default] [--repeats 1]
+[--real] [--out benchmarks/results/batch_throughput.json]``
+
+Dataset: the bundled sample scenes (1600x900; CAM_FRONT, CAM_FRONT_LEFT, CAM_BACK) replicated R times
+with fresh tokens (files linked, not copied), so that there are enough samples to keep two workers
+busy; each replica gets its own placements (seeds derive from the sample token). ``--real`` also
+times the real nuScenes keyframe (../shared/data/nuscenes-real), replicated the same way, on one worker.
+Wall time covers everything a user waits for (worker start-up, tables, contact sheet). The machine
+may be shared: the load average before and after each run is recorded.
+"""
+
+from __future__ import annotations
+
+import os
+
+for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
+
+import argparse  # noqa: E402
+import hashlib  # noqa: E402
+import json  # noqa: E402
+import platform  # noqa: E402
+import shutil  # noqa: E402
+import tempfile  # noqa: E402
+import time  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import numpy as np  # noqa: E402
+
+from streetaug.augment.batch import BatchConfig, RunOptions, read_log, run_batch  # noqa: E402
+from streetaug.datasets.bundled import BUNDLED_VERSION, bundled_dataroot  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+REAL = ROOT.parent / "shared" / "data" / "nuscenes-real"
+TRAINVAL_SAMPLES = 34_149
+TRAINVAL_CAMERAS = 6
+# Replicated tables get fresh tokens; these are shared between replicas.
+SHARED_TABLES = ("calibrated_sensor", "sensor", "log", "map", "category", "attribute", "visibility")
+
+
+def replicate_dataset(src: Path, dst: Path, version: str, replicas: int) -> Path:
+    """A dataroot with every sample of ``src`` repeated ``replicas`` times (new tokens, linked files)."""
+    tables = {p.stem: json.loads(p.read_text()) for p in (src / version).glob("*.json")}
+    own = [t for t in tables if t not in SHARED_TABLES]
+    tokens = {r["token"] for t in own for r in tables[t]}
+    out: dict[str, list[dict]] = {t: list(tables[t]) if t in SHARED_TABLES else [] for t in tables}
+    (dst / version).mkdir(parents=True)
+    if (src / "maps").is_dir():
+        os.symlink(src.resolve() / "maps", dst / "maps")
+    for k in range(replicas):
+        def new(token: str) -> str:
+            return hashlib.md5(f"replica{k}|{token}".encode()).hexdigest() if token in tokens else token
+
+        def remap(value):
+            if isinstance(value, str):
+                return new(value)
+            if isinstance(value, list) and all(isinstance(v, str) for v in value):
+                return [new(v) for v in value]
+            return value
+
+        for t in own:
+            for orig in tables[t]:
+                row = {key: remap(v) for key, v in orig.items()}
+                if t == "scene":
+                    row["name"] = f"{row['name']}-r{k}"
+                if t == "sample_data":
+                    name = Path(orig["filename"])
+                    row["filename"] = str(name.parent / f"r{k}__{name.name}")
+                if t == "lidarseg":
+                    row["filename"] = f"lidarseg/{version}/{row['sample_data_token']}_lidarseg.bin"
+                if t in ("sample_data", "lidarseg"):
+                    (dst / row["filename"]).parent.mkdir(parents=True, exist_ok=True)
+                    os.symlink((src / orig["filename"]).resolve(), dst / row["filename"])
+                out[t].append(row)
+    for t, rows in out.items():
+        (dst / version / f"{t}.json").write_text(json.dumps(rows))
+    return dst
+
+
+def timed_run(dataroot: Path, version: str, out: Path, quality: str, run: RunOptions, seed: int) -> dict:
+    config = BatchConfig(dataroot=str(dataroot), version=version, quality=quality, seed=seed)
+    load0 = os.getloadavg()[0]
+    t0 = time.perf_counter()
+    summary = run_batch(config, out, run)
+    wall = time.perf_counter() - t0
+    n_images = summary["this_run"]["images"]
+    rss = [w["peak_rss_mb"] for w in summary["workers"].values()]
+    # Per sample CPU seconds / cameras; the median leaves out each worker's one-off warm-up (first ephemeris
+    # call, caches), which a real run amortises over thousands of samples.
+    cpu = [r["cpu_s"] for r in read_log(out / "augment_log.jsonl")]
+    return {
+        "wall_s": round(wall, 2),
+        "images": n_images,
+        "worker_cpu_s_per_image_mean": round(summary["this_run"]["worker_cpu_s"] / n_images, 4),
+        "worker_cpu_s_per_image_median": round(float(np.median(cpu)), 4),
+        "busy_workers": summary["this_run"]["busy_workers"],
+        "ok_images": summary["counts"].get("ok", 0),
+        "failed": summary["counts"].get("failed", 0),
+        "images_per_s": round(n_images / wall, 4),
+        "peak_rss_mb_per_worker": sorted(rss),
+        "load_avg_1min_before_after": [round(load0, 2), round(os.getloadavg()[0], 2)],
+        "stage_p50_s": {k: v["p50"] for k, v in summary["stage_seconds"].items() if "." not in k},
+    }
+
+
+def projection(cpu_s_per_image: float, usd_per_core_hour: float) -> dict:
+    """Wall time and cost for every trainval keyframe image: one worker per core, linear over machines."""
+    images = TRAINVAL_SAMPLES * TRAINVAL_CAMERAS
+    per_core = 1.0 / cpu_s_per_image
+    core_hours = images / per_core / 3600
+    rows = {}
+    for cores in (2, 32):
+        for machines in (1, 8, 32, 128):
+            hours = core_hours / (cores * machines)
+            rows[f"{machines}x{cores}-core"] = {"wall_hours": round(hours, 2),
+                                                "usd": round(core_hours * usd_per_core_hour, 2)}
+    return {"images": images, "images_per_s_per_core": round(per_core, 4), "core_hours": round(core_hours, 1),
+            "usd_per_core_hour_assumed": usd_per_core_hour, "machines": rows}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--replicas", type=int, default=4)
+    parser.add_argument("--quality", default="default", choices=["draft", "default", "high"])
+    parser.add_argument("--repeats", type=int, default=1, help="runs per mode (medians are reported)")
+    parser.add_argument("--real", action="store_true", help="also time the real keyframe (1 worker)")
+    parser.add_argument("--usd-per-core-hour", type=float, default=0.04,
+                        help="price assumed for the projection (on-demand compute-optimised vCPU, order of magnitude)")
+    parser.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "results" / "batch_throughput.json")
+    args = parser.parse_args()
+
+    modes = {"1 worker (inline)": RunOptions(workers=1, progress=False, contact_sheet=0),
+             "2 local processes": RunOptions(workers=2, progress=False, contact_sheet=0),
+             "Dask LocalCluster, 2 workers": RunOptions(dask_local=2, progress=False, contact_sheet=0)}
+    results: dict[str, list[dict]] = {m: [] for m in modes}
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        data = replicate_dataset(bundled_dataroot(), tmp / "data", BUNDLED_VERSION, args.replicas)
+        for r in range(args.repeats):
+            for name, run in modes.items():  # interleaved, so that a load spike hits every mode alike
+                out = tmp / f"out-{r}-{len(results[name])}-{name.split()[0]}"
+                results[name].append(timed_run(data, BUNDLED_VERSION, out, args.quality, run, seed=r))
+                print(f"{name}: {results[name][-1]}", flush=True)
+                shutil.rmtree(out)
+        real = None
+        if args.real and REAL.is_dir():
+            real_data = replicate_dataset(REAL, tmp / "real", "v1.0-mini", 4 * args.replicas)
+            real = timed_run(real_data, "v1.0-mini", tmp / "out-real", args.quality, modes["1 worker (inline)"], 0)
+            print(f"real keyframe, 1 worker: {real}", flush=True)
+
+    def median(name: str, key: str) -> float:
+        return float(np.median([x[key] for x in results[name]]))
+
+    rate1 = median("1 worker (inline)", "images_per_s")
+    rate2 = median("2 local processes", "images_per_s")
+    rate_dask = median("Dask LocalCluster, 2 workers", "images_per_s")
+    cpu = {name: median(name, "worker_cpu_s_per_image_median") for name in modes}
+    cpu1 = cpu["1 worker (inline)"]
+    report = {
+        "benchmark": "streetaug batch throughput",
+        "dataset": f"bundled sample scenes x{args.replicas} replicas "
+                   f"({3 * args.replicas} samples x 3 cameras, 1600x900)",
+        "quality": args.quality,
+        "machine": {"cpus": os.cpu_count(), "python": platform.python_version(), "platform": platform.platform()},
+        "runs": results,
+        "median_images_per_s": {"1 worker": rate1, "2 local processes": rate2, "Dask 2 workers": rate_dask},
+        "scaling_1_to_2_workers": round(rate2 / rate1, 3),
+        "scaling_1_to_dask_2": round(rate_dask / rate1, 3),
+        "median_worker_cpu_s_per_image": cpu,  # median over samples, then over repeats
+        # What 2 workers give when each has a core of its own: 2 x (CPU per image alone / CPU per image with 2).
+        "cpu_bound_scaling_2_workers": round(2 * cpu1 / cpu["2 local processes"], 3),
+        "cpu_bound_scaling_dask_2": round(2 * cpu1 / cpu["Dask LocalCluster, 2 workers"], 3),
+        "real_keyframe_1_worker": real,
+        "projection_trainval": projection(float(np.median(list(cpu.values()))), args.usd_per_core_hour),
+        "note": "wall time includes worker start-up, the tables and the summary. On a shared machine (see the "
+                "load averages and busy_workers) wall scaling is meaningless; the CPU seconds per image are not "
+                "(much) affected by other jobs, so the projection uses them (one worker per core).",
+    }
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(json.dumps(report, indent=2) + "\n")
+    print(json.dumps({k: report[k] for k in ("median_images_per_s", "scaling_1_to_2_workers", "scaling_1_to_dask_2",
+                                             "median_worker_cpu_s_per_image", "cpu_bound_scaling_2_workers",
+                                             "cpu_bound_scaling_dask_2", "projection_trainval")}, indent=2))
+    print(f"wrote {args.out}")
+
+
+if __name__ == "__main__":
+    main()
