@@ -317,3 +317,55 @@ def test_real_sample_estimate_runs():
     assert est.sun_source == "ephemeris" and est.light_cam.sun is not None
     assert 0.0 < est.params["scale"] < 1.0
     assert np.all(np.isfinite(est.light_cam.envmap))
+
+
+# ----------------------------------------------------------------------------- evidence from annotated objects
+
+
+def _box_scene(shadow_factor: float):
+    """A sunny synthetic image with a car-sized box 12 m ahead whose cast shadow darkens the road by
+    ``shadow_factor`` (1.0: no shadow drawn, as under an overcast sky)."""
+    import shapely
+
+    from streetaug.datasets.sample import Box
+
+    probe = _view(np.zeros((H_IMG, W_IMG, 3), np.uint8), NOON_SG)
+    sun = sun_direction_global("singapore-onenorth", NOON_SG).direction_global
+    centre_cam = np.array([1.0, CAM_HEIGHT - 0.75, 12.0])
+    centre = probe.T_global_from_cam[:3, :3] @ centre_cam + probe.T_global_from_cam[:3, 3]
+    box = Box(centre, np.array([1.9, 4.5, 1.5]), np.array([1.0, 0.0, 0.0, 0.0]), "vehicle.car")
+    corners = box.corners()
+    ground = corners - sun[None] * ((corners[:, 2] - corners[:, 2].min()) / sun[2])[:, None]
+    shadow = shapely.MultiPoint([tuple(p) for p in ground[:, :2]]).convex_hull
+    sun_cam = sun_direction_camera(probe, "singapore-onenorth")
+    light = make_sky_light(sun_cam, np.array([0.0, -1.0, 0.0]), ground_albedo=GROUND_ALBEDO, scale=0.004)
+    u, v = np.meshgrid(np.arange(W_IMG), np.arange(H_IMG))
+    rays = pixel_rays(probe.K, np.stack([u.ravel(), v.ravel()], axis=1))
+    radiance = light.radiance(np.zeros_like(rays), rays)
+    down = rays[:, 1]
+    on_ground = down > 1e-3
+    p_cam = rays[on_ground] * (CAM_HEIGHT / down[on_ground])[:, None]
+    p_glob = p_cam @ probe.T_global_from_cam[:3, :3].T + probe.T_global_from_cam[:3, 3]
+    in_shadow = shapely.contains_xy(shadow, p_glob[:, 0], p_glob[:, 1])
+    road = np.full((on_ground.sum(), 3), 0.05)
+    road[in_shadow] *= shadow_factor
+    radiance[on_ground] = road
+    image = hdr_to_ldr_uint8(radiance.reshape(H_IMG, W_IMG, 3))
+    return _view(image, NOON_SG), box
+
+
+def test_object_shadows_prove_the_sun():
+    view, box = _box_scene(0.25)
+    est = estimate_lighting(view, "singapore-onenorth", boxes=[box])
+    ev = est.params["evidence"]["object_shadows"]
+    assert ev is not None and ev["objects"] == 1
+    assert abs(ev["contrast"] - 4.0) < 0.4  # the drawn shadow is 4x darker than the road
+    assert "annotated objects" in est.reason and est.sun_visibility > 0.3
+
+
+def test_faint_object_shadow_is_not_evidence_against_the_sun():
+    view, box = _box_scene(1.0)
+    est = estimate_lighting(view, "singapore-onenorth", boxes=[box])
+    ev = est.params["evidence"]["object_shadows"]
+    assert ev is not None and ev["contrast"] < 1.2
+    assert "annotated objects" not in est.reason  # other evidence decides

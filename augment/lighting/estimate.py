@@ -1,10 +1,13 @@
-"""Lighting estimation, first level: ephemeris sun + parametric sky fitted to the image's radiometric scale.
+"""Lighting estimation: the public entry points and the parametric first level (ephemeris sun + fitted sky).
 
-Levels:
+Levels (see :mod:`.levels`):
 
 * ``L0`` — the paper's "no light" baseline: a constant dome with the image's mean linear radiance.
 * ``L1`` — sun direction from the ephemeris (location + timestamp), sky from :mod:`.sky`; its
   ``scale`` (physical -> image units), ``cloud_cover`` (hence sun visibility) are fitted to the image.
+* ``L2`` / ``L3`` — L1's sun + a sky dome corrected by the image + a VSG volume near the placement / around
+  the camera (:mod:`.multiview`, :mod:`.build`, :mod:`.volume`); :meth:`LightingEstimate.light_at` gives the
+  local light at a point. ``auto`` picks the cheapest sufficient level (:mod:`.levels`).
 
 Evidence (computed on a copy of the image downscaled to <= 480 px wide, in linear HDR =
 ``ldr_uint8_to_hdr``, i.e. the contract's camera response at EV 0):
@@ -19,6 +22,10 @@ Evidence (computed on a copy of the image downscaled to <= 480 px wide, in linea
 * **Sky**: pixels at least 3 deg above the horizon, bright, smooth (low gradient), in regions touching
   the top of the image, not saturated. Their blue/red ratio against the model's clear-sky and overcast
   ratios gives a second cloud-cover estimate; their brightness against the model gives ``scale_sky``.
+* **Object shadows** (when the sample's annotated boxes are given): the road inside each object's cast
+  shadow (its box projected along the sun's rays onto the ground under it) against a ring of road around
+  it; the strongest contrast (>= ``OBJECT_SHADOW_MIN_CONTRAST``) proves a visible sun and outranks the
+  ground split (a faint one proves nothing: the object may stand in a building's shadow).
 * Without ground shadows, the ground median pins the scale; if both the "all sunlit" and "all in
   shadow" readings are possible, the one closer to the sky's scale wins.
 
@@ -52,6 +59,7 @@ DEFAULT_CAMERA_HEIGHT_M = 1.5
 ENVMAP_HEIGHT, ENVMAP_WIDTH = 128, 256
 SKY_MIN_ELEVATION_DEG = 3.0
 SATURATED_LDR = 0.97
+OBJECT_SHADOW_MIN_CONTRAST = 1.5  # an object's shadow at least this marked proves a visible sun
 WORK_WIDTH = 480
 CAMERA_CLEAR_BLUE_RED = 1.35
 CLOUD_GRID = np.linspace(0.0, 1.0, 41)
@@ -62,14 +70,18 @@ class LightingEstimate:
     """The lighting of one image, in its camera frame and on its radiometric scale.
 
     Attributes:
-        light_cam: environment (camera-frame equirect, sun excluded) + sun, camera frame, image units.
+        light_cam: distant light: environment (camera-frame equirect, sun excluded) + sun, camera frame,
+            image units. For L2/L3 this is the sky dome alone (what reaches a point with nothing around it).
         sun_dir_cam: (3,) unit vector towards the sun (camera frame), or None (night / unknown).
         sun_source: "ephemeris" | "image" | "none".
         sun_visibility: 0..1 fraction of the sun getting through clouds (0 when there is no sun).
-        level: "L0" | "L1".
+        level: "L0" | "L1" | "L2" | "L3" (for ``auto``: the level chosen).
         reason: why this level, which evidence was used, which fallbacks were taken.
         params: turbidity, cloud_cover, scale, evidence numbers (JSON-serialisable).
         timing_s: seconds per step.
+        hybrid: the sample's :class:`~.volume.HybridLighting` (volume frame, reference scale), L2/L3 only.
+        T_vol_from_cam: (4, 4) this camera -> the volume frame (L2/L3 only).
+        radiometric_scale: this image's units per unit of ``hybrid`` radiance (its exposure ratio).
     """
 
     light_cam: DistantLight
@@ -80,6 +92,32 @@ class LightingEstimate:
     reason: str
     params: dict = field(default_factory=dict)
     timing_s: dict = field(default_factory=dict)
+    hybrid: object | None = None
+    T_vol_from_cam: np.ndarray | None = None
+    radiometric_scale: float = 1.0
+
+    def light_at(self, point_cam: np.ndarray, height: int = ENVMAP_HEIGHT, width: int = ENVMAP_WIDTH) -> DistantLight:
+        """The local distant light (camera frame, image scale) at a 3D point (3,) in the camera frame, metres.
+
+        L0/L1: ``light_cam`` at every point. L2/L3: the local environment map of the volume + sky dome seen
+        from the point (Eq. 1 over all directions, ``height`` x ``width``) and the sun attenuated by its
+        transmittance through the volume from that point. A point inside solid voxels (e.g. on the ground) is
+        first moved up to free space.
+        """
+        p = np.asarray(point_cam, dtype=np.float64)
+        check_shape(p, (3,), "point_cam")
+        if not np.all(np.isfinite(p)):
+            raise ValueError(f"point_cam must be finite, got {p.tolist()}")
+        if self.hybrid is None or self.hybrid.params is None:
+            return self.light_cam
+        T = np.asarray(self.T_vol_from_cam)
+        p_vol = self.hybrid.lift_out_of_solid(T[:3, :3] @ p + T[:3, 3])
+        env = self.hybrid.envmap_at(p_vol, height, width, R_vol_from_frame=T[:3, :3]) * np.float32(self.radiometric_scale)
+        sun = self.light_cam.sun
+        if sun is not None:
+            tau = self.hybrid.sun_transmittance(p_vol)
+            sun = replace(sun, irradiance_rgb=np.asarray(sun.irradiance_rgb) * tau, visibility=sun.visibility * tau)
+        return DistantLight(env.astype(np.float32), sun)
 
 
 # ----------------------------------------------------------------------------- evidence
@@ -93,6 +131,7 @@ class _Work:
     ldr: np.ndarray  # (h, w, 3) float64 in [0, 1]
     rays_cam: np.ndarray  # (h, w, 3) unit camera-frame rays
     elevation: np.ndarray  # (h, w) rad above the horizon
+    K: np.ndarray  # (3, 3) intrinsics of the downscaled image
 
 
 def _prepare(image_rgb: np.ndarray, K: np.ndarray, up_cam: np.ndarray) -> _Work:
@@ -111,7 +150,79 @@ def _prepare(image_rgb: np.ndarray, K: np.ndarray, up_cam: np.ndarray) -> _Work:
     u, v = np.meshgrid(np.arange(w), np.arange(h))
     rays = pixel_rays(Ks, np.stack([u.ravel(), v.ravel()], axis=1)).reshape(h, w, 3)
     elevation = np.arcsin(np.clip(rays @ up_cam, -1.0, 1.0))
-    return _Work(ldr_uint8_to_hdr(small).astype(np.float64), small / 255.0, rays, elevation)
+    return _Work(ldr_uint8_to_hdr(small).astype(np.float64), small / 255.0, rays, elevation, Ks)
+
+
+def _box_shadow_evidence(work: _Work, T_cam_from_global: np.ndarray, boxes, sun_dir_global: np.ndarray) -> dict | None:
+    """Lit / shadowed road next to annotated objects whose cast shadows follow from their boxes and the sun.
+
+    Each box (4-40 m ahead, >= 1 m tall) casts its shadow on the ground plane under it (its corners projected
+    along the sun's rays); the road inside that shadow and in a ring 0.7-2.5 m around it (outside every box's
+    shadow and image silhouette) is compared. Returns the largest lit/shadow luminance ratio over objects with >= 12 pixels in both and that
+    object's lit road median, or None (sun below ~8 deg, no usable object).
+    """
+    from shapely.geometry import MultiPoint
+    from shapely.ops import unary_union
+
+    if sun_dir_global[2] < np.sin(np.radians(8.0)) or not boxes:
+        return None
+    h, w = work.hdr.shape[:2]
+    lum = luminance(work.hdr)
+    lum_ldr = work.ldr.max(axis=-1)
+    sun = sun_dir_global / np.linalg.norm(sun_dir_global)
+    shadows, silhouettes, items = [], np.zeros((h, w), np.uint8), []
+    for box in boxes:
+        corners = box.corners()
+        if box.wlh[2] < 1.0:
+            continue
+        c_cam = (T_cam_from_global[:3, :3] @ corners.T).T + T_cam_from_global[:3, 3]
+        if np.any(c_cam[:, 2] < 1.0) or not 4.0 <= np.median(c_cam[:, 2]) <= 40.0:
+            continue
+        z0 = corners[:, 2].min()
+        ground = corners - sun[None] * ((corners[:, 2] - z0) / sun[2])[:, None]
+        shadow = MultiPoint([tuple(p) for p in ground[:, :2]]).convex_hull
+        uv = (c_cam @ work.K.T)[:, :2] / c_cam[:, 2:3]
+        hull = cv2.convexHull(np.round(uv).astype(np.int32))
+        cv2.fillConvexPoly(silhouettes, hull, 1)
+        shadows.append(shadow)
+        items.append((shadow, z0))
+    if not items:
+        return None
+    all_shadows = unary_union(shadows)
+
+    def rasterise(poly, z0) -> np.ndarray:
+        mask = np.zeros((h, w), np.uint8)
+        polys = [poly] if poly.geom_type == "Polygon" else list(getattr(poly, "geoms", []))
+        for pg in polys:
+            if pg.is_empty or pg.geom_type != "Polygon":
+                continue
+            for ring, value in [(pg.exterior, 1)] + [(r, 0) for r in pg.interiors]:
+                xy = np.asarray(ring.coords)
+                pts = np.concatenate([xy, np.full((len(xy), 1), z0)], axis=1)
+                pc = (T_cam_from_global[:3, :3] @ pts.T).T + T_cam_from_global[:3, 3]
+                if np.any(pc[:, 2] < 0.5):
+                    return np.zeros((h, w), bool)
+                uv = (pc @ work.K.T)[:, :2] / pc[:, 2:3]
+                cv2.fillPoly(mask, [np.round(uv).astype(np.int32)], value)
+        return mask > 0
+
+    free = (silhouettes == 0) & (lum_ldr < SATURATED_LDR)
+    ratios, lit_values = [], []
+    for shadow, z0 in items:
+        in_shadow = rasterise(shadow, z0) & free
+        ring = shadow.buffer(2.5).difference(shadow.buffer(0.7)).difference(all_shadows)
+        lit = rasterise(ring, z0) & free
+        if in_shadow.sum() >= 12 and lit.sum() >= 12:
+            lit_med = float(np.median(lum[lit]))
+            ratios.append(lit_med / max(float(np.median(lum[in_shadow])), 1e-9))
+            lit_values.append(lit_med)
+    if not ratios:
+        return None
+    # A visible shadow proves the sun; a faint one does not disprove it (the object may stand in a building's
+    # shadow): the strongest contrast is the evidence, with the lit road of that object.
+    best = int(np.argmax(ratios))
+    return {"objects": len(ratios), "contrast": float(ratios[best]), "lit": float(lit_values[best]),
+            "per_object_contrast": [float(r) for r in ratios]}
 
 
 def _otsu_log(values: np.ndarray) -> tuple[float, float, float, float]:
@@ -141,7 +252,7 @@ def _ground_evidence(work: _Work, up_cam: np.ndarray, camera_height_m: float) ->
     cos_down = -(work.rays_cam @ up_cam)  # > 0 for rays going down
     with np.errstate(divide="ignore"):
         dist = np.where(cos_down > 1e-3, camera_height_m / np.maximum(cos_down, 1e-3), np.inf)
-    points = work.rays_cam * dist[..., None]
+    points = work.rays_cam * np.where(np.isfinite(dist), dist, 0.0)[..., None]
     lateral = np.abs(points[..., 0])
     horizontal = np.sqrt(np.maximum(dist**2 - camera_height_m**2, 0.0))
     mask = (horizontal > 4.0) & (horizontal < 40.0) & (lateral < 8.0) & np.isfinite(dist)
@@ -212,8 +323,9 @@ def _cloud_from_contrast(contrast: float, e_sun_h: float, e_sky_h0: float, e_sky
     return float(c[np.argmin(np.abs(np.log(model) - np.log(max(contrast, 1.0))))])
 
 
-def _fit_l1(work: _Work, up_cam: np.ndarray, sun_dir_cam: np.ndarray, camera_height_m: float, turbidity: float):
-    """Returns (cloud_cover, scale, evidence dict, list of reason strings)."""
+def _l1_evidence(work: _Work, up_cam: np.ndarray, sun_dir_cam: np.ndarray, camera_height_m: float,
+                 turbidity: float, box_shadows: dict | None = None) -> dict:
+    """The image's evidence for L1 (object shadows, ground lit/shadow, sky colour and level) and the model's constants."""
     R_up = _up_rotation(up_cam)
     sun_up = R_up @ sun_dir_cam
     e_sun = float(luminance(sun_horizontal_irradiance(sun_up, turbidity, 0.0)))
@@ -221,8 +333,6 @@ def _fit_l1(work: _Work, up_cam: np.ndarray, sun_dir_cam: np.ndarray, camera_hei
     e_sky1 = float(luminance(sky_horizontal_irradiance(sun_up, turbidity, 1.0)))
     ground = _ground_evidence(work, up_cam, camera_height_m)
     sky = _sky_evidence(work, _sky_mask(work))
-    notes: list[str] = []
-    evidence: dict = {"ground": ground, "sky": None}
 
     # Sky model at the observed sky pixels (for colour and scale).
     sky_clear_lum = sky_over_lum = None
@@ -241,21 +351,43 @@ def _fit_l1(work: _Work, up_cam: np.ndarray, sun_dir_cam: np.ndarray, camera_hei
         if br_ref - br_over > 0.1:
             cloud_sky = float(np.clip((br_ref - sky["blue_red"]) / (br_ref - br_over), 0.0, 1.0))
         sky = {k: v for k, v in sky.items() if k != "mask"} | {"model_blue_red_clear": br_clear}
-    evidence["sky"] = sky
+    return {"e_sun": e_sun, "e_sky0": e_sky0, "e_sky1": e_sky1, "ground": ground, "sky": sky,
+            "sky_clear_lum": sky_clear_lum, "sky_over_lum": sky_over_lum, "cloud_sky": cloud_sky,
+            "box_shadows": box_shadows}
 
-    # Cloud cover.
+
+def _l1_cloud(ev: dict) -> tuple[float, str, str]:
+    """Cloud cover from one image's evidence: (cloud, source, note); source ranks the evidence."""
+    e_sun, ground, cloud_sky, sky = ev["e_sun"], ev["ground"], ev["cloud_sky"], ev["sky"]
     if e_sun <= 0:
-        cloud = 1.0 if cloud_sky is None else cloud_sky
-        notes.append("sun below the horizon")
-    elif ground is not None and ground["bimodal"]:
-        cloud = _cloud_from_contrast(ground["contrast"], e_sun, e_sky0, e_sky1)
-        notes.append(f"sun visibility from ground lit/shadow contrast {ground['contrast']:.2f}")
-    elif cloud_sky is not None:
-        cloud = cloud_sky
-        notes.append(f"cloud cover from sky colour (blue/red {sky['blue_red']:.2f})")
+        return (1.0 if cloud_sky is None else cloud_sky), "night", "sun below the horizon"
+    boxes = ev.get("box_shadows")
+    if boxes is not None and boxes["contrast"] >= OBJECT_SHADOW_MIN_CONTRAST:
+        cloud = _cloud_from_contrast(boxes["contrast"], e_sun, ev["e_sky0"], ev["e_sky1"])
+        return cloud, "object_shadows", (f"sun visibility from the road in/out of {boxes['objects']} annotated "
+                                         f"objects' predicted shadows (contrast {boxes['contrast']:.2f})")
+    if ground is not None and ground["bimodal"]:
+        cloud = _cloud_from_contrast(ground["contrast"], e_sun, ev["e_sky0"], ev["e_sky1"])
+        return cloud, "ground_contrast", f"sun visibility from ground lit/shadow contrast {ground['contrast']:.2f}"
+    if cloud_sky is not None:
+        return cloud_sky, "sky_colour", f"cloud cover from sky colour (blue/red {sky['blue_red']:.2f})"
+    return 0.5, "assumed", "no shadow or sky-colour evidence: cloud cover 0.5 assumed"
+
+
+def _l1_solve(ev: dict, cloud: float | None = None, cloud_note: str | None = None):
+    """Returns (cloud_cover, scale, evidence dict, list of reason strings); ``cloud`` overrides the image's own."""
+    e_sun, e_sky0, e_sky1 = ev["e_sun"], ev["e_sky0"], ev["e_sky1"]
+    ground, sky = ev["ground"], ev["sky"]
+    sky_clear_lum, sky_over_lum = ev["sky_clear_lum"], ev["sky_over_lum"]
+    evidence: dict = {"ground": ground, "sky": sky}
+    notes: list[str] = []
+    boxes = ev.get("box_shadows")
+    evidence["object_shadows"] = boxes
+    if cloud is None:
+        cloud, source, note = _l1_cloud(ev)
+        notes.append(note)
     else:
-        cloud = 0.5
-        notes.append("no shadow or sky-colour evidence: cloud cover 0.5 assumed")
+        notes.append(cloud_note or f"cloud cover {cloud:.2f} given")
 
     vis = sun_visibility(cloud)
     e_sky_c = (1 - cloud) * e_sky0 + cloud * e_sky1
@@ -268,7 +400,10 @@ def _fit_l1(work: _Work, up_cam: np.ndarray, sun_dir_cam: np.ndarray, camera_hei
     if ground is not None:
         scale_lit = np.pi * ground["lit"] / (GROUND_ALBEDO * e_lit)
         scale_shadow = np.pi * ground["shadow"] / (GROUND_ALBEDO * e_sky_c)
-    if ground is not None and ground["bimodal"]:
+    if boxes is not None and boxes["contrast"] >= OBJECT_SHADOW_MIN_CONTRAST and e_sun * vis > 0.5 * e_sky_c:
+        scale = np.pi * boxes["lit"] / (GROUND_ALBEDO * e_lit)
+        notes.append("scale from the sunlit road next to the objects")
+    elif ground is not None and ground["bimodal"]:
         scale = scale_lit
         notes.append("scale from the sunlit ground")
     elif ground is not None:
@@ -320,30 +455,71 @@ def _clean(obj):
 # ----------------------------------------------------------------------------- public API
 
 
-def estimate_lighting(view, location: str | None, level: str = "L1") -> LightingEstimate:
+def estimate_lighting(view, location: str | None, level: str = "L1", *, lidar=None, boxes=None,
+                      query_point_cam: np.ndarray | None = None) -> LightingEstimate:
     """Lighting of a ``CameraView`` (camera frame, image scale).
 
     Args:
         view: a :class:`streetaug.datasets.sample.CameraView` (image, K, poses, timestamp_us).
         location: the log's location (e.g. ``singapore-onenorth``) for the ephemeris; None if unknown.
-        level: "L0" (constant dome of the image's mean radiance) or "L1" (ephemeris sun + fitted sky).
+        level: "L0" (constant dome of the image's mean radiance), "L1" (ephemeris sun + fitted sky),
+            "L2" / "L3" (+ VSG volume near the placement / full volume), "auto" (see :mod:`.levels`).
+        lidar: optional ``LidarSweep`` of the same sample (L2/L3 geometry; without it the ground plane and
+            vertical facades alone).
+        boxes: optional annotated ``Box`` objects (global frame) of the sample: the road in and out of their
+            predicted shadows is evidence of the sun's visibility.
+        query_point_cam: (3,) the placement (camera frame, metres) that L2 centres on and ``auto`` judges;
+            default: the ground 15 m straight ahead.
     """
-    if level not in ("L0", "L1"):
-        raise ValueError(f"level must be 'L0' or 'L1', got {level!r}")
+    from .levels import check_level
+
+    check_level(level)
+    if level in ("L2", "L3", "auto"):
+        from .multiview import estimate_views_lighting
+
+        return estimate_views_lighting([view], location, level, lidar=lidar, boxes=boxes,
+                                       query_point_cam=query_point_cam).for_view(view)
     t0 = time.perf_counter()
     image = np.asarray(view.image)
     timing = {"decode": time.perf_counter() - t0}
     if level == "L0":
-        t1 = time.perf_counter()
-        light, mean = _l0_light(ldr_uint8_to_hdr(image))
-        timing["fit"] = time.perf_counter() - t1
-        timing["total"] = time.perf_counter() - t1
-        return LightingEstimate(
-            light, None, "none", 0.0, "L0", "L0 requested: constant dome of the image's mean linear radiance",
-            {"mean_radiance_rgb": mean.tolist()}, timing,
-        )
+        return _estimate_l0(image, timing)
+    fit = _l1_view_evidence(view, location, timing, boxes)
+    return _l1_estimate(fit, timing)
+
+
+def _estimate_l0(image: np.ndarray, timing: dict) -> LightingEstimate:
+    t1 = time.perf_counter()
+    light, mean = _l0_light(ldr_uint8_to_hdr(image))
+    timing["fit"] = time.perf_counter() - t1
+    timing["total"] = time.perf_counter() - t1
+    return LightingEstimate(
+        light, None, "none", 0.0, "L0", "L0: constant dome of the image's mean linear radiance",
+        {"mean_radiance_rgb": mean.tolist()}, timing,
+    )
+
+
+@dataclass(frozen=True)
+class _ViewL1:
+    """One view's L1 inputs: geometry, ephemeris and image evidence (``ev`` None without a sun position)."""
+
+    view: object
+    location: str | None
+    up_cam: np.ndarray
+    camera_height_m: float
+    sun_pos: object | None
+    sun_dir_cam: np.ndarray | None
+    fallback: str
+    work: _Work | None
+    ev: dict | None
+    t_start: float
+
+
+def _l1_view_evidence(view, location: str | None, timing: dict, boxes=None) -> _ViewL1:
+    t0 = time.perf_counter()
+    image = np.asarray(view.image)
     up_cam = up_direction_camera(view)
-    cam_z = float(view.T_global_from_cam[2, 3])
+    cam_z = float(view.T_global_from_cam[2, 3] - view.T_global_from_ego[2, 3])
     camera_height_m = cam_z if 0.5 <= cam_z <= 4.0 else DEFAULT_CAMERA_HEIGHT_M
     sun_pos = None
     fallback = ""
@@ -358,17 +534,29 @@ def estimate_lighting(view, location: str | None, level: str = "L1") -> Lighting
         except ValueError as exc:
             fallback = f"ephemeris unavailable ({exc})"
     if sun_pos is None:
-        est = _estimate_diffuse(image, view.K, up_cam, camera_height_m, t0, timing)
-        return replace(est, reason=f"{fallback}; {est.reason}")
-
-    t1 = time.perf_counter()
+        return _ViewL1(view, location, up_cam, camera_height_m, None, None, fallback, None, None, t0)
     R_cam_from_global = np.asarray(view.T_cam_from_global)[:3, :3]
     sun_dir_cam = R_cam_from_global @ sun_pos.direction_global
     sun_dir_cam = sun_dir_cam / np.linalg.norm(sun_dir_cam)
     work = _prepare(image, view.K, up_cam)
-    timing["prepare"] = time.perf_counter() - t1
+    timing["prepare"] = time.perf_counter() - t0
     t2 = time.perf_counter()
-    cloud, scale, evidence, notes = _fit_l1(work, up_cam, sun_dir_cam, camera_height_m, DEFAULT_TURBIDITY)
+    box_shadows = _box_shadow_evidence(work, np.asarray(view.T_cam_from_global), boxes, sun_pos.direction_global) \
+        if boxes else None
+    ev = _l1_evidence(work, up_cam, sun_dir_cam, camera_height_m, DEFAULT_TURBIDITY, box_shadows)
+    timing["evidence"] = time.perf_counter() - t2
+    return _ViewL1(view, location, up_cam, camera_height_m, sun_pos, sun_dir_cam, fallback, work, ev, t0)
+
+
+def _l1_estimate(fit: _ViewL1, timing: dict, cloud: float | None = None, cloud_note: str | None = None) -> LightingEstimate:
+    """The L1 estimate of one view from its evidence (``cloud`` overrides the view's own cloud cover)."""
+    if fit.sun_pos is None:
+        est = _estimate_diffuse(np.asarray(fit.view.image), fit.view.K, fit.up_cam, fit.camera_height_m,
+                                fit.t_start, timing)
+        return replace(est, reason=f"{fit.fallback}; {est.reason}")
+    t2 = time.perf_counter()
+    up_cam, sun_dir_cam, sun_pos, work = fit.up_cam, fit.sun_dir_cam, fit.sun_pos, fit.work
+    cloud, scale, evidence, notes = _l1_solve(fit.ev, cloud, cloud_note)
     night = sun_pos.elevation_deg <= 0.0
     if scale is None:
         mean_lum = float(luminance(work.hdr.reshape(-1, 3).mean(axis=0)))
@@ -382,7 +570,8 @@ def estimate_lighting(view, location: str | None, level: str = "L1") -> Lighting
         sun_dir_cam, up_cam, DEFAULT_TURBIDITY, cloud, GROUND_ALBEDO, ENVMAP_HEIGHT, ENVMAP_WIDTH, float(scale)
     )
     timing["envmap"] = time.perf_counter() - t3
-    timing["total"] = time.perf_counter() - t1
+    timing["total"] = time.perf_counter() - fit.t_start
+    location = fit.location
     if night:
         reason = f"L1: sun {sun_pos.elevation_deg:.1f} deg below the horizon (night/twilight): no sun, dim sky; "
         source, sun_out, visibility = "none", None, 0.0
@@ -394,8 +583,9 @@ def estimate_lighting(view, location: str | None, level: str = "L1") -> Lighting
         "cloud_cover": cloud,
         "scale": float(scale),
         "ground_albedo_assumed": GROUND_ALBEDO,
-        "camera_height_m": camera_height_m,
+        "camera_height_m": fit.camera_height_m,
         "up_camera": up_cam.tolist(),
+        "sky_sun_direction_camera": sun_dir_cam.tolist(),
         "sun_elevation_deg": sun_pos.elevation_deg,
         "sun_azimuth_deg": sun_pos.azimuth_deg,
         "location": location,
@@ -435,17 +625,44 @@ def _estimate_diffuse(image, K, up_cam, camera_height_m, t0, timing) -> Lighting
     params = {
         "turbidity": DEFAULT_TURBIDITY, "cloud_cover": 1.0, "scale": float(scale),
         "ground_albedo_assumed": GROUND_ALBEDO, "camera_height_m": camera_height_m,
-        "up_camera": np.asarray(up_cam).tolist(), "evidence": {"ground": ground, "sky": sky and {k: v for k, v in sky.items() if k != "mask"}},
+        "up_camera": np.asarray(up_cam).tolist(), "sky_sun_direction_camera": sun_cam.tolist(), "evidence": {"ground": ground, "sky": sky and {k: v for k, v in sky.items() if k != "mask"}},
     }
     return LightingEstimate(light, None, "none", 0.0, "L1", reason, _clean(params), timing)
 
 
-def estimate_lighting_from_image(image_rgb: np.ndarray, K: np.ndarray) -> LightingEstimate:
+def estimate_lighting_from_image(image_rgb: np.ndarray, K: np.ndarray, level: str = "L1") -> LightingEstimate:
     """Lighting of an image without metadata: camera assumed level (up = -y, horizon at the principal
-    point row), 1.5 m above the ground; no sun (``sun_source="none"``), diffuse sky scaled to the image."""
+    point row), 1.5 m above the ground; no sun (``sun_source="none"``), diffuse sky scaled to the image.
+
+    L2/L3/auto add a volume built from the image alone: the ground plane and vertical facades standing on it.
+    """
+    from .levels import check_level
+
     image_rgb = np.asarray(image_rgb)
     check_shape(image_rgb, ("H", "W", 3), "image_rgb")
     if image_rgb.dtype != np.uint8:
         raise ValueError(f"image_rgb must be uint8 RGB, got dtype {image_rgb.dtype}")
+    check_level(level)
+    if level == "L0":
+        return _estimate_l0(image_rgb, {})
+    if level in ("L2", "L3", "auto"):
+        from .multiview import estimate_views_lighting
+
+        view = image_only_view(image_rgb, K)
+        return estimate_views_lighting([view], None, level).for_view(view)
     t0 = time.perf_counter()
     return _estimate_diffuse(image_rgb, K, np.array([0.0, -1.0, 0.0]), DEFAULT_CAMERA_HEIGHT_M, t0, {})
+
+
+def image_only_view(image_rgb: np.ndarray, K: np.ndarray, camera_height_m: float = DEFAULT_CAMERA_HEIGHT_M):
+    """A ``CameraView`` for an image without metadata: level camera ``camera_height_m`` above the ground,
+    looking along ego +x, at the global origin, no timestamp (0)."""
+    from streetaug.datasets.sample import CameraView
+
+    from ..conventions import make_transform
+
+    H, W = image_rgb.shape[:2]
+    T_ego_from_cam = make_transform(np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]]),
+                                    [0.0, 0.0, camera_height_m])
+    return CameraView("IMAGE", "", "", np.asarray(K, dtype=np.float64), W, H, T_ego_from_cam, np.eye(4), 0,
+                      _load_image=lambda: image_rgb)

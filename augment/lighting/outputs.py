@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import time
 from pathlib import Path
 
 import cv2
@@ -66,8 +67,13 @@ def _sphere_normals(size: int) -> tuple[np.ndarray, np.ndarray]:
     return n, inside
 
 
-def make_preview(estimate: LightingEstimate, image_rgb: np.ndarray, env_full: np.ndarray) -> np.ndarray:
-    """uint8 (h, w, 3): input (downscaled) | env map (tone-mapped, contract response) | diffuse | mirror sphere."""
+def make_preview(estimate: LightingEstimate, image_rgb: np.ndarray, env_full: np.ndarray,
+                 env_no_sun: np.ndarray | None = None) -> np.ndarray:
+    """uint8 (h, w, 3): input (downscaled) | env map (tone-mapped, contract response) | diffuse | mirror sphere.
+
+    ``env_full`` (sun included) lights the diffuse sphere; the mirror sphere reflects ``env_no_sun`` (default:
+    the estimate's distant environment) so that the sun's huge pixels do not bleed.
+    """
     h = PREVIEW_HEIGHT
     H, W = image_rgb.shape[:2]
     img = cv2.resize(np.ascontiguousarray(image_rgb), (max(int(round(W * h / H)), 1), h), interpolation=cv2.INTER_AREA)
@@ -76,7 +82,7 @@ def make_preview(estimate: LightingEstimate, image_rgb: np.ndarray, env_full: np
     env_ldr = hdr_to_ldr_uint8(env_small)
     s = h // 2
     diffuse = hdr_to_ldr_uint8(diffuse_sphere(env_full, s, albedo=0.5))
-    mirror = hdr_to_ldr_uint8(mirror_sphere(estimate.light_cam.envmap, s))
+    mirror = hdr_to_ldr_uint8(mirror_sphere(estimate.light_cam.envmap if env_no_sun is None else env_no_sun, s))
     spheres = np.zeros((h, s, 3), np.uint8)
     spheres[:s] = diffuse
     spheres[s : 2 * s] = mirror
@@ -91,11 +97,14 @@ def write_lighting_outputs(
     envmap_height: int = 128,
     envmap_width: int = 256,
     extra_timing_s: dict | None = None,
+    save_hybrid: bool = True,
 ) -> dict:
     """Write ``lighting.json``, ``envmap_camera.exr`` (sun included) and ``preview.png`` into ``out_dir``.
 
-    Returns the lighting.json content. The env map is distant light, so it is the same at any query point
-    (the query point is recorded as given).
+    The env map is the local light at ``query_point_cam`` (:meth:`LightingEstimate.light_at`: the same at every
+    point for L0/L1; the volume + sky seen from the point, and the sun's transmittance from it, for L2/L3).
+    With ``save_hybrid`` an L2/L3 estimate also writes its representation into ``out_dir/hybrid/``
+    (``sky_world.exr``, ``volume.npz``, ``hybrid.json``). Returns the lighting.json content.
     """
     if envmap_height < 128 or envmap_width < 256:
         raise ValueError(f"envmap must be at least 128 x 256, got {envmap_height} x {envmap_width}")
@@ -103,22 +112,43 @@ def write_lighting_outputs(
     check_shape(q, (3,), "query_point_cam")
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    env = estimate.light_cam.to_envmap(envmap_height, envmap_width).astype(np.float32)
+    t0 = time.perf_counter()
+    local = estimate.light_at(q, envmap_height, envmap_width)
+    env = local.to_envmap(envmap_height, envmap_width).astype(np.float32)
+    t_local = time.perf_counter() - t0
     write_exr(out / "envmap_camera.exr", env)
-    write_image_rgb(out / "preview.png", make_preview(estimate, np.asarray(image_rgb), env))
+    write_image_rgb(out / "preview.png", make_preview(estimate, np.asarray(image_rgb), env, local.envmap))
     sun = estimate.sun_dir_cam
     timing = dict(estimate.timing_s)
+    timing["local_envmap"] = t_local
+    if "total" in timing:
+        timing["total"] = timing["total"] + t_local
     if extra_timing_s:
         timing.update(extra_timing_s)
+    files = {"envmap_camera": "envmap_camera.exr", "preview": "preview.png"}
+    hybrid = getattr(estimate, "hybrid", None)
+    if save_hybrid and hybrid is not None and hybrid.params is not None:
+        hybrid.save(out / "hybrid", extra={
+            "T_vol_from_camera": np.asarray(estimate.T_vol_from_cam).tolist(),
+            "radiometric_scale": float(estimate.radiometric_scale),
+        })
+        files["hybrid"] = "hybrid/hybrid.json"
+    visibility = float(estimate.sun_visibility)
+    transmittance = None
+    if sun is not None and estimate.light_cam.sun is not None and local.sun is not None and estimate.light_cam.sun.visibility > 0:
+        transmittance = float(local.sun.visibility / estimate.light_cam.sun.visibility)
+        visibility = float(local.sun.visibility)
     doc = {
         "schema": LIGHTING_SCHEMA,
         "sun": {
             "direction_camera": None if sun is None else [float(x) for x in sun],
             "source": estimate.sun_source,
-            "visibility": float(estimate.sun_visibility),
+            "visibility": visibility,
+            "cloud_visibility": float(estimate.sun_visibility),
+            "transmittance_at_query": transmittance,
         },
         "query_point_camera": [float(x) for x in q],
-        "files": {"envmap_camera": "envmap_camera.exr", "preview": "preview.png"},
+        "files": files,
         "level": estimate.level,
         "reason": estimate.reason,
         "params": estimate.params,

@@ -1,0 +1,470 @@
+"""The hybrid lighting representation of the paper: an HDR sky dome + a volumetric spherical-Gaussian (VSG) volume.
+
+Everything here lives in one z-up *volume frame* (metres; in practice the ego frame of the reference camera,
+shifted so that the origin is on the ground under that camera: x forward, y left, z up, ground at z = 0).
+Radiance is linear RGB on one radiometric scale (the reference image's); torch float32, differentiable with
+respect to the sky dome, the sun irradiance and the volume parameters.
+
+* **Sky dome** ``sky_world``: (H, W, 3) equirect map in the world (z-up) convention of
+  :mod:`streetaug.augment.conventions` (``lon = atan2(dy, dx)``, ``lat = asin(dz)``), sun disc excluded; the
+  sun is analytic (direction, irradiance, angular radius) and added by the radiance query where a ray
+  falls inside its disc.
+* **VSG volume** ``params``: (X, Y, Z, 8) channels-last tensor, per voxel ``[c_r, c_g, c_b, mu_x, mu_y, mu_z,
+  sigma, alpha]``: the lobe ``G(l) = c exp(-(1 - l . mu / |mu|) / sigma^2)`` (c: RGB amplitude, mu: axis,
+  sigma: sharpness, larger = broader) and the occupancy ``alpha`` in [0, 1].
+* **Log-projected grid** (:class:`LogGrid`): voxel i along x spans ``[i, i + 1)`` of the continuous index
+  ``n/2 (1 + sign(x') log(1 + |x'|/s) / log(1 + R/s))``, ``x' = x - centre_x`` (dense near the centre, as
+  the paper's 256 x 256 x 64 grid over 300 x 300 x 80 m); along z the same with separate log ramps below and
+  above z = 0, so that z = 0 (the ground) is exactly a voxel boundary.
+* **Radiance query** (paper Eq. 1): K equi-spaced samples at ``t_k = (k - 1/2) t_exit / K`` between the
+  point and where the ray leaves the grid, nearest-neighbour voxel lookup, alpha compositing, then the sky:
+  ``L(x, l) = sum_k tau_{k-1} alpha_k G(-l; xi_k) + tau_K L_env(l)``, ``tau_k = prod_{i<=k} (1 - alpha_i)``.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from ..conventions import (
+    camera_envmap_directions,
+    check_shape,
+    equirect_pixel_lonlat,
+    lonlat_to_world_dir,
+)
+
+N_CHANNELS = 8
+CH_COLOR, CH_AXIS, CH_SIGMA, CH_ALPHA = slice(0, 3), slice(3, 6), 6, 7
+DEFAULT_SAMPLES = 128
+CHUNK_RAYS = 16384
+VOLUME_SCHEMA = "streetaug.hybrid_lighting/1"
+
+
+# ----------------------------------------------------------------------------- grid
+
+
+@dataclass(frozen=True)
+class LogGrid:
+    """A log-projected voxel grid in the volume frame.
+
+    Attributes:
+        shape: (X, Y, Z) voxels.
+        half_extent_xy_m: the grid covers ``centre +- half_extent`` in x and y.
+        z_min_m, z_max_m: vertical extent (z_min < 0 < z_max; z = 0 is the ground).
+        n_below: voxel layers below z = 0.
+        log_scale_xy_m, log_scale_z_m: distance s where the projection turns from linear to logarithmic.
+        centre_xy_m: (x, y) of the grid's densest point.
+    """
+
+    shape: tuple[int, int, int] = (128, 128, 32)
+    half_extent_xy_m: float = 150.0
+    z_min_m: float = -4.0
+    z_max_m: float = 76.0
+    n_below: int = 2
+    log_scale_xy_m: float = 4.0
+    log_scale_z_m: float = 2.0
+    centre_xy_m: tuple[float, float] = (0.0, 0.0)
+
+    def __post_init__(self) -> None:
+        nx, ny, nz = self.shape
+        if min(nx, ny) < 2 or nz < self.n_below + 1 or self.n_below < 1:
+            raise ValueError(f"LogGrid: shape {self.shape} too small for n_below={self.n_below}")
+        if not self.z_min_m < 0.0 < self.z_max_m or self.half_extent_xy_m <= 0:
+            raise ValueError(f"LogGrid: need z_min < 0 < z_max and a positive extent, got {self}")
+
+    @property
+    def n_voxels(self) -> int:
+        return int(np.prod(self.shape))
+
+    def to_index(self, points: torch.Tensor) -> torch.Tensor:
+        """Continuous voxel coordinates (..., 3) of points (..., 3) in the volume frame (voxel i spans [i, i+1))."""
+        return torch.stack(self._axes(points), dim=-1)
+
+    def _axes(self, points: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        nx, ny, nz = self.shape
+        cx, cy = self.centre_xy_m
+        s, R = self.log_scale_xy_m, self.half_extent_xy_m
+        k = 1.0 / math.log1p(R / s)
+
+        def horiz(v: torch.Tensor, n: int) -> torch.Tensor:
+            return 0.5 * n * (1.0 + torch.sign(v) * torch.log1p(v.abs() / s) * k)
+
+        sz = self.log_scale_z_m
+        z = points[..., 2]
+        up = (nz - self.n_below) / math.log1p(self.z_max_m / sz) * torch.log1p(z.clamp(min=0.0) / sz)
+        down = self.n_below / math.log1p(-self.z_min_m / sz) * torch.log1p((-z).clamp(min=0.0) / sz)
+        return horiz(points[..., 0] - cx, nx), horiz(points[..., 1] - cy, ny), self.n_below + up - down
+
+    def flat_index(self, points: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """Nearest-neighbour voxel of points (..., 3): (flat index (...) int64, inside mask (...) bool).
+
+        Points outside the grid get a clamped (valid) index and ``inside = False``.
+        """
+        if self.n_voxels >= 2**24 and points.dtype != torch.float64:
+            points = points.double()  # flat indices must stay exact integers
+        inside = None
+        flat = None
+        for a, n in zip(self._axes(points), self.shape):
+            a = torch.floor(a)
+            ok = (a >= 0) & (a < n)
+            inside = ok if inside is None else inside & ok
+            a = a.clamp(0, n - 1)
+            flat = a if flat is None else flat * n + a
+        return flat.long(), inside
+
+    def index_to_point(self, index: np.ndarray) -> np.ndarray:
+        """Volume-frame points (..., 3) at continuous voxel coordinates (..., 3) (inverse of :meth:`to_index`)."""
+        index = np.asarray(index, dtype=np.float64)
+        nx, ny, nz = self.shape
+        s, R = self.log_scale_xy_m, self.half_extent_xy_m
+
+        def horiz(i: np.ndarray, n: int) -> np.ndarray:
+            u = 2.0 * i / n - 1.0
+            return np.sign(u) * s * np.expm1(np.abs(u) * np.log1p(R / s))
+
+        sz = self.log_scale_z_m
+        iz = index[..., 2]
+        up = sz * np.expm1((iz - self.n_below) / (nz - self.n_below) * np.log1p(self.z_max_m / sz))
+        down = -sz * np.expm1((self.n_below - iz) / self.n_below * np.log1p(-self.z_min_m / sz))
+        z = np.where(iz >= self.n_below, up, down)
+        cx, cy = self.centre_xy_m
+        return np.stack([horiz(index[..., 0], nx) + cx, horiz(index[..., 1], ny) + cy, z], axis=-1)
+
+    def voxel_centres(self) -> np.ndarray:
+        """(X, Y, Z, 3) float64 volume-frame centres of all voxels (centre of the index cell); read-only, cached."""
+        return _voxel_centres(self)
+
+    def axis_edges(self) -> list[np.ndarray]:
+        """Voxel boundaries along x, y, z: three arrays of lengths X+1, Y+1, Z+1 (metres)."""
+        out = []
+        for a, n in enumerate(self.shape):
+            idx = np.zeros((n + 1, 3))
+            idx[:, a] = np.arange(n + 1)
+            idx[:, [b for b in range(3) if b != a]] = np.array([self.shape[b] / 2 for b in range(3) if b != a])
+            out.append(self.index_to_point(idx)[:, a])
+        return out
+
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """(lo (3,), hi (3,)) of the grid's box, metres."""
+        cx, cy = self.centre_xy_m
+        R = self.half_extent_xy_m
+        return np.array([cx - R, cy - R, self.z_min_m]), np.array([cx + R, cy + R, self.z_max_m])
+
+    def to_json(self) -> dict:
+        d = asdict(self)
+        d["shape"] = list(self.shape)
+        d["centre_xy_m"] = list(self.centre_xy_m)
+        return d
+
+    @staticmethod
+    def from_json(d: dict) -> "LogGrid":
+        d = dict(d)
+        d["shape"] = tuple(int(v) for v in d["shape"])
+        d["centre_xy_m"] = tuple(float(v) for v in d["centre_xy_m"])
+        return LogGrid(**d)
+
+
+@functools.lru_cache(maxsize=4)
+def _voxel_centres(grid: LogGrid) -> np.ndarray:
+    grids = np.meshgrid(*[np.arange(n) + 0.5 for n in grid.shape], indexing="ij")
+    out = grid.index_to_point(np.stack(grids, axis=-1))
+    out.flags.writeable = False
+    return out
+
+
+# ----------------------------------------------------------------------------- sky
+
+
+def world_envmap_directions(height: int, width: int) -> np.ndarray:
+    """Unit z-up direction (H, W, 3) of every pixel centre of a world-convention equirect map."""
+    lon, lat = equirect_pixel_lonlat(height, width)
+    return lonlat_to_world_dir(lon, lat)
+
+
+def sample_world_equirect(env: torch.Tensor, dirs: torch.Tensor) -> torch.Tensor:
+    """Bilinear lookup (N, C) of a world-convention (H, W, C) map at unit directions (N, 3); wraps in longitude."""
+    H, W = env.shape[:2]
+    lon = torch.atan2(dirs[:, 1], dirs[:, 0])
+    lat = torch.asin(dirs[:, 2].clamp(-1.0, 1.0))
+    x = torch.remainder(lon / (2 * math.pi) + 0.5, 1.0) * W - 0.5
+    y = ((0.5 - lat / math.pi) * H - 0.5).clamp(0.0, H - 1.0)
+    x0 = torch.floor(x)
+    y0 = torch.floor(y)
+    fx = (x - x0)[:, None]
+    fy = (y - y0)[:, None]
+    x0 = x0.long()
+    y0 = y0.long()
+    y1 = (y0 + 1).clamp(max=H - 1)
+    x0w = torch.remainder(x0, W)
+    x1w = torch.remainder(x0 + 1, W)
+    top = env[y0, x0w] * (1 - fx) + env[y0, x1w] * fx
+    bottom = env[y1, x0w] * (1 - fx) + env[y1, x1w] * fx
+    return top * (1 - fy) + bottom * fy
+
+
+# ----------------------------------------------------------------------------- hybrid lighting
+
+
+@dataclass
+class HybridLighting:
+    """Sky dome + analytic sun + optional VSG volume, in the volume frame (see module doc).
+
+    Attributes:
+        sky_world: (H, W, 3) float32 tensor, world-convention equirect sky radiance, sun excluded.
+        sun_dir: (3,) float64 unit vector towards the sun (volume frame), or None (night / no sun).
+        sun_irradiance: (3,) float32 tensor, irradiance of the sun on a surface facing it (clouds applied).
+        sun_half_angle_rad: angular radius of the sun disc.
+        grid: the volume's grid, or None (sky only).
+        params: (X, Y, Z, 8) float32 tensor of VSG parameters (see module doc), or None.
+        n_samples: K of Eq. 1.
+    """
+
+    sky_world: torch.Tensor
+    sun_dir: np.ndarray | None = None
+    sun_irradiance: torch.Tensor | None = None
+    sun_half_angle_rad: float = float(np.radians(0.2665))
+    grid: LogGrid | None = None
+    params: torch.Tensor | None = None
+    n_samples: int = DEFAULT_SAMPLES
+
+    def __post_init__(self) -> None:
+        check_shape(self.sky_world, ("H", "W", 3), "sky_world")
+        if (self.grid is None) != (self.params is None):
+            raise ValueError("HybridLighting: give both grid and params, or neither")
+        if self.params is not None:
+            check_shape(self.params, (*self.grid.shape, N_CHANNELS), "params")
+        if self.sun_dir is not None:
+            d = np.asarray(self.sun_dir, dtype=np.float64)
+            check_shape(d, (3,), "sun_dir")
+            self.sun_dir = d / np.linalg.norm(d)
+            if self.sun_irradiance is None:
+                raise ValueError("HybridLighting: sun_dir given without sun_irradiance")
+
+    # ------------------------------------------------------------------ environment
+
+    @property
+    def sun_solid_angle_sr(self) -> float:
+        return 2 * math.pi * (1 - math.cos(self.sun_half_angle_rad))
+
+    def env_radiance(self, dirs: torch.Tensor, include_sun: bool = True) -> torch.Tensor:
+        """``L_env(l)`` (N, 3): the sky dome (bilinear) plus, inside the sun's disc, the sun's radiance."""
+        rgb = sample_world_equirect(self.sky_world, dirs)
+        if include_sun and self.sun_dir is not None:
+            sun = torch.as_tensor(self.sun_dir, dtype=dirs.dtype)
+            in_disc = (dirs @ sun) >= math.cos(self.sun_half_angle_rad)
+            rgb = rgb + in_disc[:, None].to(rgb.dtype) * (self.sun_irradiance / self.sun_solid_angle_sr)[None]
+        return rgb
+
+    # ------------------------------------------------------------------ Eq. 1
+
+    def _march(self, points: torch.Tensor, dirs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """Sample the volume along rays: (flat voxel index (N, K), alpha (N, K), inside (N, K))."""
+        lo, hi = (torch.as_tensor(b, dtype=points.dtype) for b in self.grid.bounds())
+        with torch.no_grad():
+            safe = torch.where(dirs.abs() < 1e-12, torch.full_like(dirs, 1e-12), dirs)
+            t_hi = torch.maximum((lo - points) / safe, (hi - points) / safe)
+            t_exit = t_hi.min(dim=1).values.clamp(min=0.0)  # (N,)
+        K = self.n_samples
+        frac = (torch.arange(K, dtype=points.dtype) + 0.5) / K
+        t = t_exit[:, None] * frac[None]
+        pos = points[:, None, :] + t[..., None] * dirs[:, None, :]
+        flat, inside = self.grid.flat_index(pos)
+        alpha = self.params.reshape(-1, N_CHANNELS)[:, CH_ALPHA][flat] * inside
+        return flat, alpha, inside
+
+    def _radiance_chunk(self, points: torch.Tensor, dirs: torch.Tensor, include_sun: bool) -> tuple[torch.Tensor, torch.Tensor]:
+        env = self.env_radiance(dirs, include_sun)
+        if self.params is None:
+            return env, torch.ones(len(dirs), dtype=env.dtype)
+        flat, alpha, _ = self._march(points, dirs)
+        trans = torch.cumprod(1.0 - alpha, dim=1)  # tau_k
+        trans_before = torch.cat([torch.ones_like(trans[:, :1]), trans[:, :-1]], dim=1)  # tau_{k-1}
+        weight = trans_before * alpha
+        ray, k = torch.nonzero(weight > 0, as_tuple=True)
+        out = trans[:, -1:] * env
+        if len(ray):
+            vox = self.params.reshape(-1, N_CHANNELS)[flat[ray, k]]
+            axis = vox[:, CH_AXIS]
+            axis = axis / axis.norm(dim=1, keepdim=True).clamp(min=1e-9)
+            cosang = -(dirs[ray] * axis).sum(dim=1)  # G(-l): radiance leaving the voxel towards the point
+            sigma2 = vox[:, CH_SIGMA].square().clamp(min=1e-6)
+            lobe = vox[:, CH_COLOR] * torch.exp(-(1.0 - cosang) / sigma2)[:, None]
+            out = out.index_add(0, ray, weight[ray, k][:, None] * lobe)
+        return out, trans[:, -1]
+
+    def radiance(self, points: torch.Tensor | np.ndarray, dirs: torch.Tensor | np.ndarray,
+                 include_sun: bool = True) -> torch.Tensor:
+        """Eq. 1: radiance (N, 3) arriving at points (N, 3) from unit directions (N, 3) (pointing away), batched."""
+        points, dirs = _as_rays(points, dirs, self.sky_world.dtype)
+        outs = [self._radiance_chunk(points[i : i + CHUNK_RAYS], dirs[i : i + CHUNK_RAYS], include_sun)[0]
+                for i in range(0, len(points), CHUNK_RAYS)]
+        return torch.cat(outs) if outs else torch.zeros((0, 3), dtype=self.sky_world.dtype)
+
+    def transmittance(self, points: torch.Tensor | np.ndarray, dirs: torch.Tensor | np.ndarray) -> torch.Tensor:
+        """``tau_K`` (N,): the fraction of the distant light (sky, sun) that reaches points along directions."""
+        points, dirs = _as_rays(points, dirs, self.sky_world.dtype)
+        if self.params is None:
+            return torch.ones(len(points), dtype=points.dtype)
+        outs = []
+        for i in range(0, len(points), CHUNK_RAYS):
+            _, alpha, _ = self._march(points[i : i + CHUNK_RAYS], dirs[i : i + CHUNK_RAYS])
+            outs.append(torch.prod(1.0 - alpha, dim=1))
+        return torch.cat(outs)
+
+    def sun_transmittance(self, point: np.ndarray, n_rays: int = 7) -> float:
+        """Mean transmittance towards the sun's disc from a point (3,): the centre and a ring of rays; 0 without sun."""
+        if self.sun_dir is None:
+            return 0.0
+        if self.params is None:
+            return 1.0
+        s = self.sun_dir
+        helper = np.array([0.0, 0.0, 1.0]) if abs(s[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
+        t1 = np.cross(s, helper)
+        t1 /= np.linalg.norm(t1)
+        t2 = np.cross(s, t1)
+        r = 0.7 * math.tan(self.sun_half_angle_rad)
+        phi = 2 * np.pi * np.arange(max(n_rays - 1, 0)) / max(n_rays - 1, 1)
+        dirs = [s] + [s + r * (np.cos(p) * t1 + np.sin(p) * t2) for p in phi]
+        dirs = np.array(dirs)
+        dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
+        pts = np.repeat(np.asarray(point, dtype=np.float64)[None], len(dirs), axis=0)
+        with torch.no_grad():
+            return float(self.transmittance(pts, dirs).mean())
+
+    # ------------------------------------------------------------------ local environment maps
+
+    def envmap_at(self, point: np.ndarray, height: int = 128, width: int = 256,
+                  R_vol_from_frame: np.ndarray | None = None) -> np.ndarray:
+        """Local environment map (height, width, 3) float32 at a volume-frame point (3,), sun excluded.
+
+        Without ``R_vol_from_frame`` the map uses the world (z-up) equirect convention of the volume frame; with
+        it, the camera-frame convention of the frame whose directions rotate into the volume frame by it.
+        """
+        p = np.asarray(point, dtype=np.float64)
+        check_shape(p, (3,), "point")
+        if R_vol_from_frame is None:
+            d = world_envmap_directions(height, width).reshape(-1, 3)
+        else:
+            d = camera_envmap_directions(height, width).reshape(-1, 3) @ np.asarray(R_vol_from_frame).T
+        with torch.no_grad():
+            rad = self.radiance(np.repeat(p[None], len(d), axis=0), d, include_sun=False)
+        return rad.numpy().reshape(height, width, 3).astype(np.float32)
+
+    def lift_out_of_solid(self, point: np.ndarray, max_steps: int = 64) -> np.ndarray:
+        """The point (3,) moved straight up to the first voxel with alpha < 0.5 (unchanged if already free)."""
+        p = np.asarray(point, dtype=np.float64).copy()
+        if self.params is None:
+            return p
+        alpha = self.params[..., CH_ALPHA]
+        with torch.no_grad():
+            idx = torch.floor(self.grid.to_index(torch.as_tensor(p))).long().numpy()
+        if np.any(idx[:2] < 0) or idx[0] >= self.grid.shape[0] or idx[1] >= self.grid.shape[1]:
+            return p
+        column = alpha[idx[0], idx[1]].detach().numpy()
+        k = int(np.clip(idx[2], 0, self.grid.shape[2] - 1))
+        steps = 0
+        while k < self.grid.shape[2] and column[k] >= 0.5 and steps < max_steps:
+            k += 1
+            steps += 1
+        if k != idx[2] and k < self.grid.shape[2]:
+            lo = self.grid.index_to_point(np.array([idx[0] + 0.5, idx[1] + 0.5, k]))[2]
+            hi = self.grid.index_to_point(np.array([idx[0] + 0.5, idx[1] + 0.5, k + 1]))[2]
+            p[2] = max(p[2], lo + 0.1 * (hi - lo))
+        return p
+
+    # ------------------------------------------------------------------ files
+
+    def save(self, out_dir: str | Path, extra: dict | None = None) -> dict:
+        """Write ``sky_world.exr`` (dome), ``volume.npz`` (occupied voxels only, float16) and ``hybrid.json``.
+
+        Empty voxels (alpha 0) do not affect the radiance; they load back as :func:`empty_params` voxels.
+        """
+        from ..io import write_bytes_atomic, write_exr, write_json_atomic
+
+        out = Path(out_dir)
+        write_exr(out / "sky_world.exr", self.sky_world.detach().numpy().astype(np.float32))
+        files = {"sky_world": "sky_world.exr"}
+        if self.params is not None:
+            flat = self.params.detach().reshape(-1, N_CHANNELS).numpy()
+            keep = np.flatnonzero(flat[:, CH_ALPHA] > 0)
+            import io
+
+            buf = io.BytesIO()
+            np.savez_compressed(buf, shape=np.array(self.grid.shape), index=keep.astype(np.int32),
+                                values=flat[keep].astype(np.float16))
+            write_bytes_atomic(out / "volume.npz", buf.getvalue())
+            files["volume"] = "volume.npz"
+        doc = {
+            "schema": VOLUME_SCHEMA,
+            "frame": "volume frame: z up, metres (see streetaug.augment.lighting.volume)",
+            "sky_convention": "world z-up equirect: lon = atan2(dy, dx), lat = asin(dz); sun excluded",
+            "sun": None if self.sun_dir is None else {
+                "direction": [float(v) for v in self.sun_dir],
+                "irradiance_rgb": [float(v) for v in self.sun_irradiance.detach().numpy()],
+                "half_angle_rad": float(self.sun_half_angle_rad),
+            },
+            "grid": None if self.grid is None else self.grid.to_json(),
+            "channels": ["c_r", "c_g", "c_b", "mu_x", "mu_y", "mu_z", "sigma", "alpha"],
+            "n_samples": self.n_samples,
+            "files": files,
+        }
+        if extra:
+            doc.update(extra)
+        write_json_atomic(out / "hybrid.json", doc)
+        return doc
+
+    @staticmethod
+    def load(in_dir: str | Path) -> "HybridLighting":
+        """Read what :meth:`save` wrote (raises ``InputError`` naming the file and field on bad input)."""
+        from ..io import InputError, read_exr, read_json
+
+        d = Path(in_dir)
+        doc = read_json(d / "hybrid.json")
+        if doc.get("schema") != VOLUME_SCHEMA:
+            raise InputError(f"{d / 'hybrid.json'}: field 'schema' is {doc.get('schema')!r}, expected {VOLUME_SCHEMA!r}")
+        sky = torch.from_numpy(read_exr(d / doc["files"]["sky_world"]).astype(np.float32))
+        sun = doc.get("sun")
+        grid = params = None
+        if doc.get("grid") is not None:
+            grid = LogGrid.from_json(doc["grid"])
+            path = d / doc["files"]["volume"]
+            try:
+                with np.load(path) as z:
+                    shape, index, values = tuple(z["shape"]), z["index"], z["values"]
+            except (OSError, KeyError, ValueError) as e:
+                raise InputError(f"{path}: cannot read the volume ({e}); expected arrays shape, index, values") from None
+            if shape != grid.shape or values.shape[1:] != (N_CHANNELS,) or len(index) != len(values):
+                raise InputError(f"{path}: volume of shape {shape} / values {values.shape} does not match grid {grid.shape}")
+            params = empty_params(grid)
+            params.reshape(-1, N_CHANNELS)[torch.from_numpy(index.astype(np.int64))] = torch.from_numpy(
+                values.astype(np.float32))
+        return HybridLighting(
+            sky_world=sky,
+            sun_dir=None if sun is None else np.array(sun["direction"]),
+            sun_irradiance=None if sun is None else torch.tensor(sun["irradiance_rgb"], dtype=torch.float32),
+            sun_half_angle_rad=float(sun["half_angle_rad"]) if sun else float(np.radians(0.2665)),
+            grid=grid, params=params, n_samples=int(doc.get("n_samples", DEFAULT_SAMPLES)),
+        )
+
+
+def _as_rays(points, dirs, dtype: torch.dtype) -> tuple[torch.Tensor, torch.Tensor]:
+    points = torch.as_tensor(np.asarray(points) if not torch.is_tensor(points) else points, dtype=dtype)
+    dirs = torch.as_tensor(np.asarray(dirs) if not torch.is_tensor(dirs) else dirs, dtype=dtype)
+    check_shape(points, ("N", 3), "points")
+    check_shape(dirs, ("N", 3), "dirs")
+    if len(points) != len(dirs):
+        raise ValueError(f"points and dirs must have the same length, got {len(points)} and {len(dirs)}")
+    return points, dirs
+
+
+def empty_params(grid: LogGrid) -> torch.Tensor:
+    """An all-empty (alpha 0) parameter tensor (X, Y, Z, 8) with unit axes +z and sigma 1."""
+    p = torch.zeros((*grid.shape, N_CHANNELS), dtype=torch.float32)
+    p[..., 5] = 1.0
+    p[..., CH_SIGMA] = 1.0
+    return p

@@ -1,0 +1,453 @@
+"""Lighting benchmark: accuracy of each level against ground truth, novel-view radiance on real data, speed.
+
+Usage: ``python benchmarks/bench_lighting.py [--runs 3] [--quick] [--out benchmarks/results]``
+
+1. **Bundled sample scenes** (ground truth known): the street is regenerated in-process by
+   ``augment.scenegen`` with the scene's own parameters; the true local environment map at a point is traced
+   with its renderer (rays from the point: sky model where they escape, the shaded street where they hit,
+   shading = pattern albedo x (sun with shadow rays + sky gathered over 8 cosine rays)), on the images'
+   radiometric scale (x exposure k). Points: 0.5 m above the road 8-40 m ahead of CAM_FRONT, three in the
+   sun and three in a building's shadow (by the true sun visibility). Per level (built from CAM_FRONT +
+   LiDAR, as batch does with one camera): sun direction error (ephemeris path), sun/sky ratio error of the
+   distant light, and per point the diffuse irradiance error over 6 normals (sun included), the sun
+   transmittance error and the log-encoded env-map error ``mean_w (log(1 + x^) - log(1 + x))^2`` (sun excluded).
+2. **Real sample** (``../shared/data/nuscenes-real``): novel-view radiance PSNR / si-PSNR as in the paper:
+   the lighting is built from some cameras, the target camera's image is rendered through
+   ``envmap_at(target camera centre)`` (256 x 512 map, bilinear) with the contract's camera response at EV 0
+   and compared with its real image at 320 x 180 (si-PSNR: the prediction scaled by the least-squares factor).
+   Monocular: CAM_FRONT -> CAM_FRONT_LEFT, CAM_BACK; leave-one-out: each camera from the other two.
+   The same on the bundled scenes.
+3. **Speed** (one core, BLAS and torch threads 1): ``predict-light`` work for a 1600 x 900 image = estimate
+   + local env map at the query point (files excluded), per level, image-only path (what the CLI runs) and
+   with the sample's LiDAR; median of ``--runs``; plus a grid-resolution sweep for L3.
+
+Writes ``lighting_bench.json`` and ``lighting_envmaps.png`` (GT vs each level at a shadowed and a lit point).
+"""
+
+from __future__ import annotations
+
+import os
+
+for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
+
+import argparse  # noqa: E402
+import json  # noqa: E402
+import platform  # noqa: E402
+import time  # noqa: E402
+from dataclasses import replace  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import cv2  # noqa: E402
+import numpy as np  # noqa: E402
+import torch  # noqa: E402
+
+from streetaug.augment.conventions import (  # noqa: E402
+    equirect_solid_angles,
+    hdr_to_ldr,
+    hdr_to_ldr_uint8,
+    invert_transform,
+    luminance,
+    make_transform,
+    pixel_rays,
+    transform_points,
+    yaw_to_quat,
+)
+from streetaug.augment.lighting.estimate import estimate_lighting  # noqa: E402
+from streetaug.augment.lighting.levels import L3_GRID  # noqa: E402
+from streetaug.augment.lighting.light import DistantLight, SunLight  # noqa: E402
+from streetaug.augment.lighting.multiview import estimate_sample_lighting, estimate_views_lighting  # noqa: E402
+from streetaug.augment.lighting.sun import sun_direction_global  # noqa: E402
+from streetaug.augment.lighting.volume import sample_world_equirect  # noqa: E402
+from streetaug.augment.scenegen.ground_truth import ground_truth_light, read_ground_truth  # noqa: E402
+from streetaug.augment.scenegen.make import SAMPLE_SCENES  # noqa: E402
+from streetaug.augment.scenegen.patterns import surface_albedo  # noqa: E402
+from streetaug.augment.scenegen.render import SkyParams, StreetRenderer  # noqa: E402
+from streetaug.augment.scenegen.street import StreetParams, build_street  # noqa: E402
+from streetaug.datasets.bundled import bundled_dataroot  # noqa: E402
+from streetaug.datasets.nuscenes import NuScenesReader  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+REAL = (ROOT / ".." / "shared" / "data" / "nuscenes-real").resolve()
+REAL_SAMPLE = "ca9a282c9e77460f8360f564131a8af5"
+LEVELS = ("L0", "L1", "L2", "L3")
+ENV_H, ENV_W = 64, 128
+NORMALS = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]], dtype=np.float64)
+NOVEL_W = 320
+ALL_SECTIONS = ("speed", "bundled", "real", "grid")
+
+
+# ----------------------------------------------------------------------------- ground truth of the bundled scenes
+
+
+class GroundTruthScene:
+    """A bundled scene regenerated in-process: the true local light anywhere (camera frame, image scale)."""
+
+    def __init__(self, dataroot: Path, name: str, seed: int = 0) -> None:
+        spec = SAMPLE_SCENES[name]
+        self.gt = read_ground_truth(dataroot, name)
+        self.k = float(self.gt["exposure_k"])
+        T_global_from_street = make_transform(yaw_to_quat(np.radians(spec.heading_deg)), [*spec.origin_xy, 0.0])
+        self.scene = build_street(StreetParams(seed=seed * 7919 + spec.street_seed, drive_on_left=spec.drive_on_left),
+                                  T_global_from_street)
+        sun = sun_direction_global(spec.location, spec.timestamp_us)
+        self.sky = SkyParams(sun.direction_global, spec.turbidity, spec.cloud_cover, 0.15,
+                             float(np.radians(spec.sun_half_angle_deg)))
+        self.renderer = StreetRenderer(self.scene, self.sky)
+        self.name = name
+
+    def sun_visibility(self, points_global: np.ndarray, n_rays: int = 16) -> np.ndarray:
+        """(N,) fraction of the sun's disc visible from points (N, 3) (0 without a sun)."""
+        r = self.renderer
+        if not np.any(r.sun_e > 0):
+            return np.zeros(len(points_global))
+        rng = np.random.default_rng(0)
+        n = np.tile(r.sun_dir, (len(points_global), 1))
+        samples = [(rng.uniform(size=len(n)), rng.uniform(size=len(n))) for _ in range(n_rays)]
+        return r._sun_visibility(points_global, n, rng, samples)
+
+    def local_light(self, point_global: np.ndarray, T_cam_from_global: np.ndarray, h: int = ENV_H, w: int = ENV_W,
+                    sky_rays: int = 8) -> DistantLight:
+        """True local light at a point: env map (h, w, 3) camera-frame convention (sun excluded) + visible sun."""
+        from streetaug.augment.conventions import camera_envmap_directions
+
+        r = self.renderer
+        rng = np.random.default_rng(1)
+        R_global_from_cam = T_cam_from_global[:3, :3].T
+        d = camera_envmap_directions(h, w).reshape(-1, 3) @ R_global_from_cam.T
+        p = np.tile(point_global, (len(d), 1))
+        hits = r.rays.intersect(p, d)
+        L = np.zeros((len(d), 3))
+        miss = ~hits.hit
+        L[miss] = self.sky.radiance(d[miss])
+        hi = np.nonzero(hits.hit)[0]
+        if len(hi):
+            q = r.rays.hit_points(hits)[hi]
+            face = hits.face[hi]
+            nq = r._oriented_normals(face, d[hi])
+            T_street = r.T_street_from_global
+            albedo, _ = surface_albedo(self.scene.materials, self.scene.face_material[face],
+                                       transform_points(T_street, q), nq @ T_street[:3, :3].T)
+            vis = r._sun_visibility(q, nq, rng, [(rng.uniform(size=len(hi)), rng.uniform(size=len(hi)))
+                                                 for _ in range(4)])
+            e = r.sun_e[None] * vis[:, None]
+            samples = [(rng.uniform(size=len(hi)), rng.uniform(size=len(hi))) for _ in range(sky_rays)]
+            e = e + r._sky_gather(q, nq, samples, rng)
+            L[hi] = albedo / np.pi * e
+        env = (L * self.k).reshape(h, w, 3).astype(np.float32)
+        sun = None
+        if np.any(r.sun_e > 0):
+            v = float(self.sun_visibility(point_global[None])[0])
+            sun = SunLight(T_cam_from_global[:3, :3] @ r.sun_dir, r.sun_e * self.k * v,
+                           self.sky.sun_half_angle_rad, v * self.sky.sun_visibility)
+        return DistantLight(env, sun)
+
+    def test_points(self, view, n_each: int = 3) -> tuple[np.ndarray, np.ndarray]:
+        """Camera-frame points (M, 3) 0.5 m above the road 8-40 m ahead, ``n_each`` lit and shadowed; their visibility."""
+        T_gc = view.T_global_from_cam
+        xs, zs = np.meshgrid(np.linspace(-6, 6, 13), np.linspace(8, 40, 17))
+        cam_h = T_gc[2, 3] - view.T_global_from_ego[2, 3]
+        p_cam = np.stack([xs.ravel(), np.full(xs.size, cam_h - 0.5), zs.ravel()], axis=1)
+        p_glob = transform_points(T_gc, p_cam)
+        vis = self.sun_visibility(p_glob)
+        lit, shade = np.flatnonzero(vis > 0.99), np.flatnonzero(vis < 0.01)
+        pick = []
+        for group in (lit, shade):
+            if len(group):
+                idx = np.linspace(0, len(group) - 1, min(n_each, len(group))).round().astype(int)
+                pick += list(group[idx])
+        if not pick:
+            pick = list(np.linspace(0, len(p_cam) - 1, 2 * n_each).round().astype(int))
+        return p_cam[pick], vis[pick]
+
+
+# ----------------------------------------------------------------------------- metrics
+
+
+def irradiance(light: DistantLight, normals: np.ndarray) -> np.ndarray:
+    """(len(normals), 3) irradiance of a distant light on surfaces with camera-frame unit normals."""
+    from streetaug.augment.conventions import camera_envmap_directions
+
+    H, W = light.envmap.shape[:2]
+    d = camera_envmap_directions(H, W).reshape(-1, 3)
+    w = equirect_solid_angles(H, W).reshape(-1)
+    cos = np.maximum(normals @ d.T, 0.0) * w[None]
+    e = cos @ light.envmap.reshape(-1, 3).astype(np.float64)
+    if light.sun is not None:
+        e = e + np.maximum(normals @ light.sun.direction, 0.0)[:, None] * np.asarray(light.sun.irradiance_rgb)[None]
+    return e
+
+
+def env_log_error(est: np.ndarray, gt: np.ndarray) -> float:
+    """Solid-angle weighted mean of (log(1 + x^) - log(1 + x))^2 over the map (both resized to gt's size)."""
+    H, W = gt.shape[:2]
+    if est.shape[:2] != (H, W):
+        est = cv2.resize(est.astype(np.float32), (W, H), interpolation=cv2.INTER_AREA)
+    w = equirect_solid_angles(H, W)[..., None]
+    return float((w * (np.log1p(np.maximum(est, 0)) - np.log1p(np.maximum(gt, 0))) ** 2).sum() / (3 * w.sum()))
+
+
+def sun_sky_ratio(light: DistantLight, up_cam: np.ndarray) -> float:
+    """Horizontal irradiance of the sun over that of the sky (luminance); 0 without a sun."""
+    e = irradiance(DistantLight(light.envmap, None), up_cam[None])[0]
+    sun = 0.0 if light.sun is None else float(luminance(light.sun.irradiance_rgb)) * max(float(light.sun.direction @ up_cam), 0.0)
+    return sun / max(float(luminance(e)), 1e-12)
+
+
+def psnr(a: np.ndarray, b: np.ndarray) -> float:
+    return float(10 * np.log10(1.0 / max(float(np.mean((a - b) ** 2)), 1e-12)))
+
+
+def si_psnr(pred: np.ndarray, gt: np.ndarray) -> float:
+    s = float((pred * gt).sum() / max(float((pred * pred).sum()), 1e-12))
+    return psnr(np.clip(s * pred, 0.0, 1.0), gt)
+
+
+def render_novel_view(sl, view, ref_view, width: int = NOVEL_W) -> np.ndarray:
+    """Linear radiance (h, w, 3) the lighting predicts for a camera, through envmap_at(camera centre).
+
+    ``ref_view`` is the lighting's reference camera (L0/L1: its distant light is turned into the target's frame;
+    nothing is fitted to the target image).
+    """
+    H, W = view.height, view.width
+    h = int(round(H * width / W))
+    u, v = np.meshgrid((np.arange(width) + 0.5) * W / width - 0.5, (np.arange(h) + 0.5) * H / h - 0.5)
+    rays = pixel_rays(view.K, np.stack([u.ravel(), v.ravel()], 1))
+    if sl.hybrid is None:
+        # L0/L1: the reference camera's distant light turned into the target's frame (never fitted to the target)
+        ref = sl.per_view[sl.reference]
+        light = ref.light_cam.rotated(view.T_cam_from_global[:3, :3] @ ref_view.T_global_from_cam[:3, :3])
+        return light.radiance(np.zeros_like(rays), rays).reshape(h, width, 3)
+    T = invert_transform(sl.T_global_from_vol) @ view.T_global_from_cam
+    env = sl.hybrid.envmap_at(sl.hybrid.lift_out_of_solid(T[:3, 3]), 256, 512)
+    with torch.no_grad():
+        rad = sample_world_equirect(torch.from_numpy(env), torch.from_numpy(rays @ T[:3, :3].T).float()).numpy()
+    return rad.reshape(h, width, 3)
+
+
+def novel_view_scores(sample, sources: list[str], target: str, level: str, grid=None) -> dict:
+    sl = estimate_views_lighting([sample.cameras[c] for c in sources], sample.location, level, lidar=sample.lidar,
+                                 boxes=sample.boxes, grid=grid)
+    view = sample.cameras[target]
+    rad = render_novel_view(sl, view, sample.cameras[sources[0]])
+    h, w = rad.shape[:2]
+    gt = cv2.resize(np.asarray(view.image), (w, h), interpolation=cv2.INTER_AREA) / 255.0
+    pred = hdr_to_ldr(rad)
+    return {"sources": sources, "target": target, "level": sl.level, "psnr": psnr(pred, gt), "si_psnr": si_psnr(pred, gt),
+            "pred": pred, "gt": gt}
+
+
+NOVEL_SETUPS = {
+    "monocular": [(["CAM_FRONT"], "CAM_FRONT_LEFT"), (["CAM_FRONT"], "CAM_BACK")],
+    "leave_one_out": [(["CAM_FRONT_LEFT", "CAM_BACK"], "CAM_FRONT"), (["CAM_FRONT", "CAM_BACK"], "CAM_FRONT_LEFT"),
+                      (["CAM_FRONT", "CAM_FRONT_LEFT"], "CAM_BACK")],
+    # not a novel view: each camera re-rendered from the lighting built from itself (what the representation
+    # keeps of what it saw; the paper's novel view, 1.5 s later, mostly shows content of the input view)
+    "in_view": [(["CAM_FRONT"], "CAM_FRONT"), (["CAM_FRONT_LEFT"], "CAM_FRONT_LEFT"), (["CAM_BACK"], "CAM_BACK")],
+}
+
+
+def novel_view_table(sample, levels=("L1", "L3"), grid=None) -> tuple[dict, list]:
+    out, images = {}, []
+    for setup, pairs in NOVEL_SETUPS.items():
+        for level in levels:
+            rows = [novel_view_scores(sample, src, tgt, level, grid) for src, tgt in pairs]
+            out[f"{setup}/{level}"] = {
+                "psnr_mean": float(np.mean([r["psnr"] for r in rows])),
+                "si_psnr_mean": float(np.mean([r["si_psnr"] for r in rows])),
+                "per_target": [{k: r[k] for k in ("sources", "target", "psnr", "si_psnr")} for r in rows],
+            }
+            if level == levels[-1]:
+                images += [np.concatenate([r["gt"], r["pred"]], axis=1) for r in rows]
+    return out, images
+
+
+# ----------------------------------------------------------------------------- sections
+
+
+def timed(fn, runs: int):
+    """(result, median wall seconds, wall seconds per run); CPU seconds per run in ``LAST_CPU``."""
+    times, cpu, out = [], [], None
+    for _ in range(runs):
+        t0, c0 = time.perf_counter(), time.process_time()
+        out = fn()
+        times.append(time.perf_counter() - t0)
+        cpu.append(time.process_time() - c0)
+    LAST_CPU[:] = cpu
+    return out, float(np.median(times)), [float(t) for t in times]
+
+
+LAST_CPU: list = []
+
+
+def bundled_section(runs: int, quick: bool) -> tuple[dict, list]:
+    dataroot = bundled_dataroot()
+    reader = NuScenesReader(dataroot, "v1.0-samples")
+    results, tiles = {}, []
+    for name in sorted(SAMPLE_SCENES):
+        sample = reader.sample(reader.sample_tokens(name)[0])
+        view = sample.cameras["CAM_FRONT"]
+        _ = view.image, sample.lidar
+        gts = GroundTruthScene(dataroot, name)
+        points, vis_true = gts.test_points(view)
+        gt_lights = [gts.local_light(transform_points(view.T_global_from_cam, p[None])[0], view.T_cam_from_global)
+                     for p in points]
+        gt_distant = ground_truth_light(dataroot, name, "CAM_FRONT", ENV_H, ENV_W)
+        up_cam = np.array(read_ground_truth(dataroot, name)["cameras"]["CAM_FRONT"]["up_direction_camera"])
+        gt_ratio = sun_sky_ratio(gt_distant, up_cam)
+        scene_out = {"points_camera": points.tolist(), "true_sun_visibility": vis_true.tolist(),
+                     "true_sun_sky_ratio": gt_ratio, "levels": {}}
+        gt_dir = np.array(read_ground_truth(dataroot, name)["cameras"]["CAM_FRONT"]["sun_direction_camera"])
+        level_envs = {}
+        for level in (*LEVELS, "auto"):
+            def run():
+                return estimate_sample_lighting(sample, ["CAM_FRONT"], level).for_view(view)
+            est, t_med, _ = timed(run, 1 if quick else runs)
+            cpu_build = float(np.median(LAST_CPU))
+            _, t_query, _ = timed(lambda: est.light_at(points[0]), 1 if quick else runs)
+            cpu_query = float(np.median(LAST_CPU))
+            lights = [est.light_at(p, ENV_H, ENV_W) for p in points]
+            e_err, s_err, env_err = [], [], []
+            for lt, gl in zip(lights, gt_lights):
+                e_est, e_gt = luminance(irradiance(lt, NORMALS)), luminance(irradiance(gl, NORMALS))
+                e_err.append(float(np.mean(np.abs(e_est - e_gt) / np.maximum(e_gt, 1e-9))))
+                if gts.sky.sun_visibility >= 0.5:  # transmittance only means something with a visible sun
+                    v_est = 0.0 if lt.sun is None or est.light_cam.sun is None else lt.sun.visibility / max(est.light_cam.sun.visibility, 1e-9)
+                    v_gt = 0.0 if gl.sun is None else gl.sun.visibility / gts.sky.sun_visibility
+                    s_err.append(abs(v_est - v_gt))
+                env_err.append(env_log_error(lt.envmap, gl.envmap))
+            ang = None
+            if est.sun_dir_cam is not None:
+                ang = float(np.degrees(np.arccos(np.clip(est.sun_dir_cam @ gt_dir / np.linalg.norm(gt_dir), -1, 1))))
+            ratio = sun_sky_ratio(est.light_cam, up_cam)
+            scene_out["levels"][level] = {
+                "chosen_level": est.level, "reason": est.reason, "time_s_median": t_med, "cpu_s_median": cpu_build,
+                "local_envmap_128x256_s_median": t_query, "local_envmap_cpu_s_median": cpu_query,
+                "sun_direction_error_deg": ang, "sun_sky_ratio": ratio,
+                "sun_sky_ratio_error_rel": abs(ratio - gt_ratio) / gt_ratio if gt_ratio > 0 else None,
+                "irradiance_error_rel_mean": float(np.mean(e_err)), "irradiance_error_rel_per_point": e_err,
+                "sun_transmittance_error_mean": float(np.mean(s_err)) if s_err else None,
+                "env_log_mse_mean": float(np.mean(env_err)),
+            }
+            level_envs[level] = lights
+            print(f"{name} {level:>4} ({est.level}): t {t_med:.2f} s (cpu {cpu_build:.2f}), irradiance err {np.mean(e_err):.3f}, "
+                  f"sun vis err {np.mean(s_err) if s_err else float('nan'):.2f}, env log-mse {np.mean(env_err):.4f}",
+                  flush=True)
+        # tiles: GT and each level at a shadowed and a lit point
+        for i in ([int(np.argmin(vis_true)), int(np.argmax(vis_true))]):
+            row = [gt_lights[i].to_envmap(ENV_H, ENV_W)] + [level_envs[lv][i].to_envmap(ENV_H, ENV_W) for lv in LEVELS]
+            tiles.append(np.concatenate([hdr_to_ldr_uint8(e) for e in row], axis=1))
+        novel, _ = novel_view_table(sample, ("L1", "L3"))
+        scene_out["novel_view"] = novel
+        results[name] = scene_out
+    return results, tiles
+
+
+def real_section(quick: bool) -> tuple[dict, list]:
+    if not REAL.exists():
+        return {"skipped": f"{REAL} not found"}, []
+    sample = NuScenesReader(REAL, "v1.0-mini").sample(REAL_SAMPLE)
+    levels = ("L0", "L1", "L2", "L3") if not quick else ("L1", "L3")
+    table, images = novel_view_table(sample, levels)
+    for k, v in table.items():
+        print(f"real novel view {k}: PSNR {v['psnr_mean']:.2f} dB, si-PSNR {v['si_psnr_mean']:.2f} dB", flush=True)
+    return table, images
+
+
+def speed_section(runs: int) -> dict:
+    out = {}
+    if REAL.exists():
+        sample = NuScenesReader(REAL, "v1.0-mini").sample(REAL_SAMPLE)
+    else:
+        reader = NuScenesReader(bundled_dataroot(), "v1.0-samples")
+        sample = reader.sample(reader.sample_tokens("sample-sunny")[0])
+    view = sample.cameras["CAM_FRONT"]
+    _ = view.image, sample.lidar
+    query = np.array([0.0, 1.5, 15.0])
+    for level in (*LEVELS, "auto"):
+        def cli_path():
+            est = estimate_lighting(view, sample.location, level)
+            est.light_at(query).to_envmap(128, 256)
+            return est
+        def lidar_path():
+            est = estimate_lighting(view, sample.location, level, lidar=sample.lidar, boxes=sample.boxes,
+                                    query_point_cam=query)
+            est.light_at(query).to_envmap(128, 256)
+            return est
+        est, t_cli, all_cli = timed(cli_path, runs)
+        cpu_cli = float(np.median(LAST_CPU))
+        est2, t_lidar, all_lidar = timed(lidar_path, runs)
+        cpu_lidar = float(np.median(LAST_CPU))
+        out[level] = {"image_only_s_median": t_cli, "with_lidar_s_median": t_lidar, "image_only_runs": all_cli,
+                      "with_lidar_runs": all_lidar, "image_only_cpu_s_median": cpu_cli,
+                      "with_lidar_cpu_s_median": cpu_lidar, "chosen": [est.level, est2.level]}
+        print(f"speed {level}: image-only {t_cli:.3f} s (cpu {cpu_cli:.3f}), with LiDAR {t_lidar:.3f} s "
+              f"(cpu {cpu_lidar:.3f}) (chosen {est.level}/{est2.level})", flush=True)
+    return out
+
+
+def grid_sweep(runs: int, quick: bool) -> dict:
+    if not REAL.exists():
+        return {"skipped": f"{REAL} not found"}
+    sample = NuScenesReader(REAL, "v1.0-mini").sample(REAL_SAMPLE)
+    view = sample.cameras["CAM_FRONT"]
+    _ = view.image, sample.lidar
+    shapes = [(64, 64, 16), (96, 96, 24), (128, 128, 32), (160, 160, 40)] if not quick else [(96, 96, 24), (128, 128, 32)]
+    out = {}
+    query = np.array([0.0, 1.5, 15.0])
+    for shape in shapes:
+        grid = replace(L3_GRID, shape=shape)
+        def run():
+            sl = estimate_views_lighting([view], sample.location, "L3", lidar=sample.lidar, boxes=sample.boxes,
+                                         grid=grid)
+            sl.for_view(view).light_at(query).to_envmap(128, 256)
+            return sl
+        _, t_med, _ = timed(run, runs)
+        cpu = float(np.median(LAST_CPU))
+        table, _ = novel_view_table(sample, ("L3",), grid=grid)
+        out["x".join(map(str, shape))] = {
+            "time_s_median": t_med, "cpu_s_median": cpu,
+            "monocular_psnr": table["monocular/L3"]["psnr_mean"], "monocular_si_psnr": table["monocular/L3"]["si_psnr_mean"],
+            "loo_psnr": table["leave_one_out/L3"]["psnr_mean"], "loo_si_psnr": table["leave_one_out/L3"]["si_psnr_mean"],
+        }
+        print(f"grid {shape}: {t_med:.3f} s (cpu {cpu:.3f}), mono {out['x'.join(map(str, shape))]['monocular_psnr']:.2f} dB, "
+              f"loo {out['x'.join(map(str, shape))]['loo_psnr']:.2f} dB", flush=True)
+    return out
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--runs", type=int, default=3, help="runs per timing (median reported)")
+    ap.add_argument("--quick", action="store_true", help="fewer levels / grids (smoke run)")
+    ap.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "results")
+    ap.add_argument("--sections", default=",".join(ALL_SECTIONS),
+                    help="comma-separated subset; a subset updates an existing lighting_bench.json")
+    args = ap.parse_args()
+    torch.set_num_threads(1)
+    sections = set(args.sections.split(","))
+    out_json = args.out / "lighting_bench.json"
+    result = json.loads(out_json.read_text()) if out_json.is_file() and sections != set(ALL_SECTIONS) else {}
+    result |= {"machine": {"python": platform.python_version(), "cpu_count": os.cpu_count(),
+                          "load_average_start": list(os.getloadavg()), "torch_threads": torch.get_num_threads()}}
+    tiles, images = [], []
+    if "speed" in sections:
+        result["speed"] = speed_section(args.runs)
+    if "bundled" in sections:
+        result["bundled"], tiles = bundled_section(args.runs, args.quick)
+    if "real" in sections:
+        result["real_novel_view"], images = real_section(args.quick)
+    if "grid" in sections:
+        result["grid_sweep"] = grid_sweep(args.runs, args.quick)
+    result["machine"]["load_average_end"] = list(os.getloadavg())
+    args.out.mkdir(parents=True, exist_ok=True)
+    out_json.write_text(json.dumps(result, indent=2, default=float) + "\n")
+    if tiles:
+        cv2.imwrite(str(args.out / "lighting_envmaps.png"), np.concatenate(tiles, axis=0)[..., ::-1])
+    if images:
+        cv2.imwrite(str(args.out / "lighting_novel_views.png"),
+                    (np.concatenate(images, axis=0)[..., ::-1] * 255).round().astype(np.uint8))
+    print(f"wrote {out_json}")
+
+
+if __name__ == "__main__":
+    main()
