@@ -115,10 +115,19 @@ def _run(cases, name, car):
     return result, view
 
 
-def test_night_gives_no_sun_and_still_renders(cases, car):
-    result, _ = _run(cases, "night", car)
+def test_night_gives_no_sun_and_a_car_as_dark_as_the_scene(cases, car):
+    result, view = _run(cases, "night", car)
     assert result.lighting.sun_source == "none" and result.lighting.sun_dir_cam is None
     assert "horizon" in result.lighting.reason
+    car_mean = result.image[result.mask > 0.9].mean()
+    assert 0.3 * view.image.mean() < car_mean < 3.0 * view.image.mean() + 5  # not a glowing white car
+
+
+def test_night_timestamp_on_a_daylight_image_is_flagged(cases, car):
+    result, view = _run(cases, "night_timestamp_day_image", car)
+    assert result.lighting.sun_dir_cam is None
+    assert "check the timestamp" in result.lighting.reason
+    assert result.image[result.mask > 0.9].mean() < 200  # diffusely lit, not blown out
 
 
 def test_sun_just_below_and_just_above_the_horizon(cases, car):

@@ -64,6 +64,8 @@ WORK_WIDTH = 480
 CAMERA_CLEAR_BLUE_RED = 1.35
 CLOUD_GRID = np.linspace(0.0, 1.0, 41)
 
+# Lit/shadow ground contrast above which a night timestamp contradicts the image (sun shadows).
+NIGHT_SUSPICIOUS_CONTRAST = 2.5
 
 @dataclass(frozen=True)
 class LightingEstimate:
@@ -554,6 +556,8 @@ def _l1_estimate(fit: _ViewL1, timing: dict, cloud: float | None = None, cloud_n
         est = _estimate_diffuse(np.asarray(fit.view.image), fit.view.K, fit.up_cam, fit.camera_height_m,
                                 fit.t_start, timing)
         return replace(est, reason=f"{fit.fallback}; {est.reason}")
+    if fit.sun_pos.elevation_deg <= 0.0:
+        return _night_estimate(fit, timing)
     t2 = time.perf_counter()
     up_cam, sun_dir_cam, sun_pos, work = fit.up_cam, fit.sun_dir_cam, fit.sun_pos, fit.work
     cloud, scale, evidence, notes = _l1_solve(fit.ev, cloud, cloud_note)
@@ -592,6 +596,28 @@ def _l1_estimate(fit: _ViewL1, timing: dict, cloud: float | None = None, cloud_n
         "evidence": evidence,
     }
     return LightingEstimate(light, sun_out, source, visibility, "L1", reason + "; ".join(notes), _clean(params), timing)
+
+
+def _night_estimate(fit: _ViewL1, timing: dict) -> LightingEstimate:
+    """Sun below the horizon: no sun; the light is diffuse (twilight sky, street lights), so an
+    overcast-shaped dome scaled to the image's ground, like the no-metadata path.
+
+    A clear-sky model with the sun below the horizon is the wrong shape here, and fitting its tiny
+    irradiance to the image's ground would blow the scale up.  When the image nevertheless shows hard
+    sun shadows on the ground, the timestamp (or the location) is probably wrong: the reason says so.
+    """
+    est = _estimate_diffuse(np.asarray(fit.view.image), fit.view.K, fit.up_cam, fit.camera_height_m,
+                            fit.t_start, timing)
+    ground = (fit.ev or {}).get("ground") or {}
+    how = est.reason.rsplit("; ", 1)[-1]
+    reason = (f"L1: sun {fit.sun_pos.elevation_deg:.1f} deg below the horizon (night/twilight): no sun, diffuse "
+              f"sky; {how}")
+    if ground.get("bimodal") and ground.get("contrast", 1.0) >= NIGHT_SUSPICIOUS_CONTRAST:
+        reason += (f"; the ground shows sun-like shadows (lit/shadow contrast {ground['contrast']:.1f}) although "
+                   f"the ephemeris puts the sun below the horizon: check the timestamp and location")
+    params = dict(est.params, sun_elevation_deg=fit.sun_pos.elevation_deg, sun_azimuth_deg=fit.sun_pos.azimuth_deg,
+                  location=fit.location)
+    return replace(est, reason=reason, params=_clean(params))
 
 
 def _estimate_diffuse(image, K, up_cam, camera_height_m, t0, timing) -> LightingEstimate:
