@@ -139,18 +139,19 @@ class SampleInsertResult:
 
 def sample_lighting(sample: Sample, views: Sequence[CameraView], level: str,
                     points_cam: dict[str, np.ndarray] | None = None) -> dict[str, object]:
-    """The lighting estimate of each camera of a sample (channel -> ``LightingEstimate``, camera frame).
+    """The lighting of a sample, built once from all ``views`` and expressed in each camera's frame
+    (channel -> ``LightingEstimate``): one sun, sky and scene volume shared by the cameras, so that
+    the same car is lit the same in every camera.  The one place the pipeline estimates lighting.
 
-    The one place the pipeline estimates lighting. For now one estimate per view (each on its own
-    image's radiometric scale; the sun comes from the ephemeris, so it agrees across cameras).
-    ``points_cam``: channel -> (3,) placement in that camera's frame (where L2 centres its volume).
+    ``points_cam``: channel -> (3,) placement in that camera's frame; the first view's point is where
+    L2 centres its volume and where ``auto`` judges the level.
     """
-    from .lighting.estimate import estimate_lighting
+    from .lighting.multiview import estimate_views_lighting
 
     points_cam = points_cam or {}
-    return {view.channel: estimate_lighting(view, sample.location, level=level, lidar=sample.lidar,
-                                            boxes=sample.boxes, query_point_cam=points_cam.get(view.channel))
-            for view in views}
+    shared = estimate_views_lighting(list(views), sample.location, level, lidar=sample.lidar, boxes=sample.boxes,
+                                     query_point_cam=points_cam.get(views[0].channel))
+    return {view.channel: shared.for_view(view) for view in views}
 
 
 def object_light(estimate, center_cam: np.ndarray) -> DistantLight:
