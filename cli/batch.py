@@ -6,7 +6,7 @@ from pathlib import Path
 
 import click
 
-from .main import LEVEL_HELP, LIGHT_LEVELS, _asset_options, _render_options, _runtime_errors
+from .common import LEVEL_HELP, LIGHT_LEVELS, _asset_options, _render_options, _runtime_errors
 
 
 def _dataroot(dataroot: Path | None, version: str | None) -> tuple[str, str]:

@@ -6,58 +6,24 @@ the traceback only with ``--debug``).
 
 from __future__ import annotations
 
-import os
+from pathlib import Path
 
-# Before numpy loads: multi-threaded BLAS makes the renderer's many small (N, 3) @ (3, 3) products
-# ~40x slower on a 2-core machine, and batch parallelism is by processes anyway.
-for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
-    os.environ.setdefault(_var, "1")
+import click
+import numpy as np
 
-import functools  # noqa: E402
-import sys  # noqa: E402
-import time  # noqa: E402
-import traceback  # noqa: E402
-from pathlib import Path  # noqa: E402
-from typing import Callable  # noqa: E402
-
-import click  # noqa: E402
-import numpy as np  # noqa: E402
-
-CAMERA_DEFAULT = "CAM_FRONT"
-# Lighting levels offered on the command line (see streetaug.augment.lighting.estimate).
-LIGHT_LEVELS = ("L0", "L1")
-LEVEL_HELP = "Lighting level: L0 constant dome (the no-light baseline), L1 sun + parametric sky."
-
-
-def _parse_floats(value: str | None, n: int, name: str) -> list[float] | None:
-    if value is None:
-        return None
-    try:
-        parts = [float(x) for x in value.split(",")]
-    except ValueError:
-        raise click.BadParameter(f"expected {n} comma-separated numbers, got {value!r}", param_hint=name) from None
-    if len(parts) != n or not all(np.isfinite(parts)):
-        raise click.BadParameter(f"expected {n} finite comma-separated numbers, got {value!r}", param_hint=name)
-    return parts
-
-
-def _runtime_errors(func: Callable) -> Callable:
-    """Turn library errors into one line on stderr and exit code 1 (traceback with --debug)."""
-
-    @functools.wraps(func)
-    def wrapper(*args, **kwargs):
-        try:
-            return func(*args, **kwargs)
-        except click.ClickException:
-            raise
-        except (Exception, KeyboardInterrupt) as e:  # noqa: BLE001 - the CLI boundary
-            if kwargs.get("debug"):
-                traceback.print_exc()
-            click.echo(f"error: {e}", err=True)
-            sys.exit(1)
-
-    return wrapper
-
+from .common import (
+    LEVEL_HELP,
+    LIGHT_LEVELS,
+    _asset_options,
+    _dataset_options,
+    _intrinsics,
+    _open_dataset,
+    _parse_floats,
+    _render_options,
+    _resolve_sample,
+    _runtime_errors,
+    _view,
+)
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100})
 @click.version_option(package_name="streetaug")
@@ -70,54 +36,6 @@ def main() -> None:
       streetaug predict-light --scene sample-lowsun --out out/light
       streetaug batch --out out/dataset
     """
-
-
-# ----------------------------------------------------------------------------- shared options
-
-
-def _dataset_options(func: Callable) -> Callable:
-    options = [
-        click.option("--dataroot", type=click.Path(file_okay=False, path_type=Path),
-                     help="nuScenes dataroot (default: the bundled sample scenes)."),
-        click.option("--version", "version", default=None,
-                     help="Dataset version folder, e.g. v1.0-mini (default for the bundled scenes: v1.0-samples)."),
-        click.option("--scene", default=None, help="Scene name (e.g. scene-0061) or scene token."),
-        click.option("--sample", "sample_token", default=None, help="Sample token (default: the scene's first sample)."),
-        click.option("--camera", default=CAMERA_DEFAULT, show_default=True, help="Camera channel."),
-    ]
-    for option in reversed(options):
-        func = option(func)
-    return func
-
-
-def _open_dataset(dataroot: Path | None, version: str | None):
-    from streetaug.datasets.bundled import BUNDLED_VERSION, bundled_dataroot
-    from streetaug.datasets.nuscenes import NuScenesReader
-
-    if dataroot is None:
-        return NuScenesReader(bundled_dataroot(), version or BUNDLED_VERSION)
-    if version is None:
-        raise click.UsageError("--version is required with --dataroot (e.g. --version v1.0-mini)")
-    return NuScenesReader(dataroot, version)
-
-
-def _resolve_sample(reader, scene: str | None, sample_token: str | None) -> str:
-    if sample_token:
-        return sample_token
-    if scene is None:
-        raise click.UsageError("give --scene NAME_OR_TOKEN or --sample TOKEN")
-    tokens = reader.sample_tokens(scene)
-    if not tokens:
-        raise click.UsageError(f"scene {scene!r} has no samples")
-    return tokens[0]
-
-
-def _view(sample, camera: str):
-    if camera not in sample.cameras:
-        raise click.UsageError(
-            f"camera {camera!r} not in sample {sample.token}; available: {', '.join(sorted(sample.cameras))}"
-        )
-    return sample.cameras[camera]
 
 
 # ----------------------------------------------------------------------------- predict-light
@@ -155,65 +73,27 @@ def predict_light(dataroot, version, scene, sample_token, camera, image, fov_deg
             raise click.UsageError("--image needs --fov-deg F or --intrinsics fx,fy,cx,cy")
         rgb = read_image_rgb(image)
         K = _intrinsics(intrinsics, fov_deg, rgb.shape[1], rgb.shape[0])
-        estimate = estimate_lighting_from_image(rgb, K)
+        estimate = estimate_lighting_from_image(rgb, K, level=level)
         query = at_cam or [0.0, 1.5, 15.0]
     else:
         reader = _open_dataset(dataroot, version)
         sample = reader.sample(_resolve_sample(reader, scene, sample_token))
         view = _view(sample, camera)
         rgb = view.image
-        estimate = estimate_lighting(view, sample.location, level=level)
         if at_cam is None:
             normal, offset = ego_ground_plane_cam(view)
             # The ground point straight ahead at 15 m depth: on the plane n . p + d = 0 with p = (0, y, 15).
             y = -(offset + normal[2] * 15.0) / normal[1] if abs(normal[1]) > 1e-6 else 1.5
             at_cam = [0.0, float(y), 15.0]
         query = at_cam
+        estimate = estimate_lighting(view, sample.location, level=level, lidar=sample.lidar, boxes=sample.boxes,
+                                     query_point_cam=np.asarray(query, dtype=float))
     write_lighting_outputs(estimate, out, rgb, query_point_cam=np.asarray(query, dtype=float))
     click.echo(f"wrote {out}/lighting.json, envmap_camera.exr, preview.png "
                f"(sun: {estimate.sun_source}, visibility {estimate.sun_visibility:.2f}, level {estimate.level})")
 
 
-def _intrinsics(intrinsics: str | None, fov_deg: float | None, width: int, height: int) -> np.ndarray:
-    from streetaug.augment.conventions import intrinsics_from_fov
-
-    if intrinsics is not None:
-        fx, fy, cx, cy = _parse_floats(intrinsics, 4, "--intrinsics")
-        if fx <= 0 or fy <= 0:
-            raise click.BadParameter("focal lengths must be positive", param_hint="--intrinsics")
-        return np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
-    return intrinsics_from_fov(width, height, fov_deg)
-
-
 # ----------------------------------------------------------------------------- insert
-
-
-def _asset_options(func: Callable) -> Callable:
-    options = [
-        click.option("--asset", type=click.Path(dir_okay=False, path_type=Path),
-                     help="glTF/GLB/OBJ/PLY asset (metres, +Y up, front +Z). Default: a procedural car."),
-        click.option("--assets", "assets_dir", type=click.Path(file_okay=False, path_type=Path),
-                     help="Folder of assets to sample from."),
-        click.option("--asset-front", default="+z", show_default=True,
-                     type=click.Choice(["+x", "-x", "+y", "-y", "+z", "-z"]),
-                     help="Axis the asset's front points along (the Kenney cars: -z)."),
-        click.option("--asset-length", type=float, help="Rescale the asset to this length in metres."),
-    ]
-    for option in reversed(options):
-        func = option(func)
-    return func
-
-
-def _render_options(func: Callable) -> Callable:
-    options = [
-        click.option("--quality", type=click.Choice(["draft", "default", "high"]), default="default",
-                     show_default=True, help="Render preset."),
-        click.option("--seed", type=int, default=0, show_default=True, help="Random seed (placement, asset, sampling)."),
-        click.option("--ev", type=float, default=0.0, show_default=True, help="Exposure of the camera response."),
-    ]
-    for option in reversed(options):
-        func = option(func)
-    return func
 
 
 @main.command("insert")
@@ -337,9 +217,15 @@ def make_samples(out, scenes, width, height, seed, debug):
 
 # ----------------------------------------------------------------------------- commands in their own modules
 # Each module defines one click command (or a few) and is registered here.
-from .batch import batch  # noqa: E402
+from .batch import batch, merge  # noqa: E402
+from .stability import stability  # noqa: E402
+from .train import train_light, train_sky  # noqa: E402
 
 main.add_command(batch)
+main.add_command(merge)
+main.add_command(stability)
+main.add_command(train_sky)
+main.add_command(train_light)
 
 
 if __name__ == "__main__":

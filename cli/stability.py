@@ -6,7 +6,7 @@ from pathlib import Path
 
 import click
 
-from .main import _dataset_options, _open_dataset, _resolve_sample, _runtime_errors, _view
+from .common import _dataset_options, _open_dataset, _resolve_sample, _runtime_errors, _view
 
 
 @click.command("stability")

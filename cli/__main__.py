@@ -1,0 +1,5 @@
+"""``python -m streetaug.cli`` = the ``streetaug`` command."""
+
+from .main import main
+
+main()
