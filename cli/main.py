@@ -218,10 +218,12 @@ def make_samples(out, scenes, width, height, seed, debug):
 # ----------------------------------------------------------------------------- commands in their own modules
 # Each module defines one click command (or a few) and is registered here.
 from .batch import batch, merge  # noqa: E402
+from .bench import bench  # noqa: E402
 from .stability import stability  # noqa: E402
 from .train import train_light, train_sky  # noqa: E402
 
 main.add_command(batch)
+main.add_command(bench)
 main.add_command(merge)
 main.add_command(stability)
 main.add_command(train_sky)
