@@ -72,8 +72,8 @@ def bench(scenes, seeds, levels, presets, small, out, debug):
                     rows.append(sa.run_configuration(case, level, preset))
                     bar.update(1)
     table = sa.summarise(rows)
-    title = (f"{len(cases)} insertions ({', '.join(scene_names)}); reference: high preset under the true local light; "
-             f"load {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
+    title = (f"{len(cases)} insertions ({', '.join(scene_names)}); load {os.getloadavg()[0]:.1f} on {os.cpu_count()} "
+             f"cores\nreference: high preset under the true local light of the generated street")
     sa.plot_chart(table, out / "speed_accuracy.png", title)
     buf = io.StringIO()
     writer = csv.DictWriter(buf, fieldnames=list(rows[0]))
