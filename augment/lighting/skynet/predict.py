@@ -1,0 +1,495 @@
+"""Inference with the shipped networks: sky vectors, single-image sky prediction, test-time refinement.
+
+Frames: sky vectors and domes live in the camera's **heading frame** (see :mod:`.dome`; z up, x = the
+optical axis projected on the horizontal plane); ``R_heading_from_cam`` converts camera-frame vectors.
+Without metadata the camera is assumed level (up = -y in the camera frame).  Radiance is linear HDR on
+the radiometric scale of the input image (``LDR = hdr_to_ldr(HDR)``, the contract's response, EV 0).
+
+Main entry points:
+
+* :func:`predict_sky` — image (+ K, + optional up) -> :class:`SkyPrediction` (sky vector, sun
+  direction in the camera frame with a calibrated uncertainty, visibility, or a diffuse fallback).
+* :func:`refine_sky` — a few Adam steps on the sky vector (intensity + latent; direction too if no
+  ephemeris) so that the decoded dome matches the visible sky pixels (the paper's differentiable
+  decoder used at test time).
+* :func:`sky_to_light` — sky vector -> :class:`..light.DistantLight` (camera-frame envmap, sun kept
+  analytic) for the renderer.
+* :func:`estimate_sky_light` — the three above in one call, as used by the lighting estimator.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+from ...conventions import check_shape, ldr_uint8_to_hdr, luminance, camera_envmap_directions
+from ..light import DistantLight, SunLight
+from .dome import dome_directions, dome_pixel_size_rad, dome_solid_angles, heading_from_camera, sample_dome
+from .model import direction_cone_deg
+
+VISIBILITY_MIN = 0.3  # below: no sun is reported (overcast, night, hidden)
+UNCERTAINTY_MAX_DEG = 35.0  # above (68 % cone): the direction is too uncertain to report a sun
+SUN_REGION_PX = 2.5  # the decoded sun is taken from this radius (dome pixels) around f_dir
+MIN_SUN_FRACTION = 0.05  # a decoded peak counts as a sun if it carries this fraction of the dome's irradiance
+REFINE_MAX_PIXELS = 3000
+SATURATED_LDR = 0.97
+
+_lock = threading.Lock()
+_models: dict = {}
+
+
+@dataclass(frozen=True)
+class SkyVector:
+    """The paper's sky vector ``f`` (64 floats) in a heading frame.
+
+    Attributes:
+        intensity_rgb: (3,) float64 linear HDR radiance of the peak pixel of the decoded dome (image scale).
+        direction: (3,) float64 unit vector towards the peak (the sun), heading frame.
+        latent: (58,) float64 code of the rest of the sky.
+    """
+
+    intensity_rgb: np.ndarray
+    direction: np.ndarray
+    latent: np.ndarray
+
+    def to_array(self) -> np.ndarray:
+        """(64,) float64 ``[intensity (3), direction (3), latent (58)]``."""
+        return np.concatenate([self.intensity_rgb, self.direction, self.latent]).astype(np.float64)
+
+    @staticmethod
+    def from_array(f: np.ndarray) -> "SkyVector":
+        f = np.asarray(f, dtype=np.float64)
+        check_shape(f, (64,), "sky vector")
+        d = f[3:6] / max(np.linalg.norm(f[3:6]), 1e-12)
+        return SkyVector(np.maximum(f[:3], 0.0), d, f[6:].copy())
+
+
+@dataclass(frozen=True)
+class SkyPrediction:
+    """What :func:`predict_sky` saw in one image.
+
+    Attributes:
+        sky: sky vector (heading frame); when no sun is reported its intensity is lowered to the
+            surrounding sky (a diffuse sky).
+        sky_raw: the network's sky vector, before that decision.
+        R_heading_from_cam: (3, 3) camera -> heading frame.
+        sun_dir_cam: (3,) unit direction towards the sun (camera frame), or None when not confident.
+        sun_visibility: 0..1 (0 when no sun is reported).
+        direction_cam: (3,) the network's peak direction (camera frame), reported or not.
+        visibility_raw: the network's visibility before the decision.
+        uncertainty_deg: half-angle of the cone around the direction holding 68 % of the predicted
+            direction distribution.
+        confident: whether a sun is reported.
+        reason: one line saying why.
+        timing_s: seconds per step.
+    """
+
+    sky: SkyVector
+    sky_raw: SkyVector
+    R_heading_from_cam: np.ndarray
+    sun_dir_cam: np.ndarray | None
+    sun_visibility: float
+    direction_cam: np.ndarray
+    visibility_raw: float
+    uncertainty_deg: float
+    confident: bool
+    reason: str
+    timing_s: dict = field(default_factory=dict)
+
+
+# ----------------------------------------------------------------------------- models
+
+
+def get_models(sky_weights: str | Path | None = None, light_weights: str | Path | None = None):
+    """(sky model, image predictor), loaded once per process (thread-safe) and kept in eval mode."""
+    from .train import load_light_model, load_sky_model
+
+    key = (str(sky_weights), str(light_weights))
+    with _lock:
+        if key not in _models:
+            import torch
+
+            torch.set_grad_enabled(True)
+            _models[key] = (load_sky_model(sky_weights), load_light_model(light_weights))
+        return _models[key]
+
+
+def _torch():
+    import torch
+
+    return torch
+
+
+def encode_dome(dome_hdr: np.ndarray, sky_model=None) -> SkyVector:
+    """Sky vector of an HDR dome (H, W, 3) on its LDR's scale (the encoder sees ``hdr_to_ldr(dome)``)."""
+    from .data import quantize_ldr
+
+    torch = _torch()
+    model = sky_model or get_models()[0]
+    check_shape(dome_hdr, (model.cfg.height, model.cfg.width, 3), "dome")
+    ldr = torch.from_numpy(quantize_ldr(dome_hdr).transpose(2, 0, 1)[None].copy())
+    with torch.no_grad():
+        li, d, z = model.encoder(ldr)
+    return SkyVector(np.expm1(li[0].double().numpy()), d[0].double().numpy(), z[0].double().numpy())
+
+
+def _decode_log(sky_model, log_int, direction, latent):
+    return sky_model.decoder(log_int, direction, latent)
+
+
+def decode_sky(sky: SkyVector, sky_model=None) -> np.ndarray:
+    """HDR dome (H, W, 3) float32 (heading frame) decoded from a sky vector."""
+    torch = _torch()
+    model = sky_model or get_models()[0]
+    li = torch.from_numpy(np.log1p(np.maximum(sky.intensity_rgb, 0.0))[None]).float()
+    d = torch.from_numpy(np.asarray(sky.direction)[None]).float()
+    z = torch.from_numpy(np.asarray(sky.latent)[None]).float()
+    with torch.no_grad():
+        y = _decode_log(model, li, d, z)[0]
+    return np.expm1(np.maximum(y.numpy(), 0.0)).transpose(1, 2, 0).astype(np.float32)
+
+
+# ----------------------------------------------------------------------------- single image
+
+
+def _diffuse_intensity(dome: np.ndarray, direction: np.ndarray) -> np.ndarray:
+    """RGB (3,) of the sky around ``direction`` (median of a 2-5 pixel ring): a peak without a sun."""
+    H, W = dome.shape[:2]
+    ang = np.arccos(np.clip(dome_directions(H, W) @ direction, -1, 1)) / dome_pixel_size_rad(H)
+    ring = (ang >= 2.0) & (ang <= 5.0)
+    if not ring.any():
+        ring = np.ones((H, W), bool)
+    return np.median(dome[ring], axis=0).astype(np.float64)
+
+
+def simple_sky_mask(ldr: np.ndarray, rays_h: np.ndarray) -> np.ndarray:
+    """(h, w) bool: bright, smooth pixels at least 2 deg above the horizon in regions touching the top row.
+
+    ``ldr`` (h, w, 3) float in [0, 1]; ``rays_h`` (h, w, 3) heading-frame unit rays.
+    """
+    import cv2
+
+    lum = luminance(ldr)
+    gx = cv2.Sobel(lum, cv2.CV_64F, 1, 0, ksize=3)
+    gy = cv2.Sobel(lum, cv2.CV_64F, 0, 1, ksize=3)
+    grad = cv2.GaussianBlur(np.hypot(gx, gy), (5, 5), 0)
+    above = rays_h[..., 2] > np.sin(np.radians(2.0))
+    if not above.any():
+        return above
+    bright = lum >= max(0.25, float(np.percentile(lum[above], 40)))
+    cand = (above & bright & (grad < 0.15)).astype(np.uint8)
+    _, labels = cv2.connectedComponents(cand, connectivity=4)
+    top = np.unique(labels[0][cand[0] > 0])
+    return np.isin(labels, top[top > 0]) & (cand > 0)
+
+
+def sky_gradient_loglik(ldr: np.ndarray, rays_h: np.ndarray, sky_mask: np.ndarray, bin_dirs: np.ndarray,
+                        turbidity: float = 3.0, max_pixels: int = 600) -> tuple[np.ndarray, dict]:
+    """Log-likelihood (n_bins,) of each candidate sun direction given the visible sky's brightness pattern.
+
+    Classical evidence (Lalonde et al.): the sun-dependent factor of the Perez/Preetham luminance,
+    ``1 + C exp(D gamma) + E cos^2 gamma`` (gamma = angle to the sun), explains the log-luminance of the
+    unsaturated sky pixels up to a per-image constant and a per-elevation term (fitted out by a linear
+    model in ``1/cos(theta)``-like features).  The residual ``E(s)`` becomes a Gaussian log-likelihood
+    ``-n_eff (E(s) - E_min) / (2 sigma^2)`` with ``n_eff`` <= 40 (neighbouring pixels are not independent).
+    Returns zeros (no evidence) when fewer than 80 usable sky pixels are visible.
+    """
+    from ..sky import _PEREZ_Y
+
+    ok = sky_mask & (ldr.max(axis=-1) < SATURATED_LDR) & (ldr.min(axis=-1) > 0.02)
+    info = {"sky_pixels": int(ok.sum())}
+    if ok.sum() < 80:
+        return np.zeros(len(bin_dirs)), info
+    idx = np.flatnonzero(ok.ravel())
+    if len(idx) > max_pixels:
+        idx = idx[np.linspace(0, len(idx) - 1, max_pixels).astype(np.int64)]
+    d = rays_h.reshape(-1, 3)[idx]
+    hdr = ldr_uint8_to_hdr(np.round(ldr.reshape(-1, 3)[idx] * 255).astype(np.uint8)[None])[0]
+    y = np.log(np.maximum(luminance(hdr.astype(np.float64)), 1e-6))
+    A, B, C, D, E = _PEREZ_Y[:, 0] * turbidity + _PEREZ_Y[:, 1]
+    gamma = np.arccos(np.clip(d @ bin_dirs.T, -1.0, 1.0))  # (N, n_bins)
+    g = np.log(np.maximum(1.0 + C * np.exp(D * gamma) + E * np.cos(gamma) ** 2, 1e-6))
+    # per-image constant + elevation term: regress y - g on [1, 1/cos(theta)-like] per candidate
+    cos_t = np.clip(d[:, 2], 0.05, 1.0)
+    X = np.stack([np.ones_like(cos_t), np.log1p(A * np.exp(B / cos_t)) if A > -1 else 1.0 / cos_t], axis=1)
+    P = X @ np.linalg.pinv(X)  # projection onto the nuisance terms
+    r = (y[:, None] - g) - P @ (y[:, None] - g)
+    err = np.mean(r**2, axis=0)
+    e_min = float(err.min())
+    sigma2 = max(e_min, 0.004)
+    n_eff = min(len(idx), 40)
+    info.update(fit_residual=e_min, contrast=float(err.max() - e_min))
+    return -n_eff * (err - e_min) / (2.0 * sigma2), info
+
+
+def predict_sky(image_rgb: np.ndarray, K: np.ndarray, up_cam: np.ndarray | None = None,
+                models=None, use_sky_fit: bool = False) -> SkyPrediction:
+    """Sky vector and sun of one LDR image without metadata (or with a known up direction).
+
+    Args:
+        image_rgb: (H, W, 3) uint8 RGB, the contract's camera response.
+        K: (3, 3) intrinsics (pixel centres at integers).
+        up_cam: (3,) gravity up in the camera frame; default (0, -1, 0) (a level camera).
+        models: (sky model, image predictor), default the shipped ones.
+        use_sky_fit: multiply the network's direction distribution by the likelihood of the visible
+            sky's brightness pattern (:func:`sky_gradient_loglik`) and take the posterior's main mode.
+            Off by default: measured on held-out views it makes the direction over-confident
+            (benchmarks/results/sky_benchmark.json).
+    """
+    from .data import VIEW_SIZE, resize_view, view_rays
+
+    torch = _torch()
+    image_rgb = np.asarray(image_rgb)
+    check_shape(image_rgb, ("H", "W", 3), "image_rgb")
+    if image_rgb.dtype != np.uint8:
+        raise ValueError(f"image_rgb must be uint8 RGB, got dtype {image_rgb.dtype}")
+    check_shape(np.asarray(K), (3, 3), "K")
+    t0 = time.perf_counter()
+    sky_model, net = models or get_models()
+    up = np.array([0.0, -1.0, 0.0]) if up_cam is None else np.asarray(up_cam, dtype=np.float64)
+    R = heading_from_camera(up)
+    h, w = VIEW_SIZE
+    small, Ks = resize_view(image_rgb, np.asarray(K, dtype=np.float64), h, w)
+    ldr = torch.from_numpy(np.ascontiguousarray(small.transpose(2, 0, 1)[None], dtype=np.float32) / 255.0)
+    rays = torch.from_numpy(view_rays(Ks, R, h, w)[None])
+    t1 = time.perf_counter()
+    with torch.no_grad():
+        o = net(ldr, rays)
+    t2 = time.perf_counter()
+    direction = o["dir"][0].double().numpy()
+    p = torch.exp(o["dir_logp"][0]).double().numpy()
+    bins = net.bin_dirs.double().numpy()
+    vis = float(torch.sigmoid(o["vis_logit"][0]))
+    fit_info: dict = {}
+    if use_sky_fit:
+        ldr_s = small.astype(np.float64) / 255.0
+        rays_h = rays[0].numpy().transpose(1, 2, 0).astype(np.float64)
+        loglik, fit_info = sky_gradient_loglik(ldr_s, rays_h, simple_sky_mask(ldr_s, rays_h), bins)
+        if np.any(loglik != 0):
+            logp = np.log(np.maximum(p, 1e-12)) + loglik
+            p = np.exp(logp - logp.max())
+            p /= p.sum()
+            mode = bins[int(np.argmax(p))]
+            near = bins @ mode >= np.cos(np.radians(20.0))
+            d = (p[near, None] * bins[near]).sum(axis=0)
+            direction = d / np.linalg.norm(d)
+    unc = direction_cone_deg(p, bins, direction)
+    sky = SkyVector(np.expm1(o["log_int"][0].double().numpy()), direction, o["latent"][0].double().numpy())
+    direction_cam = R.T @ direction
+    reasons = []
+    if vis < VISIBILITY_MIN:
+        reasons.append(f"sun visibility {vis:.2f} < {VISIBILITY_MIN}")
+    if unc > UNCERTAINTY_MAX_DEG:
+        reasons.append(f"direction uncertainty {unc:.0f} deg > {UNCERTAINTY_MAX_DEG:.0f}")
+    if direction[2] < -0.02:
+        reasons.append("peak below the horizon")
+    confident = not reasons
+    if confident:
+        reason = f"sun from the image: visibility {vis:.2f}, 68% cone {unc:.0f} deg"
+        out = SkyPrediction(sky, sky, R, direction_cam, vis, direction_cam, vis, unc, True, reason)
+    else:
+        dome = decode_sky(sky, sky_model)
+        diffuse = replace(sky, intensity_rgb=_diffuse_intensity(dome, direction))
+        reason = "no reliable sun in the image (" + "; ".join(reasons) + "): diffuse sky"
+        out = SkyPrediction(diffuse, sky, R, None, 0.0, direction_cam, vis, unc, False, reason)
+    timing = {"prepare": t1 - t0, "network": t2 - t1, "total": time.perf_counter() - t0}
+    return replace(out, timing_s=timing)
+
+
+# ----------------------------------------------------------------------------- refinement
+
+
+def _grid_sample_dome(torch, log_dome, dirs_h):
+    """Bilinear lookup (N, 3) of a (1, 3, H, W) dome at heading-frame directions (N, 3) (torch, differentiable)."""
+    import torch.nn.functional as F
+
+    H, W = log_dome.shape[2:]
+    padded = torch.cat([log_dome[..., -1:], log_dome, log_dome[..., :1]], dim=3)  # wrap in longitude
+    lon = torch.atan2(dirs_h[:, 1], dirs_h[:, 0])
+    lat = torch.asin(dirs_h[:, 2].clamp(0.0, 1.0))
+    x = (lon / (2 * np.pi) + 0.5) * W - 0.5 + 1.0  # pixel coordinate in the padded map
+    y = (1.0 - lat / (np.pi / 2)) * H - 0.5
+    gx = (x + 0.5) / (W + 2) * 2 - 1
+    gy = (y + 0.5) / H * 2 - 1
+    grid = torch.stack([gx, gy], dim=-1)[None, None].float()
+    out = F.grid_sample(padded, grid, mode="bilinear", padding_mode="border", align_corners=False)
+    return out[0, :, 0].T
+
+
+def refine_sky(sky: SkyVector, image_rgb: np.ndarray, K: np.ndarray, sky_mask: np.ndarray,
+               up_cam: np.ndarray | None = None, sun_dir_cam: np.ndarray | None = None, steps: int = 20,
+               prior_weight: float = 0.01, lr: float = 0.1, models=None) -> SkyVector:
+    """Refine a sky vector against the visible sky pixels of the image through the frozen decoder.
+
+    Args:
+        sky: initial sky vector (heading frame of this camera), e.g. ``predict_sky(...).sky``.
+        image_rgb: (H, W, 3) uint8 image (contract response).
+        K: (3, 3) intrinsics of ``image_rgb``.
+        sky_mask: (H, W) bool, True on sky pixels (e.g. the lighting estimator's sky mask).
+        up_cam: (3,) gravity up in the camera frame (default level camera, (0, -1, 0)).
+        sun_dir_cam: (3,) the ephemeris sun direction (camera frame): overrides the direction, which is
+            then kept fixed.  If None the direction is optimised too.
+        steps: Adam steps (each ~20-40 ms on one core at 32 x 128).
+        prior_weight: weight of the pull towards the initial latent/intensity (the image rarely
+            constrains the whole sky).
+
+    Returns the refined sky vector (same frame).  Unsaturated sky pixels are fitted in ``log1p`` HDR;
+    saturated ones (LDR >= 0.97) only push the sky up to at least their value.
+    """
+    torch = _torch()
+    image_rgb = np.asarray(image_rgb)
+    check_shape(image_rgb, ("H", "W", 3), "image_rgb")
+    sky_mask = np.asarray(sky_mask, dtype=bool)
+    check_shape(sky_mask, image_rgb.shape[:2], "sky_mask")
+    sky_model = (models or get_models())[0]
+    up = np.array([0.0, -1.0, 0.0]) if up_cam is None else np.asarray(up_cam, dtype=np.float64)
+    R = heading_from_camera(up)
+    direction = np.asarray(sky.direction, dtype=np.float64)
+    if sun_dir_cam is not None:
+        d = R @ np.asarray(sun_dir_cam, dtype=np.float64)
+        direction = d / np.linalg.norm(d)
+    jj, ii = np.nonzero(sky_mask)
+    if len(jj) < 10 or steps <= 0:
+        return replace(sky, direction=direction)
+    if len(jj) > REFINE_MAX_PIXELS:  # deterministic subsample
+        sel = np.linspace(0, len(jj) - 1, REFINE_MAX_PIXELS).astype(np.int64)
+        jj, ii = jj[sel], ii[sel]
+    from ...conventions import pixel_rays
+
+    rays_h = pixel_rays(np.asarray(K, dtype=np.float64), np.stack([ii, jj], 1).astype(np.float64)) @ R.T
+    above = rays_h[:, 2] > 0.0
+    if above.sum() < 10:
+        return replace(sky, direction=direction)
+    rays_h, jj, ii = rays_h[above], jj[above], ii[above]
+    ldr = image_rgb[jj, ii].astype(np.float64) / 255.0
+    target = torch.from_numpy(np.log1p(ldr_uint8_to_hdr(image_rgb[jj, ii][None])[0].astype(np.float64))).float()
+    saturated = torch.from_numpy(ldr.max(axis=1) >= SATURATED_LDR)
+    dirs_t = torch.from_numpy(rays_h).float()
+
+    li0 = torch.from_numpy(np.log1p(np.maximum(sky.intensity_rgb, 0.0))[None]).float()
+    z0 = torch.from_numpy(np.asarray(sky.latent)[None]).float()
+    d0 = torch.from_numpy(direction[None]).float()
+    li = li0.clone().requires_grad_(True)
+    z = z0.clone().requires_grad_(True)
+    params = [li, z]
+    d_raw = d0.clone()
+    if sun_dir_cam is None:
+        d_raw.requires_grad_(True)
+        params.append(d_raw)
+    opt = torch.optim.Adam(params, lr=lr)
+    for p in sky_model.parameters():
+        p.requires_grad_(False)
+    for _ in range(int(steps)):
+        d = torch.nn.functional.normalize(d_raw, dim=1)
+        log_dome = _decode_log(sky_model, li.clamp(min=0.0), d, z)
+        pred = _grid_sample_dome(torch, log_dome, dirs_t)
+        err = pred - target
+        fit = torch.where(saturated[:, None], torch.relu(-err), err) ** 2
+        loss = fit.mean() + prior_weight * (((z - z0) ** 2).mean() + 0.1 * ((li - li0) ** 2).mean())
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+    d = torch.nn.functional.normalize(d_raw.detach(), dim=1)[0].double().numpy()
+    return SkyVector(np.expm1(li.detach().clamp(min=0.0)[0].double().numpy()), d, z.detach()[0].double().numpy())
+
+
+# ----------------------------------------------------------------------------- to a light
+
+
+def split_sun(dome: np.ndarray, direction: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(dome without the sun (H, W, 3), sun irradiance (3,)): the decoded excess over the surrounding sky
+    within ``SUN_REGION_PX`` pixels of ``direction`` (zero if it carries < MIN_SUN_FRACTION of the dome's
+    irradiance)."""
+    H, W = dome.shape[:2]
+    ang = np.arccos(np.clip(dome_directions(H, W) @ direction, -1, 1)) / dome_pixel_size_rad(H)
+    region = ang <= SUN_REGION_PX
+    ring = (ang > SUN_REGION_PX) & (ang <= 2 * SUN_REGION_PX)
+    if not region.any() or not ring.any():
+        return dome, np.zeros(3)
+    background = np.median(dome[ring], axis=0)
+    omega = dome_solid_angles(H, W)
+    excess = np.maximum(dome[region] - background, 0.0)
+    e_sun = (excess * omega[region][:, None]).sum(axis=0)
+    total = (luminance(dome) * omega).sum()
+    if luminance(e_sun) < MIN_SUN_FRACTION * total:
+        return dome, np.zeros(3)
+    residual = dome.copy()
+    residual[region] = np.minimum(dome[region], background)
+    return residual, e_sun.astype(np.float64)
+
+
+def sky_to_light(sky: SkyVector, R_heading_from_cam: np.ndarray, sun_visibility: float = 1.0,
+                 with_sun: bool = True, height: int = 128, width: int = 256, ground_albedo: float = 0.15,
+                 ground_radiance: np.ndarray | None = None, sky_model=None, dome: np.ndarray | None = None) -> DistantLight:
+    """Camera-frame distant light of a sky vector.
+
+    The decoded dome fills the upper hemisphere (bilinear); its sun peak becomes an analytic
+    :class:`SunLight` along ``sky.direction`` (when ``with_sun`` and it is bright enough); below the
+    horizon a uniform ground: ``ground_radiance`` (3,) if given (e.g. the image's road), else
+    ``ground_albedo`` x the horizontal irradiance of sky + sun / pi.
+    """
+    dome = decode_sky(sky, sky_model) if dome is None else dome
+    H, W = dome.shape[:2]
+    R = np.asarray(R_heading_from_cam, dtype=np.float64)
+    direction = np.asarray(sky.direction, dtype=np.float64)
+    residual, e_sun = split_sun(dome, direction) if with_sun and direction[2] > 0 else (dome, np.zeros(3))
+    d_cam = camera_envmap_directions(height, width).reshape(-1, 3)
+    d_h = d_cam @ R.T
+    env = sample_dome(residual.astype(np.float64), d_h)
+    if ground_radiance is None:
+        dirs = dome_directions(H, W).reshape(-1, 3)
+        omega = dome_solid_angles(H, W).reshape(-1)
+        e_h = (residual.reshape(-1, 3) * (omega * dirs[:, 2])[:, None]).sum(axis=0) + e_sun * max(direction[2], 0.0)
+        ground = ground_albedo * e_h / np.pi
+    else:
+        ground = np.asarray(ground_radiance, dtype=np.float64)
+        check_shape(ground, (3,), "ground_radiance")
+    env = np.where(d_h[:, 2:3] < 0.0, ground[None], env).reshape(height, width, 3).astype(np.float32)
+    sun = None
+    if np.any(e_sun > 0):
+        sun = SunLight(direction=R.T @ direction, irradiance_rgb=e_sun, visibility=float(np.clip(sun_visibility, 0, 1)))
+    return DistantLight(env, sun)
+
+
+def estimate_sky_light(image_rgb: np.ndarray, K: np.ndarray, up_cam: np.ndarray | None = None,
+                       sun_dir_cam: np.ndarray | None = None, sky_mask: np.ndarray | None = None,
+                       refine_steps: int = 20, refine_direction: bool = False,
+                       ground_radiance: np.ndarray | None = None, height: int = 128, width: int = 256,
+                       models=None) -> tuple[DistantLight, SkyPrediction, SkyVector]:
+    """Predict, override the sun with the ephemeris if given, refine on the sky pixels, build the light.
+
+    Args:
+        image_rgb, K, up_cam: as :func:`predict_sky`.
+        sun_dir_cam: (3,) ephemeris sun direction (camera frame) or None (image only).  With it, the sun
+            is reported whenever the network's visibility is >= VISIBILITY_MIN and the sun is above the
+            horizon (the direction uncertainty no longer matters).
+        sky_mask: (H, W) bool sky pixels for :func:`refine_sky`; None skips the refinement.
+        refine_direction: without ephemeris, let the refinement move the direction too.
+        ground_radiance: (3,) radiance below the horizon (image scale), see :func:`sky_to_light`.
+
+    Returns (camera-frame DistantLight on the image's scale, the prediction, the final sky vector).
+    """
+    models = models or get_models()
+    pred = predict_sky(image_rgb, K, up_cam, models=models)
+    R = pred.R_heading_from_cam
+    if sun_dir_cam is not None:
+        d = R @ np.asarray(sun_dir_cam, dtype=np.float64)
+        d = d / np.linalg.norm(d)
+        with_sun = pred.visibility_raw >= VISIBILITY_MIN and d[2] > 0.0
+        visibility = pred.visibility_raw if with_sun else 0.0
+        sky = replace(pred.sky_raw if with_sun else pred.sky, direction=d)
+        if not with_sun:  # diffuse: no peak at the ephemeris direction either
+            sky = replace(sky, intensity_rgb=_diffuse_intensity(decode_sky(sky, models[0]), d))
+        fixed_dir_cam = R.T @ d
+    else:
+        sky, with_sun, visibility = pred.sky, pred.confident, pred.sun_visibility
+        fixed_dir_cam = None if (refine_direction and with_sun) else R.T @ sky.direction
+    if sky_mask is not None and refine_steps > 0:
+        sky = refine_sky(sky, image_rgb, K, sky_mask, up_cam, fixed_dir_cam, steps=refine_steps, models=models)
+    light = sky_to_light(sky, R, visibility, with_sun, height, width, ground_radiance=ground_radiance,
+                         sky_model=models[0])
+    return light, pred, sky
