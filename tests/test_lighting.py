@@ -263,7 +263,7 @@ def test_from_image_without_metadata():
     view, _, _ = _synthetic(1.0, 0.01, stripes=False)
     est = estimate_lighting_from_image(view.image, view.K)
     assert est.sun_source == "none" and est.sun_visibility == 0.0 and est.sun_dir_cam is None
-    assert "not implemented" in est.reason
+    assert "learned sky predictor" in est.reason and "diffuse sky" in est.reason
     # Ground irradiance reproduces the road's brightness.
     road = np.median(luminance(view.image[-40:].astype(np.float64) / 255.0))
     env = est.light_cam.envmap.astype(np.float64)

@@ -676,8 +676,33 @@ def estimate_lighting_from_image(image_rgb: np.ndarray, K: np.ndarray, level: st
 
         view = image_only_view(image_rgb, K)
         return estimate_views_lighting([view], None, level).for_view(view)
+    return _estimate_learned_sky(image_rgb, np.asarray(K, dtype=np.float64))
+
+
+def _estimate_learned_sky(image_rgb: np.ndarray, K: np.ndarray) -> LightingEstimate:
+    """L1 without metadata: the learned image -> sky-vector predictor (:mod:`.skynet`), its sky refined on the
+    visible sky pixels, the ground below the horizon from the road.  The sun is reported only when the
+    predictor is confident (visibility and a tight direction cone); otherwise a diffuse sky, said so."""
+    from .skynet.predict import estimate_sky_light
+
     t0 = time.perf_counter()
-    return _estimate_diffuse(image_rgb, K, np.array([0.0, -1.0, 0.0]), DEFAULT_CAMERA_HEIGHT_M, t0, {})
+    up_cam = np.array([0.0, -1.0, 0.0])
+    work = _prepare(image_rgb, K, up_cam)
+    ground = _ground_evidence(work, up_cam, DEFAULT_CAMERA_HEIGHT_M)
+    mask = _sky_mask(work)
+    small = np.clip(np.round(work.ldr * 255.0), 0, 255).astype(np.uint8)
+    ground_rgb = None if ground is None else np.full(3, ground["median"])
+    light, pred, _ = estimate_sky_light(small, work.K, up_cam, sky_mask=mask if mask.sum() >= 20 else None,
+                                        ground_radiance=ground_rgb, height=ENVMAP_HEIGHT, width=ENVMAP_WIDTH)
+    total = time.perf_counter() - t0
+    source = "image" if pred.confident else "none"
+    sun_dir = np.asarray(pred.sun_dir_cam, dtype=np.float64) if pred.confident else None
+    reason = (f"L1 without metadata: learned sky predictor ({pred.reason}); "
+              + ("sky refined on the visible sky pixels" if mask.sum() >= 20 else "no sky visible: sky not refined"))
+    params = {"sun_visibility_raw": float(pred.visibility_raw), "camera_height_m": DEFAULT_CAMERA_HEIGHT_M,
+              "up_camera": up_cam.tolist(), "evidence": {"ground": ground, "sky_pixels": int(mask.sum())}}
+    return LightingEstimate(light, sun_dir, source, float(pred.sun_visibility) if pred.confident else 0.0, "L1",
+                            reason, _clean(params), {"total": total})
 
 
 def image_only_view(image_rgb: np.ndarray, K: np.ndarray, camera_height_m: float = DEFAULT_CAMERA_HEIGHT_M):
