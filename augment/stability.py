@@ -453,7 +453,7 @@ def _crop_around(image: np.ndarray, boxes: list, zoom: float = 4.0) -> np.ndarra
     return image[y0:y0 + int(h), x0:x0 + int(w)]
 
 
-def contact_sheet(rows: list[dict], images: dict[str, np.ndarray], tile_width: int = 400) -> np.ndarray:
+def contact_sheet(rows: list[dict], images: dict[str, np.ndarray], tile_width: int = 360) -> np.ndarray:
     """One tile per case (image + a caption with the case and its outcome), 3 per row, uint8 RGB."""
     tiles = []
     for row in rows:
