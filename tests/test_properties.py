@@ -108,3 +108,61 @@ def test_softclip_continuous_with_unit_slope_at_tau(x, tau):
     eps = 1e-7
     assert abs(cv.softclip(tau + eps, tau) - cv.softclip(tau - eps, tau)) < 3 * eps
     assert cv.softclip(x, tau) <= min(x, 1.0) + 1e-12
+
+
+# ----------------------------------------------------------------------------- lighting volume: log projection
+
+
+@settings(max_examples=200, deadline=None)
+@given(x=st.floats(-149, 149), y=st.floats(-149, 149), z=st.floats(-3.9, 75.9))
+def test_log_projection_round_trips_and_stays_in_the_grid(x, y, z):
+    import torch
+
+    from streetaug.augment.lighting.volume import LogGrid
+
+    grid = LogGrid()
+    idx = grid.to_index(torch.tensor([[x, y, z]], dtype=torch.float64)).numpy()
+    assert np.all(idx >= 0) and np.all(idx <= np.array(grid.shape))
+    np.testing.assert_allclose(grid.index_to_point(idx)[0], [x, y, z], atol=1e-6)
+    flat, inside = grid.flat_index(torch.tensor([[x, y, z]], dtype=torch.float64))
+    assert bool(inside[0]) and 0 <= int(flat[0]) < grid.n_voxels
+
+
+@settings(max_examples=100, deadline=None)
+@given(a=st.floats(-149, 149), b=st.floats(-149, 149))
+def test_log_projection_is_monotone(a, b):
+    import torch
+
+    from streetaug.augment.lighting.volume import LogGrid
+
+    assume(a != b)
+    lo, hi = sorted((a, b))
+    idx = LogGrid().to_index(torch.tensor([[lo, lo, lo / 2], [hi, hi, hi / 2]], dtype=torch.float64)).numpy()
+    assert np.all(idx[0] <= idx[1])
+
+
+# ----------------------------------------------------------------------------- the shadow ratio under extreme light
+
+
+@settings(max_examples=12, deadline=None)
+@given(sky=st.sampled_from([0.0, 1e-6, 0.3, 50.0]), sun=st.sampled_from([0.0, 1e-6, 1.0, 1e5]),
+       elevation=st.floats(1.0, 89.0), azimuth=st.floats(-180, 180))
+def test_shadow_ratio_finite_and_bounded_for_any_light(sky, sun, elevation, azimuth):
+    """Zero, tiny and huge sky/sun irradiance: the ratio map's denominators never produce NaN/Inf or negatives."""
+    from streetaug.augment.assets.procedural import procedural_car
+    from streetaug.augment.lighting.light import DistantLight, SunLight
+    from streetaug.augment.render.depth import ground_plane_depth
+    from streetaug.augment.render.insert import render_insertion
+
+    W, H, f = 96, 64, 60.0
+    K = np.array([[f, 0, W / 2], [0, f, H / 2], [0, 0, 1.0]])
+    env = np.full((16, 32, 3), sky, np.float32)
+    el, az = np.radians(elevation), np.radians(azimuth)
+    direction = np.array([np.cos(el) * np.sin(az), -np.sin(el), np.cos(el) * np.cos(az)])
+    light = DistantLight(env, SunLight(direction, np.full(3, sun)) if sun > 0 else None)
+    depth = ground_plane_depth(K, W, H, np.array([0.0, -1.0, 0.0]), 1.5)
+    image = np.full((H, W, 3), 120, np.uint8)
+    T = cv.pose_camera_to_transform(0.0, 1.5, 9.0, 30.0)
+    ins = render_insertion(image, K, depth, light, procedural_car(0), T, quality="draft")
+    assert np.isfinite(ins.shadow_ratio).all() and ins.shadow_ratio.min() >= 0.0 and ins.shadow_ratio.max() <= 1.5
+    assert np.isfinite(ins.mask).all() and ins.image.dtype == np.uint8
