@@ -14,6 +14,7 @@ from streetaug.augment.render.insert import QUALITY_PRESETS, RenderSettings, ren
 
 W, H = 320, 180
 K = intrinsics_from_fov(W, H, 60.0)
+T_SIDE = pose_camera_to_transform(0.0, 1.5, 12.0, 90.0)  # the car 12 m ahead, seen from its side
 
 
 @pytest.fixture(scope="module")
@@ -31,8 +32,7 @@ def scene():
 @pytest.fixture(scope="module")
 def result(car, scene):
     light, image, depth, ev = scene
-    T = pose_camera_to_transform(0.0, 1.5, 12.0, 90.0)
-    return render_insertion(image, K, depth, light, car, T, ev=ev, seed=3)
+    return render_insertion(image, K, depth, light, car, T_SIDE, ev=ev, seed=3)
 
 
 def test_white_furnace_sphere():
@@ -51,7 +51,7 @@ def test_white_furnace_sphere():
     assert np.percentile(np.abs(rad - 1.0), 95) < 0.35  # per-pixel noise stays moderate
 
 
-def test_shadow_ratio_one_far_and_below_one_under(result, car):
+def test_shadow_ratio_one_far_and_below_one_under(result, car, scene):
     S = result.shadow_ratio
     assert S.shape == (H, W) and S.dtype == np.float32
     assert np.all(S <= 1.0) and np.all(S >= 0.0)
@@ -59,11 +59,16 @@ def test_shadow_ratio_one_far_and_below_one_under(result, car):
     assert S[:, -12:].min() > 0.99  # metres away on the sunny side only a sliver of sky is blocked
     x0, y0, x1, y1 = result.stats["shadow"]["box"]
     assert (y1 - y0) < 0.5 * H  # the ratio map is only computed near the object
-    # Right below the car (ground points under the body, in front of the tyres' contact line).
-    cols = np.flatnonzero(result.coverage.max(axis=0) > 0.5)
-    bottom_rows = [np.flatnonzero(result.coverage[:, c] > 0.5).max() for c in cols]
-    under = [S[r + 2, c] for r, c in zip(bottom_rows, cols) if r + 2 < H]
-    assert np.median(under) < 0.8
+    # Ground points under the car's body (object frame |x| < 1.5 m, |y| < 0.6 m) that the camera sees
+    # between the wheels: the body hides the sun and most of the sky from them.
+    from streetaug.augment.conventions import invert_transform, unproject_depth
+
+    ys, xs = np.nonzero((result.coverage == 0) & np.isfinite(scene[2]))
+    p_cam = unproject_depth(K, np.stack([xs, ys], 1).astype(float), scene[2][ys, xs])
+    p_obj = p_cam @ invert_transform(T_SIDE)[:3, :3].T + invert_transform(T_SIDE)[:3, 3]
+    under = (np.abs(p_obj[:, 0]) < 1.5) & (np.abs(p_obj[:, 1]) < 0.6)
+    assert under.sum() > 20
+    assert np.median(S[ys[under], xs[under]]) < 0.5
 
 
 def test_sun_shadow_falls_opposite_the_sun(result):
@@ -255,7 +260,7 @@ def test_base_color_texture_is_sampled_by_uv():
     """A quad facing the camera with a half-red / half-blue texture renders red on one side, blue on the other."""
     # Object frame: x front, y left, z up.  The quad lies in the y-z plane facing -x (towards a camera behind it).
     V = np.array([[0, 1.0, 0], [0, -1.0, 0], [0, -1.0, 2.0], [0, 1.0, 2.0]])
-    F = np.array([[0, 2, 1], [0, 3, 2]])
+    F = np.array([[0, 1, 2], [0, 2, 3]])  # counter-clockwise seen from -x: the front faces the camera
     uv = np.array([[0, 1.0], [1, 1.0], [1, 0.0], [0, 0.0]])  # glTF uv: v = 0 at the top row
     tex = np.zeros((4, 4, 3), np.float32)
     tex[:, :2] = [1, 0, 0]
@@ -273,3 +278,52 @@ def test_base_color_texture_is_sampled_by_uv():
     right = rad[ys[xs > xs.mean() + 5], xs[xs > xs.mean() + 5]].mean(axis=0)
     # object +y (left of the object) is image-left when its front points away from the camera; uv u=0 there = red
     assert left[0] > 5 * left[2] and right[2] > 5 * right[0], (left, right)
+
+
+def _textured_quad(material):
+    """The quad of the base-colour test (facing a camera behind it, uv u = 0 on the image's left)."""
+    V = np.array([[0, 1.0, 0], [0, -1.0, 0], [0, -1.0, 2.0], [0, 1.0, 2.0]])
+    F = np.array([[0, 1, 2], [0, 2, 3]])  # counter-clockwise seen from -x: the front faces the camera
+    uv = np.array([[0, 1.0], [1, 1.0], [1, 0.0], [0, 0.0]])
+    return Asset("quad", V, F, np.zeros(2, np.int64), (material,), np.tile([-1.0, 0, 0], (4, 1)), uv=uv)
+
+
+def _left_right(res):
+    ys, xs = np.nonzero(res.coverage > 0.99)
+    assert len(xs) > 500
+    rad = res.object_radiance
+    left = rad[ys[xs < xs.mean() - 5], xs[xs < xs.mean() - 5]].mean(axis=0)
+    right = rad[ys[xs > xs.mean() + 5], xs[xs > xs.mean() + 5]].mean(axis=0)
+    return left, right
+
+
+def test_metallic_roughness_texture_is_sampled_by_uv():
+    """glTF metallic-roughness texture (B = metallic): the metal half (left) loses its diffuse light."""
+    mr = np.ones((4, 4, 3), np.float32)  # G = roughness 1
+    mr[:, 2:, 2] = 0.0  # right half dielectric, left half metal
+    mat = Material("mr", np.array([0.8, 0.1, 0.1]), metallic=1.0, roughness=1.0, metallic_roughness_texture=mr)
+    light = DistantLight(np.ones((16, 32, 3), np.float32), None)
+    T = pose_camera_to_transform(0.0, 1.0, 6.0, 0.0)
+    res = render_insertion(np.full((H, W, 3), 100, np.uint8), K, np.full((H, W), np.inf, np.float32), light,
+                           _textured_quad(mat), T, quality="draft")
+    left, right = _left_right(res)
+    assert left[0] < 0.6 * right[0], (left, right)  # rough metal: ~0.3 of base; dielectric: base + 4 %
+
+
+def test_normal_map_tilts_the_shading_normal():
+    """A tangent-space normal map tilting the left half towards the sun makes that half brighter."""
+    nmap = np.empty((4, 4, 3), np.float32)
+    nmap[:, :2] = [0.5 + 0.5 * 0.6, 0.5, 0.5 + 0.5 * 0.8]  # (0.6, 0, 0.8): tilted along +u (tangent)
+    nmap[:, 2:] = [0.5, 0.5, 1.0]  # flat
+    mat = Material("nm", np.full(3, 0.7), roughness=1.0, specular=0.0, normal_texture=nmap)
+    T = pose_camera_to_transform(0.0, 1.0, 6.0, 0.0)
+    # Object frame: the quad faces -x, its tangent (+u) is -y; the sun comes from -x, -y, a little above.
+    s_obj = np.array([-1.0, -1.0, 0.3]) / np.linalg.norm([-1.0, -1.0, 0.3])
+    from streetaug.augment.lighting.light import SunLight
+
+    light = DistantLight(np.full((16, 32, 3), 0.02, np.float32), SunLight(T[:3, :3] @ s_obj, np.full(3, 3.0)))
+    res = render_insertion(np.full((H, W, 3), 100, np.uint8), K, np.full((H, W), np.inf, np.float32), light,
+                           _textured_quad(mat), T, quality="draft")
+    left, right = _left_right(res)
+    # n.s: tilted (-0.8, -0.6, 0) . s = 0.97, flat (-1, 0, 0) . s = 0.69
+    assert 1.25 < left.mean() / right.mean() < 1.55, (left, right)

@@ -93,6 +93,11 @@ def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.einsum("ij,ij->i", a, b)
 
 
+def row_norm(v: np.ndarray) -> np.ndarray:
+    """Euclidean norms (N,) of the rows of (N, 3) (much faster than ``np.linalg.norm(v, axis=1)``)."""
+    return np.sqrt(np.einsum("ij,ij->i", v, v))
+
+
 def ggx_d(n_dot_h: np.ndarray, alpha: np.ndarray) -> np.ndarray:
     """GGX normal distribution D(h) (N,), normalised so that the integral of D (n.h) over h is 1."""
     a2 = alpha * alpha
@@ -119,7 +124,7 @@ def eval_brdf(n: np.ndarray, v: np.ndarray, l: np.ndarray, params: BRDFParams) -
     n_l = np.clip(n_l, 1e-6, 1.0)
     n_v = np.clip(n_v, 1e-6, 1.0)
     h = v + l
-    h /= np.maximum(np.linalg.norm(h, axis=1, keepdims=True), 1e-12)
+    h /= np.maximum(row_norm(h)[:, None], 1e-12)
     n_h = np.clip(_dot(n, h), 0.0, 1.0)
     v_h = np.clip(_dot(v, h), 0.0, 1.0)
     fw = schlick_weight(v_h)[:, None]
@@ -158,7 +163,7 @@ def to_world(local: np.ndarray, n: np.ndarray, frame: tuple[np.ndarray, np.ndarr
     """
     if n.ndim == 1:
         t, b = tangent_frame(n[None])
-        return np.einsum("ij,jk->ik", local, np.stack([t[0], b[0], n]))
+        return local @ np.stack([t[0], b[0], n])
     t, b = tangent_frame(n) if frame is None else frame
     return local[:, :1] * t + local[:, 1:2] * b + local[:, 2:3] * n
 
@@ -183,7 +188,7 @@ def reflect(v: np.ndarray, h: np.ndarray) -> np.ndarray:
 def ggx_reflection_pdf(n: np.ndarray, v: np.ndarray, l: np.ndarray, alpha: np.ndarray) -> np.ndarray:
     """Solid-angle pdf (N,) of ``l`` when ``h`` is drawn by :func:`sample_ggx_half` and ``l = reflect(v, h)``."""
     h = v + l
-    h /= np.maximum(np.linalg.norm(h, axis=1, keepdims=True), 1e-12)
+    h /= np.maximum(row_norm(h)[:, None], 1e-12)
     n_h = np.clip(_dot(n, h), 0.0, 1.0)
     v_h = np.maximum(_dot(v, h), 1e-6)
     return ggx_d(n_h, alpha) * n_h / (4.0 * v_h)
@@ -230,3 +235,61 @@ def brdf_pdf(n: np.ndarray, v: np.ndarray, l: np.ndarray, params: BRDFParams) ->
     if np.any(probs[:, 2] > 0):
         pdf = pdf + probs[:, 2] * ggx_reflection_pdf(n, v, l, np.full(len(n), CLEARCOAT_ROUGHNESS**2))
     return pdf
+
+
+# ----------------------------------------------------------------------------- directional albedo
+
+ALBEDO_TABLE_SIZE = 32
+
+
+def _specular_albedo_table(size: int = ALBEDO_TABLE_SIZE, n_samples: int = 256) -> np.ndarray:
+    """(size, size, 2) table over (n.v, roughness) cell centres of the specular lobe's directional albedo
+    split by Fresnel: ``int f_spec cos dl = c_spec A + f90 B`` (UE4's "environment BRDF").
+
+    Deterministic (Hammersley points, GGX importance sampling), so the table carries no noise.
+    """
+    k = np.arange(n_samples)
+    u1 = (k + 0.5) / n_samples
+    u2 = np.array([int(f"{i:032b}"[::-1], 2) for i in k], dtype=np.float64) / 2.0**32  # radical inverse
+    centres = (np.arange(size) + 0.5) / size
+    nv, rough, u1, u2 = _grid(centres, u1, u2)
+    N = len(nv)
+    v = np.stack([np.sqrt(1.0 - nv * nv), np.zeros(N), nv], axis=1)
+    n = np.tile([0.0, 0.0, 1.0], (N, 1))
+    h = sample_ggx_half(n, np.maximum(rough, MIN_ROUGHNESS) ** 2, u1, u2)
+    l = reflect(v, h)
+    n_l = l[:, 2]
+    v_h = np.clip(_dot(v, h), 0.0, 1.0)
+    n_h = np.clip(h[:, 2], 1e-6, 1.0)
+    w = np.where(n_l > 1e-6, smith_g(np.clip(n_l, 1e-6, 1.0), nv, rough) * v_h / (nv * n_h), 0.0)
+    fw = schlick_weight(v_h)
+    return np.stack([w * (1 - fw), w * fw], axis=1).reshape(size, size, n_samples, 2).mean(axis=2)
+
+
+def _grid(centres: np.ndarray, u1: np.ndarray, u2: np.ndarray) -> tuple[np.ndarray, ...]:
+    """(n.v, roughness, u1, u2) flattened over the (size, size, n_samples) grid."""
+    size, n = len(centres), len(u1)
+    nv = np.repeat(centres, size * n)
+    rough = np.tile(np.repeat(centres, n), size)
+    return nv, rough, np.tile(u1, size * size), np.tile(u2, size * size)
+
+
+_ALBEDO_TABLE: np.ndarray | None = None
+
+
+def specular_albedo(n_dot_v: np.ndarray, params: BRDFParams) -> np.ndarray:
+    """Directional albedo (N, 3) of the specular (GGX) lobe, ``int f_spec(v, l) (n.l) dl``, from a cached table."""
+    global _ALBEDO_TABLE
+    if _ALBEDO_TABLE is None:
+        _ALBEDO_TABLE = _specular_albedo_table()
+    size = _ALBEDO_TABLE.shape[0]
+    x = np.clip(np.asarray(n_dot_v, dtype=np.float64) * size - 0.5, 0.0, size - 1.0)
+    y = np.clip(np.asarray(params.roughness, dtype=np.float64) * size - 0.5, 0.0, size - 1.0)
+    x0 = np.minimum(np.floor(x).astype(np.int64), size - 2)
+    y0 = np.minimum(np.floor(y).astype(np.int64), size - 2)
+    fx, fy = (x - x0)[:, None], (y - y0)[:, None]
+    t = _ALBEDO_TABLE
+    ab = (t[x0, y0] * (1 - fy) + t[x0, y0 + 1] * fy) * (1 - fx) + (t[x0 + 1, y0] * (1 - fy) + t[x0 + 1, y0 + 1] * fy) * fx
+    c_spec = params.c_spec
+    f90 = np.clip(50.0 * c_spec[:, 1:2], 0.0, 1.0)
+    return c_spec * ab[:, :1] + f90 * ab[:, 1:2]

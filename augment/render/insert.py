@@ -2,7 +2,8 @@
 
 This is the renderer's single entry point::
 
-    prepare (cached BVH) -> render_foreground -> render_shadow -> depth_visibility -> composite
+    prepare (cached BVH) -> render_shadow -> render_foreground (sees the shadow) -> depth_visibility
+      -> [match the image's blur and noise] -> composite
 """
 
 from __future__ import annotations
@@ -16,12 +17,14 @@ from ..assets.asset import Asset
 from ..conventions import check_shape
 from ..io import InputError
 from ..lighting.light import DistantLight
+from .camera_effects import add_object_noise, blur_object_layer, estimate_camera_effects
 from .composite import composite, depth_visibility
 from .geometry import prepare_asset
 from .sampling import sky_irradiance
 from .settings import QUALITY_PRESETS, RenderSettings
 from .shade import render_foreground
-from .shadow import car_ambient_radiance, render_shadow
+from .bounce import BounceLight
+from .shadow import GroundShadow, car_ambient_radiance, render_shadow
 
 __all__ = ["QUALITY_PRESETS", "RenderSettings", "Insertion", "render_insertion"]
 
@@ -38,8 +41,8 @@ class Insertion:
         coverage: (H, W) float32 object coverage before occlusion (for the visible fraction).
         shadow_ratio: (H, W) float32 ratio map S (luminance of the per-channel ratio), 1 = unchanged.
         object_depth_m: (H, W) float32 camera-z of the object, inf where none.
-        timing_s: seconds per stage: "prepare" (cached BVH, ambient), "foreground" (= "raycast" inside it + "shade"),
-            "shadow", "composite", and "total".
+        timing_s: seconds per stage: "prepare" (cached BVH, irradiance), "shadow", "foreground" (= "raycast"
+            inside it + "shade"), "composite", and "total".
         stats: rays cast per stage, sample counts, pixel boxes.
         shadow_ratio_rgb: (H, W, 3) float32 per-channel ratio actually used in the composite.
         object_radiance: (H, W, 3) float32 un-premultiplied linear object radiance (0 where no coverage).
@@ -107,17 +110,20 @@ def render_insertion(image_rgb: np.ndarray, K: np.ndarray, depth_m: np.ndarray, 
     E_sky_up = sky_irradiance(light.envmap, up)
     ambient = car_ambient_radiance(light, prep.mean_albedo, up)
     interior = INTERIOR_SKY_FRACTION * E_sky_up / np.pi
+    bounce = BounceLight.build(light, prep, T, up)
     timing["prepare"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
-    fg = render_foreground(K, W, H, light, prep, T, settings, rng, ambient, interior)
+    sh = render_shadow(K, W, H, depth_m, light, prep, T, up, settings, rng, bounce)
+    timing["shadow"] = time.perf_counter() - t0
+
+    t0 = time.perf_counter()
+    foot = None if sh is None else sh.foot_ratio
+    ground = None if sh is None else GroundShadow(sh, K, T, T[:3, :3].T @ up)
+    fg = render_foreground(K, W, H, light, prep, T, settings, rng, ambient, interior, bounce, foot, ground)
     timing["foreground"] = time.perf_counter() - t0
     timing["raycast"] = fg.stats.get("raycast_s", 0.0) if fg is not None else 0.0
     timing["shade"] = timing["foreground"] - timing["raycast"]
-
-    t0 = time.perf_counter()
-    sh = render_shadow(K, W, H, depth_m, light, prep, T, up, settings, rng, ambient)
-    timing["shadow"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
     coverage = np.zeros((H, W), np.float32)
@@ -145,11 +151,23 @@ def render_insertion(image_rgb: np.ndarray, K: np.ndarray, depth_m: np.ndarray, 
     image = image_rgb.copy()
     obj_rad = np.zeros((H, W, 3), np.float32)
     ratio_lum = np.ones((H, W), np.float32)
+    effects = None
     if boxes:
         bx0, by0 = min(b[0] for b in boxes), min(b[1] for b in boxes)
         bx1, by1 = max(b[2] for b in boxes), max(b[3] for b in boxes)
+        if settings.match_camera:
+            # Measured locally (blur and noise vary over an image): the object's box grown by 96 px.
+            g = 96
+            effects = estimate_camera_effects(image_rgb[max(by0 - g, 0) : by1 + g, max(bx0 - g, 0) : bx1 + g])
+            m = int(np.ceil(3 * effects.blur_sigma_px))  # room for the blurred object's rim
+            bx0, by0, bx1, by1 = max(bx0 - m, 0), max(by0 - m, 0), min(bx1 + m, W), min(by1 + m, H)
         ub = (slice(by0, by1), slice(bx0, bx1))
-        image[ub] = composite(image_rgb[ub], rad_premult[ub], mask[ub], vis_full[ub], ratio[ub], ev)
+        if effects is None:
+            image[ub] = composite(image_rgb[ub], rad_premult[ub], mask[ub], vis_full[ub], ratio[ub], ev)
+        else:  # blur the visible object layer like the image, composite, then add the image's noise
+            obj_b, mask_b = blur_object_layer(rad_premult[ub] * vis_full[ub][..., None], mask[ub], effects.blur_sigma_px)
+            image[ub] = composite(image_rgb[ub], obj_b, mask_b, np.ones_like(mask_b), ratio[ub], ev)
+            image[ub] = add_object_noise(image[ub], mask_b, effects.noise_sigma, rng)
         cov = coverage[ub][..., None]
         with np.errstate(divide="ignore", invalid="ignore"):
             obj_rad[ub] = np.where(cov > 0, rad_premult[ub] / cov, 0.0)
@@ -171,5 +189,7 @@ def render_insertion(image_rgb: np.ndarray, K: np.ndarray, depth_m: np.ndarray, 
         "shadow": None if sh is None else {k: v for k, v in sh.stats.items() if k != "rays"},
         "ambient_rgb": ambient.tolist(),
     }
+    if effects is not None:
+        stats["camera_effects"] = {"blur_sigma_px": effects.blur_sigma_px, "noise_sigma": effects.noise_sigma}
     return Insertion(image=image, mask=mask, coverage=coverage, shadow_ratio=ratio_lum, object_depth_m=obj_depth,
                      timing_s=timing, stats=stats, shadow_ratio_rgb=ratio, object_radiance=obj_rad)

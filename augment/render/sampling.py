@@ -108,6 +108,15 @@ _SAMPLER_CACHE: "OrderedDict[int, tuple[np.ndarray, EnvSampler]]" = OrderedDict(
 _SAMPLER_CACHE_SIZE = 8
 
 
+SAMPLER_MAX_WIDTH = 256
+
+
+def sampler_map(envmap: np.ndarray) -> np.ndarray:
+    """The box-filtered copy of ``envmap`` (from the cached pyramid) that :func:`env_sampler_for` samples."""
+    levels = env_pyramid(envmap)
+    return next((lev for lev in levels if lev.shape[1] <= SAMPLER_MAX_WIDTH), levels[-1])
+
+
 def env_sampler_for(envmap: np.ndarray) -> EnvSampler:
     """The :class:`EnvSampler` of ``envmap``, built once and cached (keyed by the array's identity)."""
     key = id(envmap)
@@ -115,7 +124,10 @@ def env_sampler_for(envmap: np.ndarray) -> EnvSampler:
     if hit is not None and hit[0] is envmap:
         _SAMPLER_CACHE.move_to_end(key)
         return hit[1]
-    sampler = EnvSampler.build(envmap)
+    # Built on a copy at most SAMPLER_MAX_WIDTH wide (:func:`sampler_map`): environment samples must
+    # look their radiance up in that same copy, so that radiance / pdf stays bounded (a bright pixel of
+    # the full map inside a dimmer sampler texel would otherwise be a firefly).
+    sampler = EnvSampler.build(sampler_map(envmap))
     _SAMPLER_CACHE[key] = (envmap, sampler)  # holding the array keeps its id from being reused
     while len(_SAMPLER_CACHE) > _SAMPLER_CACHE_SIZE:
         _SAMPLER_CACHE.popitem(last=False)
@@ -132,14 +144,35 @@ def hemisphere_irradiance(envmap: np.ndarray, normal: np.ndarray) -> np.ndarray:
     return np.einsum("hw,hwc->c", w, np.asarray(envmap, dtype=np.float64))
 
 
+def equirect_texel_moments(height: int, width: int) -> np.ndarray:
+    """Integrated direction ``int_texel d dw`` (H, W, 3) of every texel of a camera-frame equirect map.
+
+    Its length is below the texel's solid angle (the directions inside it spread); for any unit n with
+    n . d > 0 over the whole texel, ``int_texel n . d dw = n . m`` exactly.
+    """
+    lon = (np.arange(width + 1) / width - 0.5) * 2.0 * np.pi
+    lat = (0.5 - np.arange(height + 1) / height) * np.pi  # top edge first (decreasing)
+    a, b = lon[:-1], lon[1:]
+    top, bot = lat[:-1], lat[1:]
+    i2 = (top / 2 + np.sin(2 * top) / 4) - (bot / 2 + np.sin(2 * bot) / 4)  # int cos^2(lat) dlat
+    s2 = (np.sin(top) ** 2 - np.sin(bot) ** 2) / 2.0  # int sin(lat) cos(lat) dlat
+    x = i2[:, None] * (np.cos(a) - np.cos(b))[None, :]
+    y = -s2[:, None] * (b - a)[None, :]
+    z = i2[:, None] * (np.sin(b) - np.sin(a))[None, :]
+    return np.stack([x, y, z], axis=-1)
+
+
 _IRRADIANCE_CACHE: "OrderedDict[int, tuple[np.ndarray, np.ndarray]]" = OrderedDict()
 
 
 def irradiance_map(envmap: np.ndarray, height: int = 32, width: int = 64) -> np.ndarray:
-    """Unoccluded irradiance (height, width, 3) for every normal direction, camera-frame equirect layout.
+    """Unoccluded irradiance for every normal direction: (height + 2, width, 3), look up with :func:`lookup_irradiance`.
 
-    ``E(n) = sum_pixels L max(0, n . w) dw`` from the map downsampled to (height, width); cached by
-    the map's identity.  Look it up with a normal as the direction.
+    Rows 1..height hold ``E(n)`` at the texel centres of a camera-frame equirect (height, width) map,
+    row 0 and row height + 1 at the north (up, -y) and south pole, so that normals near the poles are
+    interpolated rather than clamped to the first texel row.  ``E(n) = sum_texels L max(0, n . m)`` over
+    the map reduced to (height, width) texels (power kept exactly, ``m`` = the texel's integrated
+    direction).  Cached by the map's identity.
     """
     key = id(envmap)
     hit = _IRRADIANCE_CACHE.get(key)
@@ -149,25 +182,53 @@ def irradiance_map(envmap: np.ndarray, height: int = 32, width: int = 64) -> np.
 
     from ..conventions import camera_envmap_directions
 
-    env = cv2.resize(np.asarray(envmap, dtype=np.float32), (width, height), interpolation=cv2.INTER_AREA)
-    # Keep the energy exact: rescale each row of the small map to the big map's row-band sums.
-    d = camera_envmap_directions(height, width).reshape(-1, 3)
-    w = (equirect_solid_angles(height, width).reshape(-1, 1) * env.reshape(-1, 3).astype(np.float64))
-    cos = np.clip(np.einsum("ik,jk->ij", d, d), 0.0, None)  # (normals, directions)
-    E = np.einsum("ij,jc->ic", cos, w).reshape(height, width, 3)
+    H, W = envmap.shape[:2]
+    # Power per small texel (radiance x solid angle summed exactly), and the texel's mean direction
+    # vector m = int d dw: int_texel L max(0, n.d) dw ~ (power / solid angle) max(0, n.m) is exact for
+    # texels wholly above the surface's horizon (no error at the poles, unlike centre directions).
+    power = np.asarray(envmap, dtype=np.float32) * equirect_solid_angles(H, W)[..., None].astype(np.float32)
+    power = cv2.resize(power, (width, height), interpolation=cv2.INTER_AREA).astype(np.float64)
+    power *= (H * W) / (height * width)
+    m = equirect_texel_moments(height, width).reshape(-1, 3)
+    radiance = power.reshape(-1, 3) / equirect_solid_angles(height, width).reshape(-1, 1)
+    d = np.concatenate([[[0.0, -1.0, 0.0]], camera_envmap_directions(height, width).reshape(-1, 3), [[0.0, 1.0, 0.0]]])
+    cos = np.maximum(d.astype(np.float32) @ m.T.astype(np.float32), 0.0)  # (normals, texels): max(0, n . m)
+    E_dirs = (cos @ radiance.astype(np.float32)).astype(np.float64)
+    E = np.concatenate([np.repeat(E_dirs[:1], width, axis=0), E_dirs[1:-1], np.repeat(E_dirs[-1:], width, axis=0)])
+    E = E.reshape(height + 2, width, 3)
     _IRRADIANCE_CACHE[key] = (envmap, E)
     while len(_IRRADIANCE_CACHE) > _SAMPLER_CACHE_SIZE:
         _IRRADIANCE_CACHE.popitem(last=False)
     return E
 
 
+def lookup_irradiance(E: np.ndarray, normals_cam: np.ndarray) -> np.ndarray:
+    """Bilinear lookup (N, 3) of an :func:`irradiance_map` at unit camera-frame normals (N, 3)."""
+    h, W = E.shape[0] - 2, E.shape[1]
+    n = np.asarray(normals_cam, dtype=np.float64)
+    lon = np.arctan2(n[:, 0], n[:, 2])
+    lat = np.arcsin(np.clip(-n[:, 1], -1.0, 1.0))
+    y = (0.5 - lat / np.pi) * h - 0.5  # texel-centre row coordinate, -0.5 (north pole) .. h - 0.5 (south)
+    # Row nodes: pole at y = -0.5, texel rows at 0 .. h-1, pole at h - 0.5 -> stored rows 0, 1..h, h+1.
+    lo = np.clip(np.floor(y), -1, h - 1).astype(np.int64)
+    step = np.where((lo == -1) | (lo == h - 1), 0.5, 1.0)
+    base = np.where(lo == -1, -0.5, lo.astype(np.float64))
+    fy = np.clip((y - base) / step, 0.0, 1.0)[:, None]
+    r0, r1 = lo + 1, lo + 2
+    x = (lon * (0.5 / np.pi) + 0.5) * W - 0.5
+    x0 = np.floor(x)
+    fx = (x - x0)[:, None]
+    xa = np.mod(x0.astype(np.int64), W)
+    xb = np.mod(xa + 1, W)
+    top = E[r0, xa] * (1 - fx) + E[r0, xb] * fx
+    bot = E[r1, xa] * (1 - fx) + E[r1, xb] * fx
+    return top * (1 - fy) + bot * fy
+
+
 def sky_irradiance(envmap: np.ndarray, normal: np.ndarray) -> np.ndarray:
     """Irradiance (3,) on a surface with unit camera-frame ``normal`` (3,), from the cached :func:`irradiance_map`."""
-    from .shade import lookup_equirect
-
     n = np.asarray(normal, dtype=np.float64)
-    return lookup_equirect(irradiance_map(envmap), (n / np.linalg.norm(n))[None])[0]
-
+    return lookup_irradiance(irradiance_map(envmap), (n / np.linalg.norm(n))[None])[0]
 
 
 _PYRAMID_CACHE: "OrderedDict[int, tuple[np.ndarray, list[np.ndarray]]]" = OrderedDict()

@@ -17,10 +17,12 @@ class RenderSettings:
         brdf_samples: BRDF (GGX / cosine) samples per shading sample (MIS).
         max_glass_depth: how many surfaces a camera ray may pass through (glass) before it stops.
         shadow_factor: the shadow ratio map is computed every ``shadow_factor`` pixels and upsampled.
-        shadow_sky_dirs: Fibonacci-lattice sky directions per shadow pixel.
-        shadow_sun_dirs: sun-disc directions per shadow pixel (penumbra).
+        shadow_sky_dirs: sky directions per shadow cell (a Fibonacci spiral in the cone towards the object).
+        shadow_sun_dirs: sun-disc directions per pixel at the sun shadow's edge (penumbra, anti-aliasing).
         shadow_max_length_m: longest sun shadow considered (low suns), metres along the ground.
         denoise: smooth the object's Monte Carlo noise with a G-buffer-guided cross-bilateral filter.
+        match_camera: blur the object and add noise like the input image's (estimated from it, see
+            :mod:`streetaug.augment.render.camera_effects`); off by default.
     """
 
     aa_grid: int = 1
@@ -30,10 +32,11 @@ class RenderSettings:
     brdf_samples: int = 2
     max_glass_depth: int = 3
     shadow_factor: int = 4
-    shadow_sky_dirs: int = 64
+    shadow_sky_dirs: int = 24
     shadow_sun_dirs: int = 8
     shadow_max_length_m: float = 30.0
     denoise: bool = True
+    match_camera: bool = False
 
     def __post_init__(self) -> None:
         for name in ("aa_grid", "edge_grid", "shadow_factor", "shadow_sky_dirs", "shadow_sun_dirs", "max_glass_depth"):
@@ -48,8 +51,8 @@ class RenderSettings:
 
 QUALITY_PRESETS: dict[str, RenderSettings] = {
     "draft": RenderSettings(aa_grid=1, edge_grid=3, sun_samples=1, env_samples=1, brdf_samples=1,
-                            max_glass_depth=2, shadow_factor=6, shadow_sky_dirs=32, shadow_sun_dirs=4),
+                            max_glass_depth=2, shadow_factor=6, shadow_sky_dirs=12, shadow_sun_dirs=4),
     "default": RenderSettings(),
     "high": RenderSettings(aa_grid=2, edge_grid=6, sun_samples=2, env_samples=2, brdf_samples=4,
-                           max_glass_depth=4, shadow_factor=2, shadow_sky_dirs=128, shadow_sun_dirs=16),
+                           max_glass_depth=4, shadow_factor=3, shadow_sky_dirs=32, shadow_sun_dirs=16),
 }

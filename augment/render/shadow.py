@@ -5,16 +5,23 @@ the depth is unknown), normal = the ground normal, Lambertian.  With ``E = E_sun
 the unoccluded irradiance (the sky part integrated exactly from the map, the same for every point
 since the light is distant)::
 
-    S = 1 - [ (1 - V_sun) E_sun cos  +  sum_{blocked k} (L_k - L_amb) cos_k 2pi/N ] / E
+    S = 1 - [ (1 - V_sun) E_sun cos  +  sum_{blocked k} (L_k - L_hit,k) cos_k w_k ] / E
 
-``V_sun`` is the visible fraction of jittered sun-disc directions (penumbra), the sum runs over the
-blocked directions of an N-direction Fibonacci lattice on the upper hemisphere (randomly rotated
-per pixel, so banding turns into noise that the smoothing removes), and blocked rays see ``L_amb``,
-the radiance the car itself sends back (:func:`car_ambient_radiance`) instead of the paper's 0.1.
+* Sun: ``V_sun`` is traced at full resolution where the object's box, projected along the sun onto the
+  ground, can fall -- one ray per pixel to the sun's centre, then ``shadow_sun_dirs`` jittered rays
+  (sub-pixel position x disc direction) in the pixels at the shadow's edge, so the shadow is as sharp
+  as the sun disc makes it and anti-aliased.
+* Sky: every ``shadow_factor`` pixels, ``shadow_sky_dirs`` directions in the cone around the object's
+  bounding sphere (the only directions it can block; the whole upper hemisphere under it), each
+  standing for ``w_k = cone solid angle / N``; smoothed and upsampled.
+* A blocked ray sees the object's own surface, ``L_hit`` from the one-bounce model of
+  :mod:`.bounce` (instead of the paper's constant 0.1): ``A + B S_foot`` with ``S_foot`` the mean
+  ratio under the object, solved in closed form from the map itself.
 
 The map is computed only in the image box that can be non-trivial -- the footprint grown by a
 sky-occlusion radius plus the object's top corners projected along the sun onto the ground (clamped
-to ``shadow_max_length_m``) -- every ``shadow_factor`` pixels, then smoothed and upsampled.
+to ``shadow_max_length_m``).  :class:`GroundShadow` lets the foreground renderer look the map up for
+rays that leave the object downwards.
 """
 
 from __future__ import annotations
@@ -26,9 +33,10 @@ import numpy as np
 
 from ..conventions import luminance, project_points
 from ..lighting.light import DistantLight
-from .brdf import to_world
+from .bounce import BounceLight
+from .brdf import row_norm, to_world
 from .geometry import PreparedAsset
-from .sampling import fibonacci_hemisphere, sample_cone, sky_irradiance
+from .sampling import GOLDEN_ANGLE, sample_cone, sky_irradiance
 from .settings import RenderSettings
 from .shade import lookup_equirect
 
@@ -45,12 +53,60 @@ class ShadowMap:
         x0, y0: top-left pixel of the box.
         ratio_rgb: (h, w, 3) float32 per-channel ratio S in [0, 1], 1 = unchanged.
         stats: rays cast, pixels evaluated.
+        foot_ratio: (3,) mean ratio on the ground under the object (used by the bounce model).
     """
 
     x0: int
     y0: int
     ratio_rgb: np.ndarray
     stats: dict = field(default_factory=dict)
+    foot_ratio: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
+class GroundShadow:
+    """The ratio map as seen from the object: how shadowed the ground is where a ray from the object lands.
+
+    Attributes:
+        shadow: the ratio map.
+        K: (3, 3) intrinsics; T_cam_from_object: (4, 4) pose.
+        up_obj: (3,) unit ground normal in the object frame (the ground plane passes through the origin).
+    """
+
+    shadow: ShadowMap
+    K: np.ndarray
+    T_cam_from_object: np.ndarray
+    up_obj: np.ndarray
+
+    def ratio_along(self, origins_obj: np.ndarray, dirs_obj: np.ndarray) -> np.ndarray:
+        """(N, 3) ratio S at the ground point each ray (object frame, going down) lands on; 1 off the map."""
+        out = np.ones((len(origins_obj), 3), np.float64)
+        down = dirs_obj @ self.up_obj
+        height = origins_obj @ self.up_obj
+        ok = np.flatnonzero((down < -1e-6) & (height > 0))
+        if len(ok) == 0:
+            return out
+        g = origins_obj[ok] + (height[ok] / -down[ok])[:, None] * dirs_obj[ok]
+        R, t = self.T_cam_from_object[:3, :3], self.T_cam_from_object[:3, 3]
+        g_cam = g @ R.T + t
+        front = g_cam[:, 2] > 1e-3
+        uvw = g_cam @ self.K.T
+        with np.errstate(divide="ignore", invalid="ignore"):
+            u = uvw[:, 0] / uvw[:, 2] - self.shadow.x0
+            v = uvw[:, 1] / uvw[:, 2] - self.shadow.y0
+        h, w = self.shadow.ratio_rgb.shape[:2]
+        inside = front & (u >= 0) & (u <= w - 1) & (v >= 0) & (v <= h - 1)
+        sel = ok[inside]
+        if len(sel):
+            uu, vv = u[inside], v[inside]
+            xa = np.minimum(np.floor(uu).astype(np.int64), w - 2) if w > 1 else np.zeros(len(uu), np.int64)
+            ya = np.minimum(np.floor(vv).astype(np.int64), h - 2) if h > 1 else np.zeros(len(vv), np.int64)
+            fx = np.clip(uu - xa, 0.0, 1.0)[:, None]
+            fy = np.clip(vv - ya, 0.0, 1.0)[:, None]
+            r = self.shadow.ratio_rgb
+            xb, yb = np.minimum(xa + 1, w - 1), np.minimum(ya + 1, h - 1)
+            out[sel] = (r[ya, xa] * (1 - fx) + r[ya, xb] * fx) * (1 - fy) + (r[yb, xa] * (1 - fx) + r[yb, xb] * fx) * fy
+        return out
 
 
 def car_ambient_radiance(light: DistantLight, mean_albedo: float, up_cam: np.ndarray) -> np.ndarray:
@@ -101,118 +157,266 @@ def shadow_pixel_box(K: np.ndarray, width: int, height: int, T_cam_from_object: 
 
 def render_shadow(K: np.ndarray, width: int, height: int, depth_m: np.ndarray, light: DistantLight, prep: PreparedAsset,
                   T_cam_from_object: np.ndarray, ground_normal_cam: np.ndarray, settings: RenderSettings,
-                  rng: np.random.Generator, ambient_rgb: np.ndarray) -> ShadowMap | None:
+                  rng: np.random.Generator, bounce: BounceLight) -> ShadowMap | None:
     """The ratio map S over :func:`shadow_pixel_box` (see module docstring); None if there is nothing to do.
 
     Args:
         depth_m: (H, W) scene camera-z depth in metres, inf/nan/<= 0 where unknown.
         ground_normal_cam: (3,) unit normal of the ground (pointing up), camera frame; the ground plane
             passes through the object's origin.
-        ambient_rgb: (3,) radiance of rays blocked by the object.
+        bounce: radiance model of the object's surfaces along blocked rays.
     """
     box = shadow_pixel_box(K, width, height, T_cam_from_object, prep, light, settings)
     if box is None:
         return None
     x0, y0, x1, y1 = box
-    f = settings.shadow_factor
-    wl, hl = -(-(x1 - x0) // f), -(-(y1 - y0) // f)
-    gx = x0 + f * np.arange(wl) + (f - 1) / 2.0
-    gy = y0 + f * np.arange(hl) + (f - 1) / 2.0
-    GX, GY = np.meshgrid(gx, gy)
-    uv = np.stack([GX.ravel(), GY.ravel()], axis=1)
-    ix = np.clip(np.round(uv[:, 0]).astype(int), 0, width - 1)
-    iy = np.clip(np.round(uv[:, 1]).astype(int), 0, height - 1)
-    d = np.asarray(depth_m, dtype=np.float64)[iy, ix]
     n_cam = np.asarray(ground_normal_cam, dtype=np.float64)
     n_cam = n_cam / np.linalg.norm(n_cam)
-    origin_cam = T_cam_from_object[:3, 3]
-    # Ground-plane fallback where the depth is unknown.
-    Kinv = np.linalg.inv(K)
-    rays = np.einsum("ij,kj->ik", np.concatenate([uv, np.ones((len(uv), 1))], axis=1), Kinv)  # z = 1
-    denom = np.einsum("ij,j->i", rays, n_cam)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        z_plane = (origin_cam @ n_cam) / denom
-    z_plane = np.where((denom < -1e-9) & (z_plane > 0), z_plane, np.inf)  # rays going down hit the ground
-    z = np.where(np.isfinite(d) & (d > 0), d, z_plane)
-    valid = np.isfinite(z)
-    ratio = np.ones((len(uv), 3))
+    geo = _Ground(K, np.asarray(depth_m), n_cam, T_cam_from_object)
     E_sky = sky_irradiance(light.envmap, n_cam)
     sun = light.sun
     cos_sun = 0.0 if sun is None else float(max(np.dot(sun.direction, n_cam), 0.0))
     E_sun = np.zeros(3) if sun is None else np.asarray(sun.irradiance_rgb, dtype=np.float64) * cos_sun
     E = E_sky + E_sun
-    stats = {"rays": {}, "pixels": int(valid.sum()), "grid": [int(hl), int(wl)], "box": [x0, y0, x1, y1]}
-    if valid.any() and luminance(E) > 0:
-        per_cell = settings.shadow_sky_dirs + (settings.shadow_sun_dirs if cos_sun > 0 else 0)
-        chunk = max(1, SHADOW_CHUNK_RAYS // per_cell)
-        all_sel = np.flatnonzero(valid)
-        for a in range(0, len(all_sel), chunk):
-            sel = all_sel[a : a + chunk]
-            ratio[sel] = _ratio_cells(sel, uv, rays, z, depth_m, Kinv, width, height, f, n_cam, origin_cam,
-                                      T_cam_from_object, light, prep, settings, rng, ambient_rgb, E, E_sun, cos_sun, stats)
-    low = ratio.reshape(hl, wl, 3).astype(np.float32)
-    if min(hl, wl) >= 3:
-        low = cv2.GaussianBlur(low, (3, 3), 0.8, borderType=cv2.BORDER_REPLICATE)
-    full = cv2.resize(low, (wl * f, hl * f), interpolation=cv2.INTER_LINEAR)[: y1 - y0, : x1 - x0]
-    full = np.where(full > 1.0 - 1e-4, 1.0, full).astype(np.float32)
-    return ShadowMap(x0=x0, y0=y0, ratio_rgb=full, stats=stats)
+    stats: dict = {"rays": {}, "box": [x0, y0, x1, y1]}
+    h, w = y1 - y0, x1 - x0
+    if luminance(E) <= 0:
+        return ShadowMap(x0=x0, y0=y0, ratio_rgb=np.ones((h, w, 3), np.float32), stats=stats)
+    E_safe = np.where(E > 0, E, np.inf)
 
+    # -- sky: every shadow_factor pixels, smoothed and upsampled.
+    f = settings.shadow_factor
+    wl, hl = -(-w // f), -(-h // f)
+    gx = x0 + f * np.arange(wl) + (f - 1) / 2.0
+    gy = y0 + f * np.arange(hl) + (f - 1) / 2.0
+    GX, GY = np.meshgrid(gx, gy)
+    uv = np.stack([GX.ravel(), GY.ravel()], axis=1)
+    p_obj, valid = geo.points_obj(uv)
+    D0 = np.zeros((len(uv), 3))
+    C = np.zeros((len(uv), 3))
+    per_cell = settings.shadow_sky_dirs
+    chunk = max(1, SHADOW_CHUNK_RAYS // per_cell)
+    cells = np.flatnonzero(valid)
+    for a in range(0, len(cells), chunk):
+        sel = cells[a : a + chunk]
+        D0[sel], C[sel] = _sky_deficit(p_obj[sel], geo.n_obj, light, prep, bounce, settings.shadow_sky_dirs, geo.R, rng, stats)
+    stats["grid"] = [int(hl), int(wl)]
+    stats["pixels"] = int(valid.sum())
 
-def _ratio_cells(sel, uv, rays, z, depth_m, Kinv, width, height, f, n_cam, origin_cam, T_cam_from_object, light,
-                 prep, settings, rng, ambient_rgb, E, E_sun, cos_sun, stats) -> np.ndarray:
-    """Ratio (len(sel), 3) of the low-resolution cells ``sel`` (one memory-bounded chunk of :func:`render_shadow`)."""
-    sun = light.sun
-    R = T_cam_from_object[:3, :3]
-    p_cam = rays[sel] * z[sel, None]
-    p_obj = np.einsum("ij,jk->ik", p_cam - origin_cam, R)  # R^T (p - t)
-    n_obj = R.T @ n_cam
-    P = len(sel)
-    org = p_obj + RAY_EPS_M * n_obj
-    deficit = np.zeros((P, 3))
-    # -- sun: jittered directions in the disc, from jittered points over each cell's footprint
-    #    (a box filter of the sharp sun-shadow edge: no staircase after upsampling).
+    def upsample(a: np.ndarray) -> np.ndarray:
+        low = (a / E_safe).reshape(hl, wl, 3).astype(np.float32)
+        if min(hl, wl) >= 3:
+            low = cv2.GaussianBlur(low, (3, 3), 0.8, borderType=cv2.BORDER_REPLICATE)
+        return cv2.resize(low, (wl * f, hl * f), interpolation=cv2.INTER_LINEAR)[:h, :w]
+
+    sky_def, bounce_gain = upsample(D0), upsample(C)
+
+    # Where the sky occlusion changes fast between cells (the edge of the ground under the object),
+    # the upsampled map is too soft: evaluate those cells' pixels at full resolution.
+    if f > 1:
+        lum = (D0 / E_safe) @ np.array([0.2126, 0.7152, 0.0722])
+        low = np.where(valid, lum, 0.0).reshape(hl, wl).astype(np.float32)
+        k3 = np.ones((3, 3), np.uint8)
+        jump = cv2.dilate(low, k3) - cv2.erode(low, k3, borderType=cv2.BORDER_REPLICATE)
+        sharp = np.repeat(np.repeat(jump > SKY_REFINE_JUMP, f, axis=0), f, axis=1)[:h, :w]
+        ys, xs = np.nonzero(sharp)
+        if len(ys):
+            uv_f = np.stack([xs + x0, ys + y0], axis=1).astype(np.float64)
+            p_f, valid_f = geo.points_obj(uv_f)
+            sel = np.flatnonzero(valid_f)
+            for a in range(0, len(sel), chunk):
+                part = sel[a : a + chunk]
+                d0, c = _sky_deficit(p_f[part], geo.n_obj, light, prep, bounce, per_cell, geo.R, rng, stats)
+                sky_def[ys[part], xs[part]] = d0 / E_safe
+                bounce_gain[ys[part], xs[part]] = c / E_safe
+            for a in (sky_def, bounce_gain):  # per-pixel noise -> a light blur inside the refined band
+                a[sharp] = cv2.GaussianBlur(a, (5, 5), 1.2, borderType=cv2.BORDER_REPLICATE)[sharp]
+            stats["sky_refined_pixels"] = int(len(sel))
+
+    # -- sun: full resolution where the object's shadow can fall, refined at the shadow's edges.
+    sun_def = np.zeros((h, w, 3), np.float32)
     if cos_sun > 0:
-        ns = settings.shadow_sun_dirs
-        sun_obj = R.T @ np.asarray(sun.direction, dtype=np.float64)
-        dirs = sample_cone(sun_obj, sun.half_angle_rad, rng.random(P * ns), rng.random(P * ns))
-        dirs = np.where((np.einsum("ij,j->i", dirs, n_obj) > 0)[:, None], dirs, sun_obj)
-        sub_uv = np.repeat(uv[sel], ns, axis=0) + (rng.random((P * ns, 2)) - 0.5) * f
-        sub_rays = np.einsum("ij,kj->ik", np.concatenate([sub_uv, np.ones((len(sub_uv), 1))], axis=1), Kinv)
-        sx = np.clip(np.round(sub_uv[:, 0]).astype(int), 0, width - 1)
-        sy = np.clip(np.round(sub_uv[:, 1]).astype(int), 0, height - 1)
-        sd = np.asarray(depth_m[sy, sx], dtype=np.float64)
+        blocked = _sun_blocked(geo, box, light, prep, settings, rng, stats)
+        sun_def = (blocked[..., None] * (E_sun / E_safe)[None, None]).astype(np.float32)
+
+    # -- the ground under the object: its mean ratio closes the loop of the bounce model.
+    foot = geo.footprint(uv, valid, prep)
+    if foot.any():
+        cells_yx = (np.clip(np.round(uv[foot, 1] - y0).astype(int), 0, h - 1), np.clip(np.round(uv[foot, 0] - x0).astype(int), 0, w - 1))
+        s0 = 1.0 - (D0[foot] / E_safe).mean(axis=0) - sun_def[cells_yx].mean(axis=0)
+        c = (C[foot] / E_safe).mean(axis=0)
+        s_foot = np.clip(s0 / np.maximum(1.0 - c, 1e-3), 0.0, 1.0)
+    else:
+        s_foot = np.full(3, FOOT_RATIO_FALLBACK)
+    stats["foot_ratio"] = s_foot.tolist()
+    ratio = np.clip(1.0 - sky_def - sun_def + bounce_gain * s_foot.astype(np.float32)[None, None], 0.0, 1.0)
+    ratio = np.where(ratio > 1.0 - 1e-4, 1.0, ratio).astype(np.float32)
+    return ShadowMap(x0=x0, y0=y0, ratio_rgb=ratio, stats=stats, foot_ratio=s_foot)
+
+
+FOOT_RATIO_FALLBACK = 0.15  # mean shadow ratio under a car when its footprint is not in view
+SKY_REFINE_JUMP = 0.08  # sky-occlusion change (fraction of E) between neighbouring cells that asks for full resolution
+
+
+class _Ground:
+    """Ground points seen by pixels: from the depth map where known, else on the ground plane through the object."""
+
+    def __init__(self, K: np.ndarray, depth_m: np.ndarray, n_cam: np.ndarray, T_cam_from_object: np.ndarray) -> None:
+        self.K = np.asarray(K, dtype=np.float64)
+        self.Kinv = np.linalg.inv(self.K)
+        self.depth = depth_m
+        self.n_cam = n_cam
+        self.R = T_cam_from_object[:3, :3]
+        self.t = T_cam_from_object[:3, 3]
+        self.n_obj = self.R.T @ n_cam
+
+    def points_obj(self, uv: np.ndarray, depth_uv: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Object-frame ground points (N, 3) seen through pixel positions uv (N, 2), and which are valid (N,).
+
+        The depth is read at ``depth_uv`` (default: uv rounded), so sub-pixel positions share their pixel's depth.
+        """
+        H, W = self.depth.shape
+        src = uv if depth_uv is None else depth_uv
+        ix = np.clip(np.round(src[:, 0]).astype(int), 0, W - 1)
+        iy = np.clip(np.round(src[:, 1]).astype(int), 0, H - 1)
+        d = np.asarray(self.depth[iy, ix], dtype=np.float64)
+        rays = np.concatenate([uv, np.ones((len(uv), 1))], axis=1) @ self.Kinv.T  # z = 1
+        denom = rays @ self.n_cam
         with np.errstate(divide="ignore", invalid="ignore"):
-            sz_plane = (origin_cam @ n_cam) / np.einsum("ij,j->i", sub_rays, n_cam)
-        sz = np.where(np.isfinite(sd) & (sd > 0), sd, sz_plane)
-        sz = np.where(np.isfinite(sz) & (sz > 0), sz, np.repeat(z[sel], ns))  # fall back to the cell centre
-        sub_org = np.einsum("ij,jk->ik", sub_rays * sz[:, None] - origin_cam, R) + RAY_EPS_M * n_obj
-        blocked = prep.scene.occluded(sub_org, dirs)
-        stats["rays"]["shadow_sun"] = stats["rays"].get("shadow_sun", 0) + int(P * ns)
-        deficit += blocked.reshape(P, ns).mean(axis=1)[:, None] * E_sun[None]
-    # -- sky: randomly rotated Fibonacci lattice around the ground normal.
-    N = settings.shadow_sky_dirs
-    lattice = fibonacci_hemisphere(N)  # (N, 3) z-up
-    phi = rng.random(P) * 2 * np.pi
-    c, s_ = np.cos(phi)[:, None], np.sin(phi)[:, None]
-    lx = c * lattice[None, :, 0] - s_ * lattice[None, :, 1]
-    ly = s_ * lattice[None, :, 0] + c * lattice[None, :, 1]
-    local = np.stack([lx, ly, np.broadcast_to(lattice[None, :, 2], lx.shape)], axis=2).reshape(-1, 3)
-    dirs_obj = to_world(local, n_obj)
-    blocked = prep.scene.occluded(np.repeat(org, N, axis=0), dirs_obj)
-    stats["rays"]["shadow_sky"] = stats["rays"].get("shadow_sky", 0) + int(P * N)
+            z_plane = (self.t @ self.n_cam) / denom
+        z_plane = np.where((denom < -1e-9) & (z_plane > 0), z_plane, np.inf)  # rays going down hit the ground
+        z = np.where(np.isfinite(d) & (d > 0), d, z_plane)
+        valid = np.isfinite(z)
+        p_cam = rays * np.where(valid, z, 0.0)[:, None]
+        return (p_cam - self.t) @ self.R, valid
+
+    def footprint(self, uv: np.ndarray, valid: np.ndarray, prep: PreparedAsset) -> np.ndarray:
+        """(N,) bool: valid ground points under the object's box (object-frame x, y inside its extent)."""
+        p, _ = self.points_obj(uv)
+        V = prep.asset.vertices
+        lo, hi = V.min(axis=0), V.max(axis=0)
+        return valid & np.all((p[:, :2] >= lo[:2]) & (p[:, :2] <= hi[:2]), axis=1)
+
+
+def _sky_deficit(p_obj, n_obj, light, prep, bounce, n_dirs, R, rng, stats) -> tuple[np.ndarray, np.ndarray]:
+    """Sky light the object takes from ground points p_obj (P, 3): (D0, C), each (P, 3), the deficit being
+    ``D0 - C S_foot`` (irradiance units).
+
+    Only directions towards the object can be blocked: each point samples ``n_dirs`` directions
+    uniformly (a randomly rotated Fibonacci spiral) in the cone around the object's bounding sphere,
+    or in the whole upper hemisphere when it is inside the sphere; a direction stands for
+    ``cone solid angle / n_dirs`` and counts with its cosine to the ground normal.
+    """
+    P = len(p_obj)
+    org = p_obj + RAY_EPS_M * n_obj
+    lo, hi = prep.asset.vertices.min(axis=0), prep.asset.vertices.max(axis=0)
+    centre, radius = (lo + hi) / 2.0, 0.5 * float(np.linalg.norm(hi - lo)) * 1.001
+    to_c = centre[None] - org
+    dist = row_norm(to_c)
+    inside = dist <= radius
+    axis = np.where(inside[:, None], n_obj[None], to_c / np.maximum(dist, 1e-9)[:, None])
+    cos_max = np.where(inside, 0.0, np.sqrt(np.clip(1.0 - (radius / np.maximum(dist, 1e-9)) ** 2, 0.0, 1.0)))
+    k = (np.arange(n_dirs) + 0.5) / n_dirs
+    z = 1.0 - k[None] * (1.0 - cos_max)[:, None]  # (P, N) uniform in solid angle inside the cap
+    phi = GOLDEN_ANGLE * np.arange(n_dirs)[None] + rng.random(P)[:, None] * 2 * np.pi
+    rr = np.sqrt(np.clip(1.0 - z * z, 0.0, 1.0))
+    local = np.stack([rr * np.cos(phi), rr * np.sin(phi), z], axis=2).reshape(-1, 3)
+    dirs_all = to_world(local, np.repeat(axis, n_dirs, axis=0))
+    cos_n = dirs_all @ n_obj
+    weight_all = np.repeat(2 * np.pi * (1.0 - cos_max) / n_dirs, n_dirs) * np.maximum(cos_n, 0.0)
+    live = np.flatnonzero(cos_n > 1e-6)  # directions under the ground see the ground, not the sky
+    dirs_obj = dirs_all[live]
+    origins = np.repeat(org, n_dirs, axis=0)[live]
+    blocked = prep.scene.occluded(origins, dirs_obj)
+    stats["rays"]["shadow_sky"] = stats["rays"].get("shadow_sky", 0) + int(len(live))
+    D0 = np.zeros((P, 3))
+    C = np.zeros((P, 3))
     bi = np.flatnonzero(blocked)
-    if len(bi):
-        # Each lattice direction stands for a 2 pi / N sr cell: use the sky averaged over cells of
-        # that size (a box-filtered map), not a point sample of a possibly spiky panorama.
-        L = lookup_equirect(_cell_filtered_env(light.envmap, N), np.einsum("ij,kj->ik", dirs_obj[bi], R))
-        w = local[bi, 2] * (2 * np.pi / N)
-        contrib = (L - ambient_rgb[None]) * w[:, None]
-        pix = bi // N
-        for k in range(3):
-            deficit[:, k] += np.bincount(pix, weights=contrib[:, k], minlength=P)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        r = 1.0 - deficit / np.where(E > 0, E, np.inf)[None]
-    return np.clip(r, 0.0, 1.0)
+    if len(bi) == 0:
+        return D0, C
+    hits = prep.scene.intersect(origins[bi], dirs_obj[bi])
+    stats["rays"]["shadow_bounce"] = stats["rays"].get("shadow_bounce", 0) + int(len(bi))
+    ok = hits.hit
+    bi, face = bi[ok], hits.face[ok]
+    A, B = bounce.radiance(face, dirs_obj[bi])
+    # Each direction stands for a cell of the cone: use the sky averaged over cells of about that size
+    # (a box-filtered map), not a point sample of a possibly spiky panorama.
+    L = lookup_equirect(_cell_filtered_env(light.envmap, n_dirs), dirs_obj[bi] @ R.T)
+    wgt = weight_all[live[bi]]
+    pix = live[bi] // n_dirs
+    for k in range(3):
+        D0[:, k] = np.bincount(pix, weights=(L[:, k] - A[:, k]) * wgt, minlength=P)
+        C[:, k] = np.bincount(pix, weights=B[:, k] * wgt, minlength=P)
+    return D0, C
+
+
+def _sun_polygon_mask(geo: _Ground, box, light: DistantLight, prep: PreparedAsset, K: np.ndarray) -> np.ndarray | None:
+    """(h, w) bool over ``box``: pixels the object's box can shade from the sun (its box projected along
+    the sun onto the ground plane), or None when that projection reaches behind the camera."""
+    x0, y0, x1, y1 = box
+    s_obj = geo.R.T @ np.asarray(light.sun.direction, dtype=np.float64)
+    n = geo.n_obj
+    corners = prep.box_corners_object
+    along = (corners @ n) / max(float(s_obj @ n), 1e-6)
+    shadow_pts = corners - along[:, None] * s_obj[None]  # on the plane n . p = 0
+    pts_cam = np.concatenate([corners, shadow_pts]) @ geo.R.T + geo.t
+    if np.any(pts_cam[:, 2] < 0.3):
+        return None
+    uv, _ = project_points(K, pts_cam)
+    hull = cv2.convexHull(np.round((uv - [x0, y0]) * 4).astype(np.int32))  # 2 fractional bits
+    mask = np.zeros((y1 - y0, x1 - x0), np.uint8)
+    cv2.fillConvexPoly(mask, hull, 1, lineType=cv2.LINE_8, shift=2)
+    return cv2.dilate(mask, np.ones((5, 5), np.uint8)) > 0
+
+
+def _sun_blocked(geo: _Ground, box, light: DistantLight, prep: PreparedAsset, settings: RenderSettings,
+                 rng: np.random.Generator, stats: dict) -> np.ndarray:
+    """(h, w) float32 fraction of the sun disc the object hides from each pixel's ground point.
+
+    One ray per pixel towards the sun's centre where the object can cast its shadow, then
+    ``shadow_sun_dirs`` jittered rays (sub-pixel position x disc direction) in the pixels at the
+    shadow's edge (the penumbra and the anti-aliased boundary).
+    """
+    x0, y0, x1, y1 = box
+    h, w = y1 - y0, x1 - x0
+    sun = light.sun
+    s_obj = geo.R.T @ np.asarray(sun.direction, dtype=np.float64)
+    mask = _sun_polygon_mask(geo, box, light, prep, geo.K)
+    if mask is None:
+        mask = np.ones((h, w), bool)
+    ys, xs = np.nonzero(mask)
+    uv = np.stack([xs + x0, ys + y0], axis=1).astype(np.float64)
+    p, valid = geo.points_obj(uv)
+    blocked = np.zeros((h, w), np.float32)
+    if not valid.any():
+        return blocked
+    ys, xs, p = ys[valid], xs[valid], p[valid]
+    org = p + RAY_EPS_M * geo.n_obj
+    hit0 = prep.scene.occluded(org, np.broadcast_to(s_obj, org.shape))
+    stats["rays"]["shadow_sun"] = stats["rays"].get("shadow_sun", 0) + int(len(org))
+    blocked[ys, xs] = hit0
+    # Edge pixels: the 3 x 3 neighbourhood is not uniform.
+    b8 = blocked.astype(np.uint8)
+    k3 = np.ones((3, 3), np.uint8)
+    edge = (cv2.dilate(b8, k3) != cv2.erode(b8, k3, borderType=cv2.BORDER_REPLICATE)) & mask
+    ey, ex = np.nonzero(edge)
+    ns = settings.shadow_sun_dirs
+    if len(ey) and ns > 1:
+        n = int(np.ceil(np.sqrt(ns)))
+        g = (np.arange(n) + 0.5) / n - 0.5
+        offs = np.stack(np.meshgrid(g, g), axis=-1).reshape(-1, 2)[:ns]  # stratified sub-pixel grid
+        E_n = len(ey)
+        pix_uv = np.stack([ex + x0, ey + y0], axis=1).astype(np.float64)
+        sub_uv = (pix_uv[:, None, :] + offs[None] + (rng.random((E_n, len(offs), 2)) - 0.5) / n).reshape(-1, 2)
+        depth_uv = np.repeat(pix_uv, len(offs), axis=0)
+        sp, svalid = geo.points_obj(sub_uv, depth_uv)
+        dirs = sample_cone(s_obj, sun.half_angle_rad, rng.random(len(sub_uv)), rng.random(len(sub_uv)))
+        dirs = np.where((dirs @ geo.n_obj > 0)[:, None], dirs, s_obj)
+        hit = prep.scene.occluded(sp + RAY_EPS_M * geo.n_obj, dirs) & svalid
+        stats["rays"]["shadow_sun"] += int(len(sub_uv))
+        blocked[ey, ex] = hit.reshape(E_n, len(offs)).mean(axis=1)
+    stats["sun_edge_pixels"] = int(len(ey))
+    return blocked
 
 
 def _cell_filtered_env(envmap: np.ndarray, n_dirs: int) -> np.ndarray:

@@ -1,0 +1,132 @@
+"""Blur / noise estimation of an image and matching the inserted object to it."""
+
+import dataclasses
+
+import cv2
+import numpy as np
+import pytest
+
+from streetaug.augment.io import InputError
+from streetaug.augment.render.camera_effects import (
+    CameraEffects,
+    add_object_noise,
+    blur_object_layer,
+    estimate_blur_sigma,
+    estimate_camera_effects,
+    estimate_noise_sigma,
+)
+
+
+def _sharp(seed: int = 0, width: int = 320, height: int = 180, ss: int = 8) -> np.ndarray:
+    """Random polygons with ideally pixel-integrated edges, float32 in [0, 1]."""
+    rng = np.random.default_rng(seed)
+    big = np.empty((height * ss, width * ss, 3), np.uint8)
+    big[:] = rng.integers(60, 200, 3)
+    for _ in range(25):
+        n = int(rng.integers(3, 7))
+        centre = rng.random(2) * [width * ss, height * ss]
+        r = rng.uniform(15, 60) * ss
+        ang = np.sort(rng.random(n)) * 2 * np.pi
+        pts = np.stack([centre[0] + r * np.cos(ang), centre[1] + r * np.sin(ang)], 1).astype(np.int32)
+        cv2.fillPoly(big, [pts], rng.integers(0, 256, 3).tolist())
+    return cv2.resize(big, (width, height), interpolation=cv2.INTER_AREA).astype(np.float32) / 255.0
+
+
+def _degrade(img, blur, noise_levels, seed=1):
+    out = cv2.GaussianBlur(img, (0, 0), blur) if blur > 0 else img
+    out = out + np.random.default_rng(seed).normal(0, noise_levels / 255.0, out.shape).astype(np.float32)
+    return np.clip(np.round(out * 255), 0, 255).astype(np.uint8)
+
+
+@pytest.fixture(scope="module")
+def sharp():
+    return _sharp()
+
+
+@pytest.mark.parametrize("blur,noise", [(0.0, 0.0), (1.0, 0.0), (2.0, 0.0), (1.0, 3.0), (1.5, 6.0)])
+def test_estimates_known_blur_and_noise(sharp, blur, noise):
+    e = estimate_camera_effects(_degrade(sharp, blur, noise))
+    assert isinstance(e, CameraEffects) and e.edge_pixels > 100
+    assert abs(e.blur_sigma_px - blur) < 0.25, (e.blur_sigma_px, blur)
+    assert abs(255 * e.noise_sigma - noise) < 0.1 * noise + 0.3, (255 * e.noise_sigma, noise)
+
+
+def test_noise_estimate_ignores_edges(sharp):
+    """A sharp image full of edges and no noise: the noise estimate stays at (near) zero."""
+    assert 255 * estimate_noise_sigma(_degrade(sharp, 0.0, 0.0)) < 0.3
+
+
+def test_estimates_restricted_to_a_mask(sharp):
+    img = _degrade(sharp, 0.0, 0.0)
+    noisy = _degrade(sharp, 0.0, 8.0)
+    half = np.zeros(img.shape[:2], bool)
+    half[:, : img.shape[1] // 2] = True
+    mixed = np.where(half[..., None], noisy, img)
+    assert abs(255 * estimate_noise_sigma(mixed, half) - 8.0) < 1.0
+    assert 255 * estimate_noise_sigma(mixed, ~half) < 0.5
+    blurred = _degrade(sharp, 2.0, 0.0)
+    mixed = np.where(half[..., None], blurred, img)
+    b_left, _ = estimate_blur_sigma(mixed, mask=half)
+    b_right, _ = estimate_blur_sigma(mixed, mask=~half)
+    assert b_left > 1.5 and b_right < 0.5
+
+
+def test_flat_image_has_no_edges():
+    blur, n = estimate_blur_sigma(np.full((64, 64, 3), 120, np.uint8))
+    assert blur == 0.0 and n == 0
+
+
+def test_bad_image():
+    with pytest.raises(InputError, match="uint8"):
+        estimate_camera_effects(np.zeros((8, 8, 3), np.float32))
+
+
+def test_blur_keeps_premultiplied_layer_consistent():
+    rad = np.zeros((40, 40, 3), np.float32)
+    alpha = np.zeros((40, 40), np.float32)
+    alpha[10:30, 10:30] = 1.0
+    rad[10:30, 10:30] = [0.5, 0.2, 0.1]
+    rb, ab = blur_object_layer(rad, alpha, 1.5)
+    assert ab.max() <= 1.0 and ab[20, 20] > 0.99 and 0 < ab[20, 9] < 0.5
+    inside = ab > 0.05
+    np.testing.assert_allclose(rb[inside] / ab[inside, None], np.broadcast_to([0.5, 0.2, 0.1], rb[inside].shape), rtol=1e-4)
+    np.testing.assert_allclose(rb.sum(axis=(0, 1)), rad.sum(axis=(0, 1)), rtol=1e-3)  # energy kept
+    same = blur_object_layer(rad, alpha, 0.0)
+    assert same[0] is rad and same[1] is alpha
+
+
+def test_object_noise_only_where_covered():
+    img = np.full((50, 50, 3), 128, np.uint8)
+    alpha = np.zeros((50, 50), np.float32)
+    alpha[10:40, 10:40] = 1.0
+    out = add_object_noise(img, alpha, 4.0 / 255, np.random.default_rng(0))
+    np.testing.assert_array_equal(out[alpha == 0], img[alpha == 0])
+    std = out[alpha == 1].astype(np.float64).std()
+    assert 3.5 < std < 4.5
+
+
+def test_match_camera_in_render_insertion():
+    """With matching on, the object gets the image's noise and blur; off, the image is untouched elsewhere."""
+    from render_fixtures import primitive_car, sunny_light
+    from streetaug.augment.conventions import intrinsics_from_fov, pose_camera_to_transform
+    from streetaug.augment.render.insert import QUALITY_PRESETS, render_insertion
+
+    W, H = 320, 180
+    K = intrinsics_from_fov(W, H, 60.0)
+    photo = cv2.resize(_sharp(3), (W, H))
+    image = _degrade(photo, 1.5, 5.0)
+    depth = np.full((H, W), np.inf, np.float32)
+    T = pose_camera_to_transform(0.0, 1.0, 10.0, 60.0)
+    light = sunny_light()
+    car = primitive_car()
+    on = dataclasses.replace(QUALITY_PRESETS["draft"], match_camera=True)
+    a = render_insertion(image, K, depth, light, car, T, quality="draft", seed=0)
+    b = render_insertion(image, K, depth, light, car, T, quality=on, seed=0)
+    inner = cv2.erode((a.coverage > 0.99).astype(np.uint8), np.ones((7, 7), np.uint8)) > 0
+    assert inner.sum() > 300
+    assert 255 * estimate_noise_sigma(a.image, inner) < 2.0
+    assert 255 * estimate_noise_sigma(b.image, inner) > 3.5
+    assert abs(b.stats["camera_effects"]["blur_sigma_px"] - 1.5) < 0.35
+    rim = (cv2.dilate((a.coverage > 0.5).astype(np.uint8), np.ones((5, 5), np.uint8)) > 0) & (a.coverage < 0.5)
+    # the blurred object bleeds a little over its silhouette: pixels just outside it change
+    assert np.abs(b.image[rim].astype(int) - a.image[rim].astype(int)).mean() > 1.0
