@@ -30,7 +30,7 @@ Kenney car from ``../shared/data/cars`` scaled to 4.5 m with its glTF materials 
   16 spp, linear in spp).
 
 Writes benchmarks/results/render_reference.{json,csv,png} and, per scene, a panel
-render_reference_panels/<hdri>_<car>.jpg (crop of ours / Mitsuba / |difference| x 8, default preset).
+<cache>/panels/<hdri>_<car>.jpg (crop of ours / Mitsuba / |difference| x 8, default preset; outside the repo).
 """
 
 from __future__ import annotations
@@ -364,7 +364,8 @@ def main() -> None:
         args.hdris, args.cars, args.ref_spp, args.full_spp, args.runs, args.curve_points = "sky", "sedan", 128, 16, 1, 4
         args.out = Path("/tmp/streetaug_render_reference_quick/render_reference")
         args.ref_check_spp = 0
-    args.panels = args.out.parent / "render_reference_panels"
+    # Panels show the shared panoramas and car models: never written into the repository.
+    args.panels = args.cache / "panels"
     cache = Cache(args.cache)
     results = []
     t_start = time.time()
