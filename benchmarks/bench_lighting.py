@@ -357,7 +357,10 @@ def main() -> None:
     if tiles:
         cv2.imwrite(str(args.out / "lighting_envmaps.png"), np.concatenate(tiles, axis=0)[..., ::-1])
     if images:
-        cv2.imwrite(str(args.out / "lighting_novel_views.png"),
+        # Real nuScenes pixels: this picture stays outside the repository.
+        private = Path("/tmp/streetaug_bench_lighting")
+        private.mkdir(parents=True, exist_ok=True)
+        cv2.imwrite(str(private / "lighting_novel_views.png"),
                     (np.concatenate(images, axis=0)[..., ::-1] * 255).round().astype(np.uint8))
     print(f"wrote {out_json}")
 

@@ -443,7 +443,8 @@ def main() -> None:
             img = cv2.resize(image, (256, 144), interpolation=cv2.INTER_AREA)
             envl = cv2.resize((hdr_to_ldr(env) * 255).astype(np.uint8), (256, 128), interpolation=cv2.INTER_AREA)
             tiles.append(np.concatenate([img, envl], axis=0))
-        write_image_rgb(args.out.with_name("sky_views.png"), np.concatenate(tiles, axis=1))
+        # Crops of the shared real panoramas: this picture stays outside the repository.
+        write_image_rgb(Path("/tmp/streetaug_bench_sky/sky_views.png"), np.concatenate(tiles, axis=1))
     s, r = result["single_image"], result["sky_reconstruction"]
     print(f"sky reconstruction (held-out): learned log-MSE {r['learned']['all']['log_mse']:.4f}, "
           f"peak {r['learned']['sunny']['peak_err_deg_median']:.2f} deg (sunny) | parametric "
