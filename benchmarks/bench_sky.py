@@ -71,7 +71,6 @@ from streetaug.augment.lighting.skynet.dome import (  # noqa: E402
     camera_from_angles,
     dome_directions,
     find_peak,
-    heading_from_camera,
     hdri_direction,
     panorama_to_dome,
     render_perspective,

@@ -16,7 +16,7 @@ import cv2
 import numpy as np
 import pytest
 import trimesh
-from click.testing import CliRunner
+from click.testing import CliRunner, Result
 
 from streetaug.augment.conventions import project_points
 from streetaug.augment.io import read_exr, write_exr
@@ -25,7 +25,7 @@ from streetaug.cli.main import main
 REAL = Path(__file__).resolve().parents[2] / "shared" / "data" / "nuscenes-real"
 
 
-def run(*args: str) -> "click.testing.Result":  # noqa: F821
+def run(*args: str) -> Result:
     return CliRunner().invoke(main, [str(a) for a in args], catch_exceptions=False)
 
 

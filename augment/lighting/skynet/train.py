@@ -23,7 +23,7 @@ from __future__ import annotations
 import hashlib
 import json
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
@@ -184,7 +184,6 @@ def train_sky(cfg: SkyTrainConfig, log=print) -> dict:
     cache = Path(cfg.cache_dir or default_cache_dir())
     hdri = Path(cfg.hdri_dir or default_hdri_dir())
     t_data = time.perf_counter()
-    panos = load_panoramas(hdri, TRAIN_PANORAMAS)
     val_panos = load_panoramas(hdri, VAL_PANORAMAS)
     synth, _ = synthetic_sky_pool(cfg.n_synth, cfg.seed, cfg.height, cfg.width, cache, workers=cfg.threads, log=log)
     data = SkyBatches(synth, panos, cfg.height, cfg.width, cfg.real_fraction)
@@ -337,7 +336,6 @@ def train_light(cfg: LightTrainConfig, log=print) -> dict:
         p.requires_grad_(False)
     dome_hw = (sky.cfg.height, sky.cfg.width)
     t_data = time.perf_counter()
-    panos = load_panoramas(hdri, TRAIN_PANORAMAS)
     val_panos = load_panoramas(hdri, VAL_PANORAMAS)
     street = street_view_pool(cfg.n_streets, cfg.seed, dome_hw, cache, workers=cfg.threads, log=log) if cfg.mix[0] > 0 else []
     pano_crops, sky_crops = crop_view_pool(cfg.n_crops, cfg.seed, dome_hw, hdri, cache, workers=cfg.threads, log=log)
