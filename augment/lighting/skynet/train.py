@@ -184,6 +184,7 @@ def train_sky(cfg: SkyTrainConfig, log=print) -> dict:
     cache = Path(cfg.cache_dir or default_cache_dir())
     hdri = Path(cfg.hdri_dir or default_hdri_dir())
     t_data = time.perf_counter()
+    panos = load_panoramas(hdri, TRAIN_PANORAMAS)
     val_panos = load_panoramas(hdri, VAL_PANORAMAS)
     synth, _ = synthetic_sky_pool(cfg.n_synth, cfg.seed, cfg.height, cfg.width, cache, workers=cfg.threads, log=log)
     data = SkyBatches(synth, panos, cfg.height, cfg.width, cfg.real_fraction)
