@@ -281,3 +281,14 @@ def test_cli_batch_prints_a_summary(tmp_path):
     assert result.exit_code == 0, result.output
     assert "status:" in result.output and "NuScenes(version='v1.0-samples'" in result.output
     assert json.loads((tmp_path / "summary.json").read_text())["images"] == 1
+
+
+def test_malloc_tuning_applies_on_glibc():
+    """Workers keep image-sized arrays in the heap even under Dask's MALLOC_TRIM_THRESHOLD_ (see tune_malloc)."""
+    import platform
+
+    from streetaug.augment.batch.execute import tune_malloc
+
+    if platform.system() != "Linux" or platform.libc_ver()[0] != "glibc":
+        pytest.skip("mallopt tuning is glibc-only")
+    assert tune_malloc() is True and tune_malloc() is True  # applied, idempotent

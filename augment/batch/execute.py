@@ -25,6 +25,37 @@ def single_threaded_env() -> None:
         os.environ.setdefault(var, "1")
 
 
+# glibc malloc tuning for workers (see :func:`tune_malloc`).
+_M_TRIM_THRESHOLD, _M_MMAP_THRESHOLD = -1, -3
+MMAP_THRESHOLD_BYTES = 64 * 2**20
+TRIM_THRESHOLD_BYTES = 256 * 2**20
+_malloc_tuned = False
+
+
+def tune_malloc() -> bool:
+    """Keep freed image-sized arrays in this process's heap instead of returning them to the OS.
+
+    A worker allocates and frees many 10-50 MB arrays per image.  Dask's nanny sets
+    ``MALLOC_TRIM_THRESHOLD_=65536``, which also switches off glibc's adaptive mmap threshold: every
+    such array is then a fresh ``mmap`` whose pages fault in again, and a worker spends ~2x the CPU per
+    image (measured: sys time 0.6 -> 3.2 s for the bundled scenes).  Setting the mmap threshold to 64 MiB
+    and the trim threshold to 256 MiB restores reuse.  Idempotent; a no-op (False) without glibc.
+    """
+    global _malloc_tuned
+    if _malloc_tuned:
+        return True
+    try:
+        import ctypes
+
+        libc = ctypes.CDLL("libc.so.6")
+        ok = bool(libc.mallopt(_M_MMAP_THRESHOLD, MMAP_THRESHOLD_BYTES)) and bool(
+            libc.mallopt(_M_TRIM_THRESHOLD, TRIM_THRESHOLD_BYTES))
+    except (OSError, AttributeError):
+        return False
+    _malloc_tuned = ok
+    return ok
+
+
 def run_inline(fn: Callable, tasks: Iterable[tuple]) -> Iterator:
     for args in tasks:
         yield fn(*args)

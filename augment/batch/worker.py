@@ -100,6 +100,9 @@ def process_sample(config: BatchConfig, out_dir: str, token: str, cameras: list[
     ``cpu_s``). A failure anywhere fails the whole sample (all its cameras), so a sample's cameras
     always show the same inserted objects; with ``fail_fast`` the error is raised instead.
     """
+    from .execute import tune_malloc
+
+    tune_malloc()  # in every kind of worker (inline, local process, Dask), before the heavy allocations
     from ..assets.select import select_assets
     from ..pipeline import InsertOptions, insert_into_sample, item_seed, place_in_sample
 
