@@ -166,6 +166,21 @@ def unproject_depth(K: np.ndarray, uv: np.ndarray, depth_m: np.ndarray) -> np.nd
     return rays * np.asarray(depth_m, dtype=np.float64)[:, None]
 
 
+def scale_intrinsics(K: np.ndarray, sx: float, sy: float) -> np.ndarray:
+    """Intrinsics (3, 3) of an image resized by (sx, sy) = new size / old size.
+
+    Pixel centres sit at integers, so a pixel coordinate maps as u' = (u + 0.5) sx - 0.5.
+    """
+    K = np.asarray(K, dtype=np.float64)
+    check_shape(K, (3, 3), "K")
+    Ks = K.copy()
+    Ks[0] *= sx
+    Ks[1] *= sy
+    Ks[0, 2] = (K[0, 2] + 0.5) * sx - 0.5
+    Ks[1, 2] = (K[1, 2] + 0.5) * sy - 0.5
+    return Ks
+
+
 def intrinsics_from_fov(width: int, height: int, fov_x_deg: float) -> np.ndarray:
     """Pinhole K with the given horizontal field of view and the principal point at the centre."""
     if not 1.0 < fov_x_deg < 179.0:

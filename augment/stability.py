@@ -50,13 +50,12 @@ class Family:
 def _with_image(sample, view, image_fn):
     image = image_fn(view.image)
     new_view = dataclasses.replace(view, _load_image=lambda: image)
-    return _with_view(sample, new_view), new_view, image_fn
+    return (*_with_camera(sample, new_view), image_fn)
 
 
-def _with_view(sample, view):
-    cameras = dict(sample.cameras)
-    cameras[view.channel] = view
-    return dataclasses.replace(sample, cameras=cameras)
+def _with_camera(sample, view):
+    """``(sample with view replacing its camera of that channel, view)``."""
+    return dataclasses.replace(sample, cameras=dict(sample.cameras, **{view.channel: view})), view
 
 
 def _with_lidar(sample, view, points_fn):
@@ -102,7 +101,7 @@ def focal_error(sample, view, percent: float, rng):
     K[0, 0] *= 1 + percent / 100.0
     K[1, 1] *= 1 + percent / 100.0
     new_view = dataclasses.replace(view, K=K)
-    return _with_view(sample, new_view), new_view, _identity
+    return (*_with_camera(sample, new_view), _identity)
 
 
 def calibration_error(sample, view, degrees: float, rng):
@@ -112,7 +111,7 @@ def calibration_error(sample, view, degrees: float, rng):
     R, _ = cv2.Rodrigues(axis * np.radians(degrees))
     T = view.T_ego_from_cam @ make_transform(R, [0.0, 0.0, 0.0])
     new_view = dataclasses.replace(view, T_ego_from_cam=T)
-    return _with_view(sample, new_view), new_view, _identity
+    return (*_with_camera(sample, new_view), _identity)
 
 
 def depth_bias(sample, view, percent: float, rng):
@@ -337,10 +336,6 @@ def time_with_sun_elevation(location: str, day: dt.date, elevation_deg: float) -
                 lo, hi = (mid, hi) if _elevation(location, mid) >= elevation_deg else (lo, mid)
             return lo
     raise ValueError(f"the sun never sinks through {elevation_deg} deg at {location} on {day}")
-
-
-def _with_camera(sample, view):
-    return dataclasses.replace(sample, cameras=dict(sample.cameras, **{view.channel: view})), view
 
 
 def facing_a_wall(sample, view, distance_m: float = 4.0):

@@ -88,20 +88,6 @@ class ViewObservation:
     camera_centre: np.ndarray
 
 
-def _small_image(image_rgb: np.ndarray, K: np.ndarray, work_width: int) -> tuple[np.ndarray, np.ndarray]:
-    H, W = image_rgb.shape[:2]
-    f = min(1.0, work_width / W)
-    w, h = max(int(round(W * f)), 8), max(int(round(H * f)), 8)
-    small = cv2.resize(np.ascontiguousarray(image_rgb), (w, h), interpolation=cv2.INTER_AREA)
-    sx, sy = w / W, h / H
-    Ks = np.array(K, dtype=np.float64).copy()
-    Ks[0] *= sx
-    Ks[1] *= sy
-    Ks[0, 2] = (K[0, 2] + 0.5) * sx - 0.5
-    Ks[1, 2] = (K[1, 2] + 0.5) * sy - 0.5
-    return small, Ks
-
-
 def extend_facades(depth_m: np.ndarray, sky: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Depth (H, W) with each column's non-sky pixels above its highest known depth set to that depth, and
     the (W,) bool columns whose structure reaches the image's top edge (their true top is not seen).
@@ -155,11 +141,11 @@ def observe_view(view, T_vol_from_cam: np.ndarray, exposure_ratio: float, lidar_
         work: the L1 fit's prepared image of this view (reused for the sky mask), or None.
     """
     from ..render.depth import densify_lidar_depth
-    from .estimate import _prepare, _sky_mask
+    from .estimate import _prepare, _sky_mask, downscale_image
 
     image = np.asarray(view.image)
     check_shape(image, ("H", "W", 3), "image")
-    small, Ks = _small_image(image, view.K, work_width)
+    small, Ks = downscale_image(image, view.K, work_width)
     h, w = small.shape[:2]
     normal, offset = ground_plane_cam
     up_cam = np.asarray(T_vol_from_cam)[2, :3]  # volume +z in the camera frame

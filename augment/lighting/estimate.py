@@ -41,7 +41,7 @@ from dataclasses import dataclass, field, replace
 import cv2
 import numpy as np
 
-from ..conventions import check_shape, ldr_uint8_to_hdr, luminance, pixel_rays
+from ..conventions import check_shape, ldr_uint8_to_hdr, luminance, pixel_rays, scale_intrinsics
 from .light import DistantLight
 from .sky import (
     OVERCAST_RGB,
@@ -136,19 +136,20 @@ class _Work:
     K: np.ndarray  # (3, 3) intrinsics of the downscaled image
 
 
+def downscale_image(image_rgb: np.ndarray, K: np.ndarray, max_width: int) -> tuple[np.ndarray, np.ndarray]:
+    """The image shrunk (area filter) to at most ``max_width`` pixels wide, and its intrinsics."""
+    H, W = image_rgb.shape[:2]
+    f = min(1.0, max_width / W)
+    w, h = max(int(round(W * f)), 8), max(int(round(H * f)), 8)
+    small = cv2.resize(np.ascontiguousarray(image_rgb), (w, h), interpolation=cv2.INTER_AREA)
+    return small, scale_intrinsics(K, w / W, h / H)
+
+
 def _prepare(image_rgb: np.ndarray, K: np.ndarray, up_cam: np.ndarray) -> _Work:
     check_shape(image_rgb, ("H", "W", 3), "image_rgb")
     check_shape(K, (3, 3), "K")
-    H, W = image_rgb.shape[:2]
-    f = min(1.0, WORK_WIDTH / W)
-    w, h = max(int(round(W * f)), 8), max(int(round(H * f)), 8)
-    small = cv2.resize(np.ascontiguousarray(image_rgb), (w, h), interpolation=cv2.INTER_AREA)
-    sx, sy = w / W, h / H
-    Ks = np.array(K, dtype=np.float64).copy()
-    Ks[0] *= sx
-    Ks[1] *= sy
-    Ks[0, 2] = (K[0, 2] + 0.5) * sx - 0.5
-    Ks[1, 2] = (K[1, 2] + 0.5) * sy - 0.5
+    small, Ks = downscale_image(image_rgb, K, WORK_WIDTH)
+    h, w = small.shape[:2]
     u, v = np.meshgrid(np.arange(w), np.arange(h))
     rays = pixel_rays(Ks, np.stack([u.ravel(), v.ravel()], axis=1)).reshape(h, w, 3)
     elevation = np.arcsin(np.clip(rays @ up_cam, -1.0, 1.0))
@@ -283,20 +284,30 @@ def _ground_evidence(work: _Work, up_cam: np.ndarray, camera_height_m: float) ->
     }
 
 
-def _sky_mask(work: _Work) -> np.ndarray:
-    """Bright, smooth pixels above the horizon in regions that touch the top of the image."""
-    lum_ldr = luminance(work.ldr)
+def sky_mask(ldr: np.ndarray, elevation: np.ndarray, min_elevation_deg: float = SKY_MIN_ELEVATION_DEG,
+             min_lum: float = 0.3, bright_percentile: float = 50.0, max_grad: float = 0.12) -> np.ndarray:
+    """(h, w) bool: bright, smooth pixels above ``min_elevation_deg`` in regions that touch the top of the image.
+
+    ``ldr`` (h, w, 3) floats in [0, 1]; ``elevation`` (h, w) rad of each pixel's ray above the horizon.
+    Bright = luminance >= max(``min_lum``, the ``bright_percentile`` of the pixels above the horizon);
+    smooth = blurred Sobel gradient < ``max_grad``.
+    """
+    lum_ldr = luminance(ldr)
     gx = cv2.Sobel(lum_ldr, cv2.CV_64F, 1, 0, ksize=3)
     gy = cv2.Sobel(lum_ldr, cv2.CV_64F, 0, 1, ksize=3)
     grad = cv2.GaussianBlur(np.hypot(gx, gy), (5, 5), 0)
-    above = work.elevation > np.radians(SKY_MIN_ELEVATION_DEG)
+    above = elevation > np.radians(min_elevation_deg)
     if not above.any():
         return above
-    bright = lum_ldr >= max(0.3, float(np.percentile(lum_ldr[above], 50)))
-    candidate = (above & bright & (grad < 0.12)).astype(np.uint8)
+    bright = lum_ldr >= max(min_lum, float(np.percentile(lum_ldr[above], bright_percentile)))
+    candidate = (above & bright & (grad < max_grad)).astype(np.uint8)
     n, labels = cv2.connectedComponents(candidate, connectivity=4)
     top_labels = np.unique(labels[0][candidate[0] > 0])
     return np.isin(labels, top_labels[top_labels > 0]) & (candidate > 0)
+
+
+def _sky_mask(work: _Work) -> np.ndarray:
+    return sky_mask(work.ldr, work.elevation)
 
 
 def _sky_evidence(work: _Work, sky_mask: np.ndarray) -> dict | None:

@@ -20,6 +20,7 @@ from streetaug.augment.conventions import (
     luminance,
     make_transform,
     rotate_vectors,
+    scale_intrinsics,
     transform_points,
     yaw_to_quat,
 )
@@ -64,13 +65,7 @@ class CameraRig:
 
     def K(self, width: int, height: int) -> np.ndarray:
         """Intrinsics (3, 3) for an image of ``width`` x ``height`` (same field of view as 1600 x 900)."""
-        sx, sy = width / 1600.0, height / 900.0
-        K = np.array(self.K_1600, dtype=np.float64).copy()
-        K[0, 0] *= sx
-        K[1, 1] *= sy
-        K[0, 2] = (K[0, 2] + 0.5) * sx - 0.5
-        K[1, 2] = (K[1, 2] + 0.5) * sy - 0.5
-        return K
+        return scale_intrinsics(np.array(self.K_1600, dtype=np.float64), width / 1600.0, height / 900.0)
 
 
 CAMERA_RIGS: dict[str, CameraRig] = {

@@ -23,7 +23,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from ...conventions import hdr_to_ldr, intrinsics_from_fov, luminance
+from ...conventions import hdr_to_ldr, intrinsics_from_fov, luminance, scale_intrinsics
 from ...io import InputError, atomic_path
 from .dome import (
     camera_from_angles,
@@ -410,14 +410,7 @@ def resize_view(image_rgb: np.ndarray, K: np.ndarray, height: int, width: int) -
     """Image resized to (height, width) (area filter) and its intrinsics (pixel centres at integers)."""
     H0, W0 = image_rgb.shape[:2]
     small = cv2.resize(np.ascontiguousarray(image_rgb), (width, height), interpolation=cv2.INTER_AREA)
-    sx, sy = width / W0, height / H0
-    Ks = np.array(K, dtype=np.float64).copy()
-    Ks[0, 0] *= sx
-    Ks[0, 1] *= sx
-    Ks[1, 1] *= sy
-    Ks[0, 2] = (K[0, 2] + 0.5) * sx - 0.5
-    Ks[1, 2] = (K[1, 2] + 0.5) * sy - 0.5
-    return small, Ks
+    return small, scale_intrinsics(K, width / W0, height / H0)
 
 
 def views_batch(views: list[View]) -> dict[str, np.ndarray]:

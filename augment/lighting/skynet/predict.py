@@ -171,20 +171,10 @@ def simple_sky_mask(ldr: np.ndarray, rays_h: np.ndarray) -> np.ndarray:
 
     ``ldr`` (h, w, 3) float in [0, 1]; ``rays_h`` (h, w, 3) heading-frame unit rays.
     """
-    import cv2
+    from ..estimate import sky_mask
 
-    lum = luminance(ldr)
-    gx = cv2.Sobel(lum, cv2.CV_64F, 1, 0, ksize=3)
-    gy = cv2.Sobel(lum, cv2.CV_64F, 0, 1, ksize=3)
-    grad = cv2.GaussianBlur(np.hypot(gx, gy), (5, 5), 0)
-    above = rays_h[..., 2] > np.sin(np.radians(2.0))
-    if not above.any():
-        return above
-    bright = lum >= max(0.25, float(np.percentile(lum[above], 40)))
-    cand = (above & bright & (grad < 0.15)).astype(np.uint8)
-    _, labels = cv2.connectedComponents(cand, connectivity=4)
-    top = np.unique(labels[0][cand[0] > 0])
-    return np.isin(labels, top[top > 0]) & (cand > 0)
+    elevation = np.arcsin(np.clip(rays_h[..., 2], -1.0, 1.0))
+    return sky_mask(ldr, elevation, min_elevation_deg=2.0, min_lum=0.25, bright_percentile=40.0, max_grad=0.15)
 
 
 def sky_gradient_loglik(ldr: np.ndarray, rays_h: np.ndarray, sky_mask: np.ndarray, bin_dirs: np.ndarray,
