@@ -34,7 +34,7 @@ from streetaug.augment.conventions import ConventionError, make_transform
 
 from .errors import DatasetError
 from .lidarseg import read_lidar_points, read_lidarseg_labels
-from .nuscenes_map import DrivableArea, LaneCenterlines, map_expansion_path, read_lanes
+from .nuscenes_map import DrivableArea, LaneCenterlines, map_expansion_path, read_lanes, read_map_expansion
 from .sample import Box, CameraView, LidarSweep, Sample
 
 __all__ = ["DatasetError", "NuScenesReader", "read_lidar_points", "read_lidarseg_labels"]
@@ -360,18 +360,26 @@ class NuScenesReader:
 
     # ------------------------------------------------------------------ map
 
+    def _read_map(self, location: str) -> None:
+        """Parse ``location``'s map expansion once, for both its drivable area and its lanes."""
+        path = map_expansion_path(self.dataroot, location)
+        if not path.is_file():
+            self._drivable[location] = self._lanes[location] = None
+            return
+        data = read_map_expansion(path)
+        self._drivable[location] = DrivableArea.from_file(path, data)
+        self._lanes[location] = read_lanes(path, data=data)
+
     def drivable_area(self, location: str) -> DrivableArea | None:
         """The drivable area (with spatial index) of ``location``, or None without a map expansion file."""
         if location not in self._drivable:
-            path = map_expansion_path(self.dataroot, location)
-            self._drivable[location] = DrivableArea.from_file(path) if path.is_file() else None
+            self._read_map(location)
         return self._drivable[location]
 
     def lanes(self, location: str) -> LaneCenterlines | None:
-        """Lane centre lines of ``location`` (parsed once), or None without a map or without lanes."""
+        """Lane centre lines of ``location``, or None without a map or without lanes."""
         if location not in self._lanes:
-            path = map_expansion_path(self.dataroot, location)
-            self._lanes[location] = read_lanes(path) if path.is_file() else None
+            self._read_map(location)
         return self._lanes[location]
 
     def drivable_area_global(self, location: str) -> list | None:

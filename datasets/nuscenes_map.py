@@ -29,11 +29,11 @@ def map_expansion_path(dataroot: str | Path, location: str) -> Path:
     return Path(dataroot) / "maps" / "expansion" / f"{location}.json"
 
 
-def read_drivable_area(path: str | Path) -> list[Polygon | MultiPolygon]:
-    """Read the ``drivable_area`` layer of a map expansion file.
+def read_map_expansion(path: str | Path) -> dict:
+    """The parsed JSON object of a map expansion file (clear errors when missing or malformed).
 
-    Returns:
-        One shapely (Multi)Polygon per ``drivable_area`` record, global x/y in metres (holes kept).
+    Real map expansions are 100+ MB: parse once and hand the dict to :func:`read_drivable_area` and
+    :func:`read_lanes` (their ``data`` argument).
     """
     path = Path(path)
     if not path.is_file():
@@ -42,6 +42,20 @@ def read_drivable_area(path: str | Path) -> list[Polygon | MultiPolygon]:
         data = json.loads(path.read_text())
     except (json.JSONDecodeError, UnicodeDecodeError) as e:
         raise DatasetError(f"{path}: map expansion file is not valid JSON ({e})") from None
+    if not isinstance(data, dict):
+        raise DatasetError(f"{path}: map expansion must be a JSON object")
+    return data
+
+
+def read_drivable_area(path: str | Path, data: dict | None = None) -> list[Polygon | MultiPolygon]:
+    """Read the ``drivable_area`` layer of a map expansion file (``data``: its already parsed JSON).
+
+    Returns:
+        One shapely (Multi)Polygon per ``drivable_area`` record, global x/y in metres (holes kept).
+    """
+    path = Path(path)
+    if data is None:
+        data = read_map_expansion(path)
     for layer in ("node", "polygon", "drivable_area"):
         if not isinstance(data, dict) or not isinstance(data.get(layer), list):
             raise DatasetError(f"{path}: map expansion has no '{layer}' layer (a list of records expected)")
@@ -96,8 +110,8 @@ class DrivableArea:
     tree: STRtree
 
     @classmethod
-    def from_file(cls, path: str | Path) -> "DrivableArea":
-        geometries = read_drivable_area(path)
+    def from_file(cls, path: str | Path, data: dict | None = None) -> "DrivableArea":
+        geometries = read_drivable_area(path, data)
         return cls(geometries, STRtree(geometries))
 
     def near(self, xy_global: np.ndarray, radius_m: float):
@@ -221,7 +235,7 @@ def _straight_centreline(a_xy: np.ndarray, b_xy: np.ndarray, resolution_m: float
     return np.c_[p, np.full(len(p), np.arctan2(d[1], d[0]))]
 
 
-def read_lanes(path: str | Path, resolution_m: float = 0.5) -> LaneCenterlines | None:
+def read_lanes(path: str | Path, resolution_m: float = 0.5, data: dict | None = None) -> LaneCenterlines | None:
     """Lane centre lines of the ``lane`` and ``lane_connector`` layers of a map expansion file.
 
     Each lane's centre line comes from its ``arcline_path_3`` entry (``{lane_token: [path, ...]}``,
@@ -230,19 +244,15 @@ def read_lanes(path: str | Path, resolution_m: float = 0.5) -> LaneCenterlines |
     edge lines (the direction of travel is from the "from" edge to the "to" edge). Lanes with
     neither are skipped.
 
+    ``data``: the file's already parsed JSON (see :func:`read_map_expansion`).
+
     Returns:
         The centre lines, or None when the file has no lane with a usable centre line (e.g. the
-        nuScenes-mini excerpts and streetaug's bundled maps, which carry only ``drivable_area``).
+        nuScenes-mini excerpts, which carry only ``drivable_area``).
     """
     path = Path(path)
-    if not path.is_file():
-        raise DatasetError(f"{path}: map expansion file not found")
-    try:
-        data = json.loads(path.read_text())
-    except (json.JSONDecodeError, UnicodeDecodeError) as e:
-        raise DatasetError(f"{path}: map expansion file is not valid JSON ({e})") from None
-    if not isinstance(data, dict):
-        raise DatasetError(f"{path}: map expansion must be a JSON object")
+    if data is None:
+        data = read_map_expansion(path)
     arclines = data.get("arcline_path_3") or {}
     if not isinstance(arclines, dict):
         raise DatasetError(f"{path}: 'arcline_path_3' must map lane tokens to lists of arcline paths")
