@@ -292,3 +292,40 @@ def test_malloc_tuning_applies_on_glibc():
     if platform.system() != "Linux" or platform.libc_ver()[0] != "glibc":
         pytest.skip("mallopt tuning is glibc-only")
     assert tune_malloc() is True and tune_malloc() is True  # applied, idempotent
+
+
+def test_config_of_an_older_run_still_resumes(reference, tmp_path):
+    """A batch_config.json written before ``match_camera`` existed reads as its default; others stay required."""
+    from streetaug.augment.batch.config import load_config
+
+    out = tmp_path / "out"
+    shutil.copytree(reference[0], out, symlinks=True)
+    doc = json.loads((out / "batch_config.json").read_text())
+    del doc["match_camera"]
+    (out / "batch_config.json").write_text(json.dumps(doc))
+    assert load_config(out) == config()
+    summary = run_batch(config(), out, RunOptions(workers=1, **QUIET))  # resumes: nothing to redo
+    assert summary["this_run"]["images"] == 0
+    del doc["quality"]
+    (out / "batch_config.json").write_text(json.dumps(doc))
+    with pytest.raises(InputError, match="quality"):
+        load_config(out)
+
+
+def _pid(_: int) -> int:
+    return os.getpid()
+
+
+def test_pool_workers_deliver_every_result_and_exit_cleanly():
+    """Local workers skip the interpreter teardown at exit (init_pool_worker): results arrive, exit code 0."""
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    from streetaug.augment.batch.execute import init_pool_worker
+
+    pool = ProcessPoolExecutor(2, mp_context=multiprocessing.get_context("spawn"), initializer=init_pool_worker)
+    pids = list(pool.map(_pid, range(8)))
+    processes = list(pool._processes.values())
+    pool.shutdown(wait=True)
+    assert len(pids) == 8 and os.getpid() not in pids
+    assert processes and all(p.exitcode == 0 for p in processes)
