@@ -39,19 +39,24 @@ class InsertOptions:
 
     Attributes:
         quality: render preset, ``draft`` | ``default`` | ``high``.
-        level: lighting level, ``L0`` (constant dome) | ``L1`` (sun + parametric sky).
+        level: lighting level, ``L0`` (constant dome) | ``L1`` (sun + parametric sky) | ``L2`` (+ the scene
+            volume near the placement) | ``L3`` (full scene volume) | ``auto`` (the cheapest level whose
+            predicted error is near the best's, per placement).
         seed: base seed; per-image seeds derive from (seed, sample token, camera).
         n_objects: how many objects to insert into one image.
         yaw_sigma_deg: Gaussian yaw noise around the ego heading (3 realistic, 15 augmentation).
         ev: exposure of the camera response (contract: LDR = response(HDR * 2^EV)).
+        match_camera: blur the objects and add noise like the image around them (estimated locally;
+            ``RenderSettings.match_camera``), so they are not sharper or cleaner than the photo.
     """
 
     quality: str = "default"
-    level: str = "L1"
+    level: str = "auto"
     seed: int = 0
     n_objects: int = 1
     yaw_sigma_deg: float = 3.0
     ev: float = 0.0
+    match_camera: bool = False
 
 
 @dataclass(frozen=True)
@@ -388,17 +393,27 @@ def insert_into_image(
     return InsertResult(result["image"], objects, result["mask"], result["shadow"], timing)
 
 
+def render_settings(options: InsertOptions):
+    """The render preset of ``options.quality`` with ``options.match_camera`` applied."""
+    from .render.settings import QUALITY_PRESETS
+
+    if options.quality not in QUALITY_PRESETS:
+        raise InputError(f"quality: expected one of {sorted(QUALITY_PRESETS)}, got {options.quality!r}")
+    return replace(QUALITY_PRESETS[options.quality], match_camera=options.match_camera)
+
+
 def _render_objects(image, K, depth_m, lights, assets, T_cam_from_objects, ground_normals_cam, options, rng, timing,
                     render_insertion) -> dict:
     """Render objects one after the other (each with its light); each later one is occluded by the earlier ones."""
     mask_union = np.zeros(image.shape[:2], np.float32)
     shadow = np.ones(image.shape[:2], np.float32)
     rendered = []
+    settings = render_settings(options)
     t = time.perf_counter()
     for light, asset, T_cam_from_object, normal in zip(lights, assets, T_cam_from_objects, ground_normals_cam):
         ins = render_insertion(
             image, K, depth_m, light, asset, T_cam_from_object, ground_normal_cam=normal,
-            quality=options.quality, ev=options.ev, seed=int(rng.integers(2**31)),
+            quality=settings, ev=options.ev, seed=int(rng.integers(2**31)),
         )
         for stage, seconds in ins.timing_s.items():
             if stage != "total":

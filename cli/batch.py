@@ -35,7 +35,7 @@ def _dataroot(dataroot: Path | None, version: str | None) -> tuple[str, str]:
               help="Yaw noise (deg) around the ego heading: 15 augmentation (paper), 3 realistic.")
 @_asset_options
 @_render_options
-@click.option("--level", type=click.Choice(LIGHT_LEVELS), default="L1", show_default=True, help=LEVEL_HELP)
+@click.option("--level", type=click.Choice(LIGHT_LEVELS), default="auto", show_default=True, help=LEVEL_HELP)
 @click.option("--workers", type=click.IntRange(min=1), default=None,
               help="Local worker processes [default: all cores].")
 @click.option("--scheduler", default=None, metavar="ADDRESS",
@@ -52,7 +52,7 @@ def _dataroot(dataroot: Path | None, version: str | None) -> tuple[str, str]:
 @click.option("--debug", is_flag=True, help="Show tracebacks.")
 @_runtime_errors
 def batch(dataroot, version, out, cameras, limit, n_objects, yaw_sigma, asset, assets_dir, asset_front, asset_length,
-          quality, seed, ev, level, workers, scheduler, dask_local, shard, dry_run, contact_sheet, fail_fast,
+          quality, seed, ev, match_camera, level, workers, scheduler, dask_local, shard, dry_run, contact_sheet, fail_fast,
           no_progress, debug):
     """Augment every sample of a dataset into a new nuScenes-format dataset; rerunning resumes.
 
@@ -74,7 +74,7 @@ def batch(dataroot, version, out, cameras, limit, n_objects, yaw_sigma, asset, a
     names = tuple(c.strip() for c in cameras.split(",") if c.strip())
     config = BatchConfig(
         dataroot=root, version=version, cameras=() if names in ((), ("all",)) else names, limit=limit, seed=seed,
-        quality=quality, level=level, ev=ev, n_objects=n_objects, yaw_sigma_deg=yaw_sigma,
+        quality=quality, level=level, ev=ev, match_camera=match_camera, n_objects=n_objects, yaw_sigma_deg=yaw_sigma,
         asset=str(asset.resolve()) if asset else None, assets_dir=str(assets_dir.resolve()) if assets_dir else None,
         asset_front=asset_front, asset_length=asset_length,
     )

@@ -134,6 +134,8 @@ def _render_options(func: Callable) -> Callable:
                      show_default=True, help="Render preset."),
         click.option("--seed", type=int, default=0, show_default=True, help="Random seed (placement, asset, sampling)."),
         click.option("--ev", type=float, default=0.0, show_default=True, help="Exposure of the camera response."),
+        click.option("--match-camera", is_flag=True,
+                     help="Blur the car and add noise like the photo around it (estimated there; +20-60 ms)."),
     ]
     for option in reversed(options):
         func = option(func)

@@ -48,7 +48,7 @@ def main() -> None:
 @click.option("--intrinsics", help="fx,fy,cx,cy of --image (pixel centres at integers).")
 @click.option("--at", "at", help="X,Y,Z (camera frame, metres): point of the local environment map "
               "(default: the ground point 15 m straight ahead).")
-@click.option("--level", type=click.Choice(LIGHT_LEVELS), default="L1", show_default=True, help=LEVEL_HELP)
+@click.option("--level", type=click.Choice(LIGHT_LEVELS), default="auto", show_default=True, help=LEVEL_HELP)
 @click.option("--out", required=True, type=click.Path(file_okay=False, path_type=Path), help="Output folder.")
 @click.option("--debug", is_flag=True, help="Show tracebacks.")
 @_runtime_errors
@@ -100,7 +100,7 @@ def predict_light(dataroot, version, scene, sample_token, camera, image, fov_deg
 @_dataset_options
 @_asset_options
 @_render_options
-@click.option("--level", type=click.Choice(LIGHT_LEVELS), default="L1", show_default=True, help=LEVEL_HELP)
+@click.option("--level", type=click.Choice(LIGHT_LEVELS), default="auto", show_default=True, help=LEVEL_HELP)
 @click.option("--n-objects", type=click.IntRange(1, 8), default=1, show_default=True, help="Objects per image.")
 @click.option("--yaw-sigma", type=float, default=3.0, show_default=True,
               help="Yaw noise (deg) around the ego heading: 3 realistic, 15 augmentation.")
@@ -115,7 +115,7 @@ def predict_light(dataroot, version, scene, sample_token, camera, image, fov_deg
 @click.option("--debug", is_flag=True, help="Also write mask.png and shadow.exr; show tracebacks.")
 @_runtime_errors
 def insert(dataroot, version, scene, sample_token, camera, asset, assets_dir, asset_front, asset_length,
-           quality, seed, ev, level, n_objects, yaw_sigma, image, intrinsics, depth, envmap, pose_camera, out, explain,
+           quality, seed, ev, match_camera, level, n_objects, yaw_sigma, image, intrinsics, depth, envmap, pose_camera, out, explain,
            debug):
     """Insert a car into one image; write image.png|jpg and labels.json.
 
@@ -130,7 +130,8 @@ def insert(dataroot, version, scene, sample_token, camera, asset, assets_dir, as
     """
     from streetaug.augment.pipeline import InsertOptions, insert_into_image, insert_into_view, write_insert_outputs
 
-    options = InsertOptions(quality=quality, level=level, seed=seed, n_objects=n_objects, yaw_sigma_deg=yaw_sigma, ev=ev)
+    options = InsertOptions(quality=quality, level=level, seed=seed, n_objects=n_objects, yaw_sigma_deg=yaw_sigma, ev=ev,
+                            match_camera=match_camera)
     if image is not None:
         missing = [n for n, v in [("--intrinsics", intrinsics), ("--depth", depth), ("--envmap", envmap),
                                   ("--asset", asset), ("--pose-camera", pose_camera)] if v is None]

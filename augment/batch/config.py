@@ -11,6 +11,8 @@ from ..io import InputError, write_json_atomic
 
 CONFIG_FILE = "batch_config.json"
 CONFIG_SCHEMA = "streetaug.batch/1"
+# Fields added after the schema's first release: a batch_config.json without them means their default.
+OPTIONAL_FIELDS = {"limit", "match_camera"}
 # Fields that may change between runs into the same output folder (everything else must match to resume).
 _MAY_CHANGE = ("limit",)
 
@@ -26,7 +28,8 @@ class BatchConfig:
         limit: at most this many samples (the first ones, in scene order).
         seed: base seed; per-item seeds derive from (seed, sample token, camera).
         quality: render preset, ``draft`` | ``default`` | ``high``.
-        level: lighting level, ``L0`` | ``L1``.
+        level: lighting level, ``L0`` | ``L1`` | ``L2`` | ``L3`` | ``auto``.
+        match_camera: blur and add noise to the objects like the image (:attr:`InsertOptions.match_camera`).
         ev: exposure of the camera response.
         n_objects: objects placed in each camera's view (each then rendered into every camera that sees it).
         yaw_sigma_deg: yaw noise around the ego heading (15 for augmentation, as the paper).
@@ -39,8 +42,9 @@ class BatchConfig:
     limit: int | None = None
     seed: int = 0
     quality: str = "default"
-    level: str = "L1"
+    level: str = "auto"
     ev: float = 0.0
+    match_camera: bool = False
     n_objects: int = 1
     yaw_sigma_deg: float = 15.0
     asset: str | None = None
@@ -56,7 +60,7 @@ class BatchConfig:
         if doc.get("schema") != CONFIG_SCHEMA:
             raise InputError(f"{path}: expected schema {CONFIG_SCHEMA!r}, got {doc.get('schema')!r}")
         names = {f.name for f in fields(cls)}
-        missing = names - set(doc) - {"limit"}
+        missing = names - set(doc) - OPTIONAL_FIELDS
         if missing:
             raise InputError(f"{path}: missing fields {sorted(missing)}")
         values = {k: v for k, v in doc.items() if k in names}

@@ -114,7 +114,8 @@ def process_sample(config: BatchConfig, out_dir: str, token: str, cameras: list[
                                            config.asset, config.assets_dir, config.asset_front, config.asset_length)
                   for v in views}
         options = InsertOptions(quality=config.quality, level=config.level, seed=config.seed,
-                                yaw_sigma_deg=config.yaw_sigma_deg, ev=config.ev)
+                                yaw_sigma_deg=config.yaw_sigma_deg, ev=config.ev,
+                                match_camera=config.match_camera)
         load_s = time.perf_counter() - t0
         if dry_run:
             rows = _plan_rows(token, cameras, place_in_sample(sample, views, assets, options))
