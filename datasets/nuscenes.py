@@ -254,6 +254,11 @@ class NuScenesReader:
                 out[sensor["channel"]] = sd
         return out
 
+    def lidar_sample_data(self, sample_token: str) -> dict | None:
+        """The keyframe LiDAR ``sample_data`` row a ``Sample`` uses (LIDAR_TOP, else any LiDAR), or None."""
+        lidars = self.keyframe_sample_data(sample_token, "lidar")
+        return lidars.get(LIDAR_CHANNEL) or (next(iter(lidars.values())) if lidars else None)
+
     # ------------------------------------------------------------------ poses
 
     def _transform(self, row: dict, table: str) -> np.ndarray:
@@ -407,8 +412,7 @@ class NuScenesReader:
             for channel, sd in sorted(self.keyframe_sample_data(token, "camera").items())
         }
         boxes = tuple(self.box(a) for a in self.annotation_rows(token))
-        lidars = self.keyframe_sample_data(token, "lidar")
-        lidar_sd = lidars.get(LIDAR_CHANNEL) or (next(iter(lidars.values())) if lidars else None)
+        lidar_sd = self.lidar_sample_data(token)
         load_lidar = None if lidar_sd is None else (lambda t=lidar_sd["token"]: self.lidar_sweep(t))
         return Sample(
             token=row["token"],

@@ -58,6 +58,7 @@ class InsertedObject:
         rotation: [w, x, y, z] box -> global.
         visibility_token: "1".."4" (nuScenes visibility bins, over all cameras).
         seed: the batch seed (part of the tokens).
+        num_lidar_pts: points of the (augmented) keyframe LiDAR sweep inside the box.
     """
 
     sample_token: str
@@ -69,6 +70,7 @@ class InsertedObject:
     rotation: Sequence[float]
     visibility_token: str
     seed: int = 0
+    num_lidar_pts: int = 0
 
     @property
     def annotation_token(self) -> str:
@@ -122,13 +124,17 @@ def write_augmented_tables(
     out_dir: str | Path,
     augmented_files: dict[str, str],
     objects: Sequence[InsertedObject],
+    augmented_lidarseg: dict[str, str] | None = None,
+    num_lidar_pts: dict[str, int] | None = None,
 ) -> Path:
     """Write ``out_dir/<version>/*.json``: the source tables with the augmented images and inserted objects.
 
     Args:
         source_dataroot: the source dataset root (holds ``<version>/``).
-        augmented_files: camera ``sample_data`` token -> new image path relative to ``out_dir``.
+        augmented_files: ``sample_data`` token -> new file (image, LiDAR sweep) relative to ``out_dir``.
         objects: the inserted objects (new ``instance`` + ``sample_annotation`` rows).
+        augmented_lidarseg: LiDAR ``sample_data`` token -> new lidarseg labels file relative to ``out_dir``.
+        num_lidar_pts: source annotation token -> its new ``num_lidar_pts`` (points now on an inserted object).
 
     Returns:
         The table folder. Tables are written into a temporary folder that replaces the old one at the end.
@@ -142,7 +148,7 @@ def write_augmented_tables(
     tmp = out_dir / f".{version}.tmp-{os.getpid()}"
     shutil.rmtree(tmp, ignore_errors=True)
     tmp.mkdir(parents=True)
-    changed = _changed_tables(src_tables, augmented_files, objects)
+    changed = _changed_tables(src_tables, augmented_files, objects, augmented_lidarseg or {}, num_lidar_pts or {})
     for path in sorted(src_tables.glob("*.json")):
         name = path.stem
         if name in changed:
@@ -167,7 +173,8 @@ def _load(src_tables: Path, name: str) -> list[dict]:
     return json.loads(path.read_text())
 
 
-def _changed_tables(src_tables: Path, augmented_files: dict[str, str], objects: Sequence[InsertedObject]) -> dict:
+def _changed_tables(src_tables: Path, augmented_files: dict[str, str], objects: Sequence[InsertedObject],
+                    augmented_lidarseg: dict[str, str], num_lidar_pts: dict[str, int]) -> dict:
     """Table name -> new rows, for every table that differs from the source."""
     out: dict[str, list[dict]] = {}
     for path in sorted(src_tables.glob("*.json")):
@@ -176,6 +183,12 @@ def _changed_tables(src_tables: Path, augmented_files: dict[str, str], objects: 
         rows = json.loads(path.read_text())
         if isinstance(rows, list) and any(isinstance(r, dict) and r.get("filename") for r in rows):
             out[path.stem] = [_relinked(r) for r in rows]
+    if augmented_lidarseg:
+        out["lidarseg"] = [
+            {**r, "filename": augmented_lidarseg[r["sample_data_token"]], "source_filename": r["filename"]}
+            if r.get("sample_data_token") in augmented_lidarseg else _relinked(r)
+            for r in _load(src_tables, "lidarseg")
+        ]
 
     sample_data = []
     unused = dict(augmented_files)
@@ -198,7 +211,8 @@ def _changed_tables(src_tables: Path, augmented_files: dict[str, str], objects: 
     visibility_tokens = {v["token"] for v in visibility}
     samples = {s["token"] for s in _load(src_tables, "sample")}
     instances = _load(src_tables, "instance")
-    annotations = _load(src_tables, "sample_annotation")
+    annotations = [{**a, "num_lidar_pts": num_lidar_pts[a["token"]]} if a["token"] in num_lidar_pts else a
+                   for a in _load(src_tables, "sample_annotation")]
     for obj in objects:
         if obj.sample_token not in samples:
             raise InputError(f"{src_tables / 'sample.json'}: inserted object refers to unknown sample "
@@ -230,7 +244,7 @@ def _changed_tables(src_tables: Path, augmented_files: dict[str, str], objects: 
             "visibility_token": obj.visibility_token, "attribute_tokens": attribute_tokens,
             "translation": [float(v) for v in obj.translation], "size": [float(v) for v in obj.size],
             "rotation": [float(v) for v in obj.rotation], "prev": "", "next": "",
-            "num_lidar_pts": 0, "num_radar_pts": 0,
+            "num_lidar_pts": int(obj.num_lidar_pts), "num_radar_pts": 0,
         })
     out.update(category=categories, attribute=attributes, visibility=visibility, instance=instances,
                sample_annotation=annotations)

@@ -108,7 +108,10 @@ class TestDataset:
         n = summary["objects_inserted"]
         assert len(table(new, "sample_annotation")) == len(table(src, "sample_annotation")) + n
         assert len(table(new, "instance")) == len(table(src, "instance")) + n
-        ok = {r["sample_data_token"]: r["image"] for r in read_log(out / "augment_log.jsonl") if r["status"] == "ok"}
+        rows = read_log(out / "augment_log.jsonl")
+        ok = {r["sample_data_token"]: r["image"] for r in rows if r["status"] == "ok"}
+        ok.update({r["lidar"]["sample_data_token"]: r["lidar"]["file"] for r in rows if r.get("lidar")})
+        assert len(ok) > len({r["image"] for r in rows if r["status"] == "ok"})  # the LiDAR sweeps too
         for row in table(new, "sample_data"):
             if row["token"] in ok:
                 assert row["filename"] == ok[row["token"]] and row["source_filename"].startswith("samples/")
@@ -141,7 +144,7 @@ class TestDevkit:
                 assert x0 <= u / z <= x1 and y0 <= v / z <= y1
         sample = nusc.get("sample", rows[0]["sample_token"])
         lidar_path = Path(nusc.get_sample_data_path(sample["data"]["LIDAR_TOP"]))
-        assert lidar_path.parts[-4] == "source" and lidar_path.is_file()
+        assert lidar_path == out / rows[0]["lidar"]["file"]  # the sweep with the inserted cars in it
         nusc.render_sample_data(rows[0]["sample_data_token"], out_path=str(tmp_path / "cam.png"), verbose=False)
         nusc.render_sample_data(sample["data"]["LIDAR_TOP"], out_path=str(tmp_path / "lidar.png"), verbose=False,
                                 underlay_map=False)
@@ -172,6 +175,37 @@ class TestDevkit:
                                 underlay_map=False)
         nusc_map = NuScenesMap(dataroot=str(out), map_name="singapore-onenorth")
         assert len(nusc_map.drivable_area) > 0
+
+    def test_lidar_agrees_with_the_boxes(self, reference):
+        """Every box's num_lidar_pts (inserted, and source boxes partly hidden behind one) is what the devkit
+        counts in the augmented sweep; inserted cars have points; the moved points are cars in the lidarseg."""
+        nuscenes = devkit()
+        from nuscenes.utils.data_classes import LidarPointCloud
+        from nuscenes.utils.geometry_utils import points_in_box
+
+        out = reference[0]
+        nusc = nuscenes.NuScenes(version=BUNDLED_VERSION, dataroot=str(out), verbose=False)
+        source = nuscenes.NuScenes(version=BUNDLED_VERSION, dataroot=str(bundled_dataroot()), verbose=False)
+        car_index = next(c["index"] for c in nusc.category if c["name"] == "vehicle.car")
+        inserted_points = []
+        for sample in nusc.sample:
+            lidar_token = sample["data"]["LIDAR_TOP"]
+            path, boxes, _ = nusc.get_sample_data(lidar_token)
+            xyz = LidarPointCloud.from_file(path).points[:3]
+            src = LidarPointCloud.from_file(source.get_sample_data_path(lidar_token)).points
+            assert xyz.shape == src[:3].shape  # same beams, some moved
+            labels = np.fromfile(out / nusc.get("lidarseg", lidar_token)["filename"], np.uint8)
+            moved = np.any(xyz != src[:3], axis=0)
+            in_inserted = np.zeros(len(labels), bool)
+            for box in boxes:
+                ann = nusc.get("sample_annotation", box.token)
+                inside = points_in_box(box, xyz)
+                assert ann["num_lidar_pts"] == int(inside.sum()), ann["token"]
+                if box.token not in source._token2ind["sample_annotation"]:
+                    inserted_points.append(int(inside.sum()))
+                    in_inserted |= inside
+            assert np.all(labels[moved] == car_index) and np.all(in_inserted[moved])
+        assert len(inserted_points) >= N_SAMPLES and min(inserted_points) > 0
 
 
 class TestSameOutput:

@@ -5,6 +5,8 @@ folder (see :mod:`streetaug.datasets.nuscenes_writer` for the tables and links):
 
     OUTDIR/batch_config.json              what was asked (a rerun must ask the same to resume)
     OUTDIR/samples/<CAMERA>/<name>        augmented images; OUTDIR/labels/<CAMERA>/<stem>.json their labels
+    OUTDIR/samples/LIDAR_TOP/<name>       the sample's LiDAR sweep with the inserted objects in it
+    OUTDIR/lidarseg_augmented/<version>/  its lidarseg labels (objects' points relabelled), with lidarseg
     OUTDIR/<version>/*.json, source, maps the nuScenes dataset: NuScenes(version, dataroot=OUTDIR)
     OUTDIR/augment_log.jsonl              one line per attempted image (sample_token, camera, status, reason,
                                           timing_s, objects placed in that camera's view, ...)
@@ -31,7 +33,7 @@ from .config import BatchConfig, RunOptions, check_and_save_config, load_config
 from .execute import run_dask, run_inline, run_processes
 from .log import append_rows, compact_log, done_samples, latest_rows, read_log, write_log
 from .report import contact_sheet, summarize
-from .worker import TableSlicer, process_sample
+from .worker import LIDARSEG_FOLDER, TableSlicer, process_sample
 
 LOG_FILE = "augment_log.jsonl"
 SUMMARY_FILE = "summary.json"
@@ -65,7 +67,7 @@ def _check_cameras(reader: NuScenesReader, cameras: tuple[str, ...]) -> None:
 
 def _remove_stale_temp_files(out_dir: Path, version: str) -> None:
     """Temporary files a killed run left behind (never seen under their final names)."""
-    for pattern in ("samples/*/.*.tmp*", "labels/*/.*.tmp*", ".*.tmp*"):
+    for pattern in ("samples/*/.*.tmp*", "labels/*/.*.tmp*", f"{LIDARSEG_FOLDER}/*/.*.tmp*", ".*.tmp*"):
         for path in out_dir.glob(pattern):
             if path.is_file():
                 path.unlink(missing_ok=True)
@@ -150,19 +152,28 @@ def finalize(out_dir: Path, config: BatchConfig, reader: NuScenesReader, rows: l
     order = {t: i for i, t in enumerate(reader.sample_tokens())}
     rows = sorted(latest_rows(rows).values(), key=lambda r: (order.get(r["sample_token"], len(order)), r["camera"]))
     augmented = {r["sample_data_token"]: r["image"] for r in rows if r["status"] == "ok"}
+    lidarseg, recounted = {}, {}
     objects = []
     for r in rows:
         if r["status"] not in ("ok", "skipped"):
             continue
+        lidar = r.get("lidar")
+        if lidar is not None:  # the sample's sweep with its objects (the same entry on each camera row)
+            augmented[lidar["sample_data_token"]] = lidar["file"]
+            if lidar.get("lidarseg_file"):
+                lidarseg[lidar["sample_data_token"]] = lidar["lidarseg_file"]
+            recounted.update(lidar.get("source_num_lidar_pts", {}))
         for o in r.get("objects", []):
             box = o["box_global"]
             objects.append(InsertedObject(
                 sample_token=r["sample_token"], object_index=o["object_index"], category=o["category"],
                 attribute=o.get("attribute"), translation=box["translation"], size=box["size"],
-                rotation=box["rotation"], visibility_token=_visibility(o), seed=config.seed))
+                rotation=box["rotation"], visibility_token=_visibility(o), seed=config.seed,
+                num_lidar_pts=int(o.get("num_lidar_pts", 0))))
     objects.sort(key=lambda o: (order.get(o.sample_token, len(order)), o.object_index))
     link_source(out_dir, config.dataroot)
-    tables = write_augmented_tables(config.dataroot, config.version, out_dir, augmented, objects)
+    tables = write_augmented_tables(config.dataroot, config.version, out_dir, augmented, objects, lidarseg,
+                                    recounted)
     summary = summarize(rows, this_run)
     sheet = contact_sheet(out_dir, rows, contact_sheet_n, config.seed)
     summary["outputs"] = {"tables": str(tables.relative_to(out_dir)), "log": LOG_FILE,

@@ -26,6 +26,8 @@ from ..io import write_image_rgb, write_json_atomic
 from .config import BatchConfig
 
 _READERS: dict[tuple[str, str], NuScenesReader] = {}
+# Output folder of lidarseg labels that inserted objects changed (``lidarseg/`` links to the source's).
+LIDARSEG_FOLDER = "lidarseg_augmented"
 
 
 class TableSlicer:
@@ -108,7 +110,8 @@ def process_sample(config: BatchConfig, out_dir: str, token: str, cameras: list[
 
     t0, cpu0 = time.perf_counter(), time.process_time()
     try:
-        sample = _reader(config).with_tables(tables).sample(token)
+        reader = _reader(config).with_tables(tables)
+        sample = reader.sample(token)
         views = [sample.cameras[c] for c in cameras if c in sample.cameras]
         assets = {v.channel: select_assets(item_seed(config.seed, "asset", token, v.channel), config.n_objects,
                                            config.asset, config.assets_dir, config.asset_front, config.asset_length)
@@ -121,7 +124,11 @@ def process_sample(config: BatchConfig, out_dir: str, token: str, cameras: list[
             rows = _plan_rows(token, cameras, place_in_sample(sample, views, assets, options))
         else:
             result = insert_into_sample(sample, views, assets, options)
-            rows = [_write_camera(Path(out_dir), sample, c, result, load_s / max(len(views), 1)) for c in cameras]
+            t_lidar = time.perf_counter()
+            lidar = _write_lidar(Path(out_dir), reader, sample, result, config.version)
+            shared_s = {"load": load_s, "lidar": time.perf_counter() - t_lidar}  # per sample: shared by its cameras
+            rows = [_write_camera(Path(out_dir), sample, c, result, {k: v / max(len(views), 1) for k, v in
+                                                                     shared_s.items()}, lidar) for c in cameras]
     except Exception as e:  # noqa: BLE001 - one failing sample is logged and the batch goes on
         if fail_fast:
             raise
@@ -142,9 +149,75 @@ def _box_global(placement) -> dict:
             "rotation": [float(v) for v in box.rotation]}
 
 
-def _write_camera(out_dir: Path, sample, camera: str, result, load_s: float) -> dict:
-    """Write one camera's image + labels (when changed) and return its log row."""
+def _write_lidar(out_dir: Path, reader: NuScenesReader, sample, result, version: str) -> dict | None:
+    """Write the sample's LiDAR sweep (and lidarseg labels) with the placed objects in it.
+
+    Returns the log entry shared by the sample's camera rows: the LiDAR ``sample_data_token``, the new
+    ``file`` (and ``lidarseg_file``), ``num_lidar_pts`` per object and ``source_num_lidar_pts``
+    (annotation token -> count, for the sample's boxes that lost points behind an inserted object);
+    None when nothing was placed or the sample has no LiDAR.
+    """
+    from streetaug.datasets.lidarseg import read_lidar_points, read_lidarseg_labels
+    from streetaug.placement.rules import points_in_boxes
+
+    from ..conventions import invert_transform, transform_points
+    from ..io import write_bytes_atomic
+    from ..lidar_insert import LIDARSEG_CAR, car_intensity, count_in_box, insert_into_sweep
+
+    sd = reader.lidar_sample_data(sample.token)
+    if sd is None or not result.placements:
+        return None
+    source = reader.dataroot / sd["filename"]
+    points = read_lidar_points(source)
+    seg_path = reader.lidarseg_path(sd["token"])
+    labels = None if seg_path is None else read_lidarseg_labels(seg_path, num_points=len(points))
+    T_global_from_lidar = reader.T_global_from_ego(sd) @ reader.T_ego_from_sensor(sd)
+    T_lidar_from_global = invert_transform(T_global_from_lidar)
+    if labels is not None:
+        is_car = labels == LIDARSEG_CAR
+    else:
+        cars = [b for b in sample.boxes if b.category == "vehicle.car"]
+        is_car = points_in_boxes(transform_points(T_global_from_lidar, points[:, :3].astype(np.float64)), cars)
+    index = {c["name"]: c["index"] for c in reader.table("category") if "index" in c}
+    meshes = [(transform_points(T_lidar_from_global @ p.T_global_from_object, a.vertices), a.faces)
+              for p, a in zip(result.placements, result.assets)]
+    swept = insert_into_sweep(points, meshes, labels, [index.get(a.category, LIDARSEG_CAR) for a in result.assets],
+                              car_intensity(points, is_car))
+    entry = {"sample_data_token": sd["token"], "file": f"samples/{Path(sd['filename']).parent.name}/{source.name}",
+             "lidarseg_file": None,
+             "num_lidar_pts": [count_in_box(swept.points[:, :3],
+                                            invert_transform(p.box.T_global_from_box) @ T_global_from_lidar,
+                                            p.box.wlh) for p in result.placements],
+             "source_num_lidar_pts": _recounted(reader, sample, points, swept, T_global_from_lidar)}
+    write_bytes_atomic(out_dir / entry["file"], swept.points.astype("<f4").tobytes())
+    if swept.labels is not None:
+        entry["lidarseg_file"] = f"{LIDARSEG_FOLDER}/{version}/{seg_path.name}"
+        write_bytes_atomic(out_dir / entry["lidarseg_file"], swept.labels.astype(np.uint8).tobytes())
+    return entry
+
+
+def _recounted(reader: NuScenesReader, sample, points: np.ndarray, swept, T_global_from_lidar: np.ndarray) -> dict:
+    """Annotation token -> ``num_lidar_pts`` less the points that moved out of its box onto an inserted object."""
+    from ..conventions import invert_transform
+    from ..lidar_insert import count_in_box
+
+    moved = swept.moved >= 0
+    out = {}
+    for box in sample.boxes:
+        T_box_from_lidar = invert_transform(box.T_global_from_box) @ T_global_from_lidar
+        lost = count_in_box(points[moved, :3], T_box_from_lidar, box.wlh)
+        if lost and box.token:
+            before = int(reader.get("sample_annotation", box.token).get("num_lidar_pts", lost))
+            out[box.token] = max(before - lost, 0)
+    return out
+
+
+def _write_camera(out_dir: Path, sample, camera: str, result, shared_s: dict, lidar: dict | None = None) -> dict:
+    """Write one camera's image + labels (when changed) and return its log row (with the sample's LiDAR entry)."""
     row = {"sample_token": sample.token, "camera": camera, "files": []}
+    if lidar is not None:
+        row["lidar"] = lidar
+        row["files"] = [lidar["file"]] + ([lidar["lidarseg_file"]] if lidar["lidarseg_file"] else [])
     if camera not in result.views:
         row.update(status="skipped", reason=f"camera {camera} not in this sample")
         return row
@@ -153,11 +226,12 @@ def _write_camera(out_dir: Path, sample, camera: str, result, load_s: float) -> 
     # The objects placed in this camera's view: their annotation (once per object, over all cameras).
     row["objects"] = [
         {"object_index": i, "category": a.category, "attribute": p.attribute, "box_global": _box_global(p),
-         "visible_px": float(result.visible_px[i]), "coverage_px": float(result.coverage_px[i])}
+         "visible_px": float(result.visible_px[i]), "coverage_px": float(result.coverage_px[i]),
+         "num_lidar_pts": lidar["num_lidar_pts"][i] if lidar is not None else 0}
         for i, (p, a, owner) in enumerate(zip(result.placements, result.assets, result.placed_for)) if owner == camera
     ]
     row["sample_data_token"] = view.sample_data_token
-    timing = {**r.timing_s, "load": load_s}
+    timing = {**r.timing_s, **shared_s}
     if r.lighting is not None:
         row["lighting"] = {"level": r.lighting.level, "sun_source": r.lighting.sun_source,
                            "sun_visibility": round(float(r.lighting.sun_visibility), 3)}
@@ -175,7 +249,7 @@ def _write_camera(out_dir: Path, sample, camera: str, result, load_s: float) -> 
     doc.update(sample_token=sample.token, sample_data_token=view.sample_data_token, camera=camera)
     write_json_atomic(out_dir / labels_rel, doc)
     timing["write"] = time.perf_counter() - t
-    row.update(status="ok", reason="", image=image_rel, files=[image_rel, labels_rel], timing_s=timing,
+    row.update(status="ok", reason="", image=image_rel, files=[image_rel, labels_rel, *row["files"]], timing_s=timing,
                n_objects_visible=len(r.objects))
     return row
 

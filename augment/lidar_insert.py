@@ -1,0 +1,102 @@
+"""Inserted objects in the LiDAR sweep, so the LiDAR agrees with the augmented images and the boxes.
+
+nuScenes stores only a sweep's returns. A beam whose return lies behind an inserted object (the road,
+a wall, a car further away) would now have returned from the object: the point moves along its beam
+onto the object's surface (first hit; 1 mm inside), keeps its ring index, takes the intensity typical of this
+sweep's real cars and, with lidarseg, the object's class. Points in front of the object are unchanged.
+Beams that returned nothing (sky) stay without a return, so an object lit only by such beams is
+under-sampled; at 10-40 m, where objects stand on the road, almost every beam through them returned
+from the ground or a structure behind.
+
+Frames: everything in the LiDAR sensor frame (nuScenes ``.pcd.bin``: x, y, z, intensity, ring).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+
+from streetaug.datasets.lidarseg import LIDARSEG_CAR
+
+from .conventions import check_shape
+from .raycast import RayScene
+
+# Moved points sit this far beyond the surface along their beam: inside the object, so that float32
+# storage cannot put a return on a tight box's face outside the box (LiDAR range noise is ~2 cm).
+INSIDE_SURFACE_M = 1e-3
+# Intensity of moved points when the sweep has no real car to learn it from (nuScenes 0-255 scale;
+# painted car bodies mostly return 5-40).
+DEFAULT_CAR_INTENSITY = 15.0
+
+
+@dataclass(frozen=True)
+class SweepInsertion:
+    """A sweep with objects inserted.
+
+    Attributes:
+        points: (N, 5) float32 x, y, z, intensity, ring (same order and count as the input).
+        labels: (N,) uint8 lidarseg labels with the moved points relabelled, or None without lidarseg.
+        moved: (N,) int64 index of the object each point moved onto, -1 for unchanged points.
+    """
+
+    points: np.ndarray
+    labels: np.ndarray | None
+    moved: np.ndarray
+
+
+def insert_into_sweep(points: np.ndarray, meshes_lidar: Sequence[tuple[np.ndarray, np.ndarray]],
+                      labels: np.ndarray | None = None, object_labels: Sequence[int] | None = None,
+                      intensity: float = DEFAULT_CAR_INTENSITY) -> SweepInsertion:
+    """Move the returns whose beam meets an object onto that object's surface.
+
+    Args:
+        points: (N, 5) sweep (x, y, z in the LiDAR frame, intensity, ring); beams start at the origin.
+        meshes_lidar: per object, (V, 3) vertices in the LiDAR frame and (F, 3) faces.
+        labels: (N,) lidarseg labels of the sweep, or None.
+        object_labels: lidarseg class of each object (default: vehicle.car).
+        intensity: intensity given to the moved points (:func:`car_intensity`).
+    """
+    points = np.asarray(points, dtype=np.float32)
+    check_shape(points, ("N", 5), "LiDAR points")
+    out = points.copy()
+    moved = np.full(len(points), -1, np.int64)
+    if not meshes_lidar or len(points) == 0:
+        return SweepInsertion(out, None if labels is None else np.asarray(labels, np.uint8).copy(), moved)
+    xyz = points[:, :3].astype(np.float64)
+    range_m = np.linalg.norm(xyz, axis=1)
+    ok = range_m > 1e-6
+    directions = np.zeros_like(xyz)
+    directions[ok] = xyz[ok] / range_m[ok, None]
+    best_t = np.where(ok, range_m, -np.inf)  # a hit must come before the return (or the other objects)
+    origins = np.zeros_like(xyz)
+    for index, (vertices, faces) in enumerate(meshes_lidar):
+        hits = RayScene(vertices, faces).intersect(origins[ok], directions[ok])
+        closer = np.zeros(len(points), bool)
+        closer[ok] = hits.hit & (hits.t < best_t[ok])
+        best_t[closer] = hits.t[closer[ok]]
+        moved[closer] = index
+    hit = moved >= 0
+    out[hit, :3] = (directions[hit] * (best_t[hit, None] + INSIDE_SURFACE_M)).astype(np.float32)
+    out[hit, 3] = intensity
+    new_labels = None
+    if labels is not None:
+        new_labels = np.asarray(labels, np.uint8).copy()
+        classes = np.asarray(object_labels if object_labels is not None else [LIDARSEG_CAR] * len(meshes_lidar),
+                             np.uint8)
+        new_labels[hit] = classes[moved[hit]]
+    return SweepInsertion(out, new_labels, moved)
+
+
+def car_intensity(points: np.ndarray, is_car: np.ndarray) -> float:
+    """Median intensity of the sweep's real car returns (``is_car``: (N,) bool), or the default without any."""
+    values = np.asarray(points)[np.asarray(is_car, bool), 3]
+    return float(np.median(values)) if len(values) >= 20 else DEFAULT_CAR_INTENSITY
+
+
+def count_in_box(points_xyz: np.ndarray, T_box_from_frame: np.ndarray, wlh: np.ndarray) -> int:
+    """Points (N, 3) inside a box, boundary included (nuScenes ``num_lidar_pts``; box x = length, y = width)."""
+    p = np.asarray(points_xyz, np.float64) @ T_box_from_frame[:3, :3].T + T_box_from_frame[:3, 3]
+    half = np.asarray(wlh, np.float64)[[1, 0, 2]] / 2
+    return int(np.count_nonzero(np.all(np.abs(p) <= half, axis=1)))
