@@ -1,7 +1,7 @@
 """Batch throughput: images/s with 1 and 2 local workers and a 2-worker Dask LocalCluster, peak RSS per
 worker, and the projected wall time / cost of all nuScenes trainval keyframes (34,149 samples x 6 cameras).
 
-Usage: ``python benchmarks/bench_batch.py [--replicas 4] [--quality default] [--repeats 1]
+Usage: ``python benchmarks/bench_batch.py [--replicas 12] [--quality default] [--repeats 1]
 [--real] [--out benchmarks/results/batch_throughput.json]``
 
 Dataset: the bundled sample scenes (1600x900; CAM_FRONT, CAM_FRONT_LEFT, CAM_BACK) replicated R times
@@ -80,8 +80,8 @@ def replicate_dataset(src: Path, dst: Path, version: str, replicas: int) -> Path
     return dst
 
 
-def timed_run(dataroot: Path, version: str, out: Path, quality: str, run: RunOptions, seed: int) -> dict:
-    config = BatchConfig(dataroot=str(dataroot), version=version, quality=quality, seed=seed)
+def timed_run(dataroot: Path, version: str, out: Path, quality: str, level: str, run: RunOptions, seed: int) -> dict:
+    config = BatchConfig(dataroot=str(dataroot), version=version, quality=quality, level=level, seed=seed)
     load0 = os.getloadavg()[0]
     t0 = time.perf_counter()
     summary = run_batch(config, out, run)
@@ -123,8 +123,10 @@ def projection(cpu_s_per_image: float, usd_per_core_hour: float) -> dict:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--replicas", type=int, default=4)
+    parser.add_argument("--replicas", type=int, default=12,
+                        help="copies of the 3 bundled samples (12: 108 images, ~1 min per mode on one core)")
     parser.add_argument("--quality", default="default", choices=["draft", "default", "high"])
+    parser.add_argument("--level", default="auto", choices=["L0", "L1", "L2", "L3", "auto"])
     parser.add_argument("--repeats", type=int, default=1, help="runs per mode (medians are reported)")
     parser.add_argument("--real", action="store_true", help="also time the real keyframe (1 worker)")
     parser.add_argument("--usd-per-core-hour", type=float, default=0.04,
@@ -142,13 +144,14 @@ def main() -> None:
         for r in range(args.repeats):
             for name, run in modes.items():  # interleaved, so that a load spike hits every mode alike
                 out = tmp / f"out-{r}-{len(results[name])}-{name.split()[0]}"
-                results[name].append(timed_run(data, BUNDLED_VERSION, out, args.quality, run, seed=r))
+                results[name].append(timed_run(data, BUNDLED_VERSION, out, args.quality, args.level, run, seed=r))
                 print(f"{name}: {results[name][-1]}", flush=True)
                 shutil.rmtree(out)
         real = None
         if args.real and REAL.is_dir():
             real_data = replicate_dataset(REAL, tmp / "real", "v1.0-mini", 4 * args.replicas)
-            real = timed_run(real_data, "v1.0-mini", tmp / "out-real", args.quality, modes["1 worker (inline)"], 0)
+            real = timed_run(real_data, "v1.0-mini", tmp / "out-real", args.quality, args.level,
+                             modes["1 worker (inline)"], 0)
             print(f"real keyframe, 1 worker: {real}", flush=True)
 
     def median(name: str, key: str) -> float:
@@ -164,6 +167,7 @@ def main() -> None:
         "dataset": f"bundled sample scenes x{args.replicas} replicas "
                    f"({3 * args.replicas} samples x 3 cameras, 1600x900)",
         "quality": args.quality,
+        "level": args.level,
         "machine": {"cpus": os.cpu_count(), "python": platform.python_version(), "platform": platform.platform()},
         "runs": results,
         "median_images_per_s": {"1 worker": rate1, "2 local processes": rate2, "Dask 2 workers": rate_dask},
