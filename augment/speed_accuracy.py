@@ -30,6 +30,8 @@ from typing import Sequence
 import cv2
 import numpy as np
 
+from .metrics import psnr_db
+
 LEVELS = ("L0", "L1", "L2", "L3", "auto")
 PRESETS = ("draft", "default", "high")
 
@@ -66,9 +68,8 @@ def ssim(a: np.ndarray, b: np.ndarray, where: np.ndarray) -> float:
 
 def composite_errors(image: np.ndarray, reference: np.ndarray, where: np.ndarray) -> dict:
     """RMSE (8-bit levels), PSNR (dB) and SSIM of ``image`` vs ``reference`` over ``where``."""
-    d = image[where].astype(np.float64) - reference[where].astype(np.float64)
-    rmse = float(np.sqrt(np.mean(d**2))) if d.size else float("nan")
-    psnr = float("inf") if rmse == 0 else float(20 * np.log10(255.0 / rmse))
+    psnr = psnr_db(image, reference, where)
+    rmse = float(255.0 * 10 ** (-psnr / 20))  # nan for an empty region, 0 for identical images
     return {"rmse": rmse, "psnr_db": psnr, "ssim": ssim(image, reference, where)}
 
 

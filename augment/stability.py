@@ -29,6 +29,7 @@ import cv2
 import numpy as np
 
 from .conventions import hdr_to_ldr_uint8, ldr_uint8_to_hdr, make_transform
+from .metrics import psnr_db
 
 PerturbFn = Callable[..., tuple[object, object, Callable[[np.ndarray], np.ndarray]]]
 
@@ -174,14 +175,6 @@ def envmap_change(light_a, light_b, height: int = 64, width: int = 128) -> float
     ea = np.log1p(np.maximum(light_a.to_envmap(height, width), 0.0))
     eb = np.log1p(np.maximum(light_b.to_envmap(height, width), 0.0))
     return float(np.sqrt(np.mean((ea - eb) ** 2)))
-
-
-def psnr_db(a: np.ndarray, b: np.ndarray, where: np.ndarray) -> float:
-    """PSNR (dB, peak 255) of two uint8 images over a boolean mask (inf when identical, nan when empty)."""
-    if not where.any():
-        return float("nan")
-    mse = float(np.mean((a[where].astype(np.float64) - b[where].astype(np.float64)) ** 2))
-    return float("inf") if mse == 0 else float(10 * np.log10(255.0**2 / mse))
 
 
 def _affected(result, source: np.ndarray) -> np.ndarray:

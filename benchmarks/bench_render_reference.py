@@ -57,6 +57,7 @@ SHARED = (ROOT / ".." / "shared" / "data").resolve()
 from streetaug.augment.assets.loader import load_asset  # noqa: E402
 from streetaug.augment.conventions import hdr_to_ldr_uint8, luminance, pose_camera_to_transform  # noqa: E402
 from streetaug.augment.lighting.light import DistantLight  # noqa: E402
+from streetaug.augment.metrics import psnr_db  # noqa: E402
 from streetaug.augment.pipeline import InsertOptions, insert_into_image  # noqa: E402
 from streetaug.augment.render import reference as ref  # noqa: E402
 from streetaug.augment.render.depth import ground_plane_depth  # noqa: E402
@@ -87,12 +88,6 @@ def camera_envmap(hdri: str) -> np.ndarray:
     shift = int(round((SUN_AZIMUTH_CAM_DEG.get(hdri, 0.0) - az) / 360.0 * env.shape[1]))
     env = np.roll(env, shift, axis=1)  # whole pixels: an exact rotation about the vertical
     return ref.with_ground_below_horizon(env, UP, ALBEDO)
-
-
-def psnr(a: np.ndarray, b: np.ndarray, mask: np.ndarray | None = None) -> float:
-    d = (a.astype(np.float64) - b.astype(np.float64)) ** 2
-    mse = float(d[mask].mean() if mask is not None else d.mean())
-    return float("inf") if mse == 0 else 10.0 * np.log10(255.0**2 / mse)
 
 
 class Cache:
@@ -204,9 +199,9 @@ def run_scene(hdri: str, car: str, args, cache: Cache, log, curve: bool = True, 
         out["presets"][preset] = {
             "total_s_median": float(np.median(times)), "total_s": times,
             "cpu_s_median": float(np.median(cpus)),
-            "psnr_region": psnr(r0.image, ref_ldr, region), "psnr_whole": psnr(r0.image, ref_ldr),
-            "psnr_car": psnr(r0.image, ref_ldr, car_px), "psnr_shadow": psnr(r0.image, ref_ldr, shadow_px),
-            "psnr_region_seeds": [psnr(r.image, ref_ldr, region) for r in runs],
+            "psnr_region": psnr_db(r0.image, ref_ldr, region), "psnr_whole": psnr_db(r0.image, ref_ldr),
+            "psnr_car": psnr_db(r0.image, ref_ldr, car_px), "psnr_shadow": psnr_db(r0.image, ref_ldr, shadow_px),
+            "psnr_region_seeds": [psnr_db(r.image, ref_ldr, region) for r in runs],
         }
         if preset == "default":
             _save_panel(args, hdri, car, r0.image, ref_ldr, crop)
@@ -215,15 +210,15 @@ def run_scene(hdri: str, car: str, args, cache: Cache, log, curve: bool = True, 
             f"whole {out['presets'][preset]['psnr_whole']:.2f} dB")
 
     # Bias vs noise: our default against our own high preset (mostly default's noise: same model).
-    out["psnr_region_default_vs_high"] = psnr(images["default"], images["high"], region)
+    out["psnr_region_default_vs_high"] = psnr_db(images["default"], images["high"], region)
     if args.ref_check_spp and check:  # is the reference converged? the same crop at more spp
         hi_crop, _ = mitsuba(True, args.ref_check_spp, 5, crop, args.threads)
         ref_hi = reference.copy()
         ref_hi[y0:y1, x0:x1] = hi_crop
         ref_hi_ldr = hdr_to_ldr_uint8(ref_hi, ev)
         out["ref_check"] = {"spp": args.ref_check_spp,
-                            "psnr_region_reference_vs_check": psnr(ref_ldr, ref_hi_ldr, region),
-                            **{f"psnr_region_{p}_vs_check": psnr(images[p], ref_hi_ldr, region) for p in PRESETS}}
+                            "psnr_region_reference_vs_check": psnr_db(ref_ldr, ref_hi_ldr, region),
+                            **{f"psnr_region_{p}_vs_check": psnr_db(images[p], ref_hi_ldr, region) for p in PRESETS}}
         log(f"  check against {args.ref_check_spp} spp: " + ", ".join(f"{k} {v:.2f}" for k, v in out["ref_check"].items()))
     if not curve:
         return out
@@ -247,7 +242,7 @@ def run_scene(hdri: str, car: str, args, cache: Cache, log, curve: bool = True, 
         m_ldr = hdr_to_ldr_uint8(m, ev)
         out["mitsuba"].append({"spp": spp, "full_frame_s_1thread": fixed + per_spp * spp,
                                "full_frame_cpu_s": cpu_fixed + cpu_per_spp * spp,
-                               "psnr_region": psnr(m_ldr, ref_ldr, region), "psnr_whole": psnr(m_ldr, ref_ldr)})
+                               "psnr_region": psnr_db(m_ldr, ref_ldr, region), "psnr_whole": psnr_db(m_ldr, ref_ldr)})
     out["mitsuba_full_frame_s_1thread_measured"] = t_full
     out["mitsuba_full_frame_cpu_s_measured"] = c_full
     d = out["presets"]["default"]
