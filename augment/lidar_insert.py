@@ -20,7 +20,7 @@ import numpy as np
 
 from streetaug.datasets.lidarseg import LIDARSEG_CAR
 
-from .conventions import check_shape
+from .conventions import check_shape, invert_transform, transform_points
 from .raycast import RayScene
 
 # Moved points sit this far beyond the surface along their beam: inside the object, so that float32
@@ -97,6 +97,60 @@ def car_intensity(points: np.ndarray, is_car: np.ndarray) -> float:
 
 def count_in_box(points_xyz: np.ndarray, T_box_from_frame: np.ndarray, wlh: np.ndarray) -> int:
     """Points (N, 3) inside a box, boundary included (nuScenes ``num_lidar_pts``; box x = length, y = width)."""
-    p = np.asarray(points_xyz, np.float64) @ T_box_from_frame[:3, :3].T + T_box_from_frame[:3, 3]
-    half = np.asarray(wlh, np.float64)[[1, 0, 2]] / 2
-    return int(np.count_nonzero(np.all(np.abs(p) <= half, axis=1)))
+    return int(np.count_nonzero(_inside(points_xyz, T_box_from_frame, wlh)))
+
+
+def _inside(points_xyz: np.ndarray, T_box_from_frame: np.ndarray, wlh: np.ndarray) -> np.ndarray:
+    p = transform_points(T_box_from_frame, np.asarray(points_xyz, np.float64).reshape(-1, 3))
+    return np.all(np.abs(p) <= np.asarray(wlh, np.float64)[[1, 0, 2]] / 2, axis=1)
+
+
+@dataclass(frozen=True)
+class SampleSweep:
+    """A sample's keyframe sweep with its placed objects in it.
+
+    Attributes:
+        sweep: the new points (and labels).
+        num_lidar_pts: (n_objects,) points inside each placed object's box.
+        lost_pts: source annotation token -> how many of its box's points now lie on a placed object.
+    """
+
+    sweep: SweepInsertion
+    num_lidar_pts: list[int]
+    lost_pts: dict[str, int]
+
+
+def insert_placements_into_sweep(points: np.ndarray, labels: np.ndarray | None, T_global_from_lidar: np.ndarray,
+                                 placements: Sequence, assets: Sequence, boxes: Sequence,
+                                 class_index: dict[str, int]) -> SampleSweep:
+    """Put placed assets (``Placement.T_global_from_object``, global frame) into a sweep; recount the boxes.
+
+    Args:
+        points: (N, 5) the sweep; labels: its lidarseg labels or None.
+        placements, assets: the placed objects and their meshes.
+        boxes: the sample's annotated boxes (global frame): cars among them give the moved points'
+            intensity (without lidarseg), and they lose the points that now hit a placed object.
+        class_index: nuScenes category name -> lidarseg class index (``category.index``).
+    """
+    T_lidar_from_global = invert_transform(T_global_from_lidar)
+    xyz = np.asarray(points, np.float64)[:, :3]
+    if labels is not None:
+        is_car = np.asarray(labels) == LIDARSEG_CAR
+    else:
+        is_car = np.zeros(len(xyz), bool)
+        for box in boxes:
+            if box.category == "vehicle.car":
+                is_car |= _inside(xyz, invert_transform(box.T_global_from_box) @ T_global_from_lidar, box.wlh)
+    meshes = [(transform_points(T_lidar_from_global @ p.T_global_from_object, a.vertices), a.faces)
+              for p, a in zip(placements, assets)]
+    sweep = insert_into_sweep(points, meshes, labels, [class_index.get(a.category, LIDARSEG_CAR) for a in assets],
+                              car_intensity(points, is_car))
+    moved = xyz[sweep.moved >= 0]
+    lost = {}
+    for box in boxes:
+        n = count_in_box(moved, invert_transform(box.T_global_from_box) @ T_global_from_lidar, box.wlh)
+        if n and box.token:
+            lost[box.token] = n
+    counts = [count_in_box(sweep.points[:, :3], invert_transform(p.box.T_global_from_box) @ T_global_from_lidar,
+                           p.box.wlh) for p in placements]
+    return SampleSweep(sweep, counts, lost)

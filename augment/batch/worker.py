@@ -158,11 +158,9 @@ def _write_lidar(out_dir: Path, reader: NuScenesReader, sample, result, version:
     None when nothing was placed or the sample has no LiDAR.
     """
     from streetaug.datasets.lidarseg import read_lidar_points, read_lidarseg_labels
-    from streetaug.placement.rules import points_in_boxes
 
-    from ..conventions import invert_transform, transform_points
     from ..io import write_bytes_atomic
-    from ..lidar_insert import LIDARSEG_CAR, car_intensity, count_in_box, insert_into_sweep
+    from ..lidar_insert import insert_placements_into_sweep
 
     sd = reader.lidar_sample_data(sample.token)
     if sd is None or not result.placements:
@@ -171,45 +169,19 @@ def _write_lidar(out_dir: Path, reader: NuScenesReader, sample, result, version:
     points = read_lidar_points(source)
     seg_path = reader.lidarseg_path(sd["token"])
     labels = None if seg_path is None else read_lidarseg_labels(seg_path, num_points=len(points))
-    T_global_from_lidar = reader.T_global_from_ego(sd) @ reader.T_ego_from_sensor(sd)
-    T_lidar_from_global = invert_transform(T_global_from_lidar)
-    if labels is not None:
-        is_car = labels == LIDARSEG_CAR
-    else:
-        cars = [b for b in sample.boxes if b.category == "vehicle.car"]
-        is_car = points_in_boxes(transform_points(T_global_from_lidar, points[:, :3].astype(np.float64)), cars)
-    index = {c["name"]: c["index"] for c in reader.table("category") if "index" in c}
-    meshes = [(transform_points(T_lidar_from_global @ p.T_global_from_object, a.vertices), a.faces)
-              for p, a in zip(result.placements, result.assets)]
-    swept = insert_into_sweep(points, meshes, labels, [index.get(a.category, LIDARSEG_CAR) for a in result.assets],
-                              car_intensity(points, is_car))
+    class_index = {c["name"]: c["index"] for c in reader.table("category") if "index" in c}
+    placed = insert_placements_into_sweep(points, labels, reader.T_global_from_ego(sd) @ reader.T_ego_from_sensor(sd),
+                                          result.placements, result.assets, sample.boxes, class_index)
+    before = {token: int(reader.get("sample_annotation", token).get("num_lidar_pts", n))
+              for token, n in placed.lost_pts.items()}
     entry = {"sample_data_token": sd["token"], "file": f"samples/{Path(sd['filename']).parent.name}/{source.name}",
-             "lidarseg_file": None,
-             "num_lidar_pts": [count_in_box(swept.points[:, :3],
-                                            invert_transform(p.box.T_global_from_box) @ T_global_from_lidar,
-                                            p.box.wlh) for p in result.placements],
-             "source_num_lidar_pts": _recounted(reader, sample, points, swept, T_global_from_lidar)}
-    write_bytes_atomic(out_dir / entry["file"], swept.points.astype("<f4").tobytes())
-    if swept.labels is not None:
+             "lidarseg_file": None, "num_lidar_pts": placed.num_lidar_pts,
+             "source_num_lidar_pts": {t: max(before[t] - n, 0) for t, n in placed.lost_pts.items()}}
+    write_bytes_atomic(out_dir / entry["file"], placed.sweep.points.astype("<f4").tobytes())
+    if placed.sweep.labels is not None:
         entry["lidarseg_file"] = f"{LIDARSEG_FOLDER}/{version}/{seg_path.name}"
-        write_bytes_atomic(out_dir / entry["lidarseg_file"], swept.labels.astype(np.uint8).tobytes())
+        write_bytes_atomic(out_dir / entry["lidarseg_file"], placed.sweep.labels.astype(np.uint8).tobytes())
     return entry
-
-
-def _recounted(reader: NuScenesReader, sample, points: np.ndarray, swept, T_global_from_lidar: np.ndarray) -> dict:
-    """Annotation token -> ``num_lidar_pts`` less the points that moved out of its box onto an inserted object."""
-    from ..conventions import invert_transform
-    from ..lidar_insert import count_in_box
-
-    moved = swept.moved >= 0
-    out = {}
-    for box in sample.boxes:
-        T_box_from_lidar = invert_transform(box.T_global_from_box) @ T_global_from_lidar
-        lost = count_in_box(points[moved, :3], T_box_from_lidar, box.wlh)
-        if lost and box.token:
-            before = int(reader.get("sample_annotation", box.token).get("num_lidar_pts", lost))
-            out[box.token] = max(before - lost, 0)
-    return out
 
 
 def _write_camera(out_dir: Path, sample, camera: str, result, shared_s: dict, lidar: dict | None = None) -> dict:
