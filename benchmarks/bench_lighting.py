@@ -17,6 +17,9 @@ Usage: ``python benchmarks/bench_lighting.py [--runs 3] [--quick] [--out benchma
    and compared with its real image at 320 x 180 (si-PSNR: the prediction scaled by the least-squares factor).
    Monocular: CAM_FRONT -> CAM_FRONT_LEFT, CAM_BACK; leave-one-out: each camera from the other two.
    The same on the bundled scenes.
+   **Street prior ablation** (section ``street_prior``): the same L3 monocular / leave-one-out scores with the
+   street prior of :mod:`augment.lighting.fill` on and off (``build.STREET_PRIOR_WEIGHT`` = inf: the shading
+   model alone colours unobserved surfaces), on the bundled scenes and the real sample.
 3. **Speed** (one core, BLAS and torch threads 1): ``predict-light`` work for a 1600 x 900 image = estimate
    + local env map at the query point (files excluded), per level, image-only path (what the CLI runs) and
    with the sample's LiDAR; median of ``--runs``; plus a grid-resolution sweep for L3.
@@ -68,7 +71,7 @@ LEVELS = ("L0", "L1", "L2", "L3")
 ENV_H, ENV_W = 64, 128
 NORMALS = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]], dtype=np.float64)
 NOVEL_W = 320
-ALL_SECTIONS = ("speed", "bundled", "real", "grid")
+ALL_SECTIONS = ("speed", "bundled", "real", "street_prior", "grid")
 
 
 # ----------------------------------------------------------------------------- ground truth of the bundled scenes
@@ -267,6 +270,36 @@ def real_section(quick: bool) -> tuple[dict, list]:
     return table, images
 
 
+def street_prior_section() -> dict:
+    """L3 novel-view PSNR / si-PSNR with the street prior on and off, per sample (bundled scenes + real)."""
+    from streetaug.augment.lighting import build
+
+    reader = NuScenesReader(bundled_dataroot(), "v1.0-samples")
+    samples = [(n, reader.sample(reader.sample_tokens(n)[0])) for n in sorted(SAMPLE_SCENES)]
+    if REAL.exists():
+        samples.append(("real", NuScenesReader(REAL, "v1.0-mini").sample(REAL_SAMPLE)))
+    weight = build.STREET_PRIOR_WEIGHT
+    out: dict = {"prior_weight": weight}
+    try:
+        for label, w in (("off", float("inf")), ("on", weight)):
+            build.STREET_PRIOR_WEIGHT = w
+            for name, sample in samples:
+                for setup in ("monocular", "leave_one_out"):
+                    rows = [novel_view_scores(sample, src, tgt, "L3") for src, tgt in NOVEL_SETUPS[setup]]
+                    out.setdefault(name, {}).setdefault(setup, {})[label] = {
+                        "psnr_mean": float(np.mean([r["psnr"] for r in rows])),
+                        "si_psnr_mean": float(np.mean([r["si_psnr"] for r in rows])),
+                        "per_target": [{k: r[k] for k in ("target", "psnr", "si_psnr")} for r in rows]}
+    finally:
+        build.STREET_PRIOR_WEIGHT = weight
+    for name, _ in samples:
+        print("street prior " + name + ": " + ", ".join(
+            f"{setup} L3 {v['off']['psnr_mean']:.2f} -> {v['on']['psnr_mean']:.2f} dB "
+            f"(si {v['off']['si_psnr_mean']:.2f} -> {v['on']['si_psnr_mean']:.2f})" for setup, v in out[name].items()),
+            flush=True)
+    return out
+
+
 def speed_section(runs: int) -> dict:
     out = {}
     if REAL.exists():
@@ -349,6 +382,8 @@ def main() -> None:
         result["bundled"], tiles = bundled_section(args.runs, args.quick)
     if "real" in sections:
         result["real_novel_view"], images = real_section(args.quick)
+    if "street_prior" in sections:
+        result["street_prior_ablation"] = street_prior_section()
     if "grid" in sections:
         result["grid_sweep"] = grid_sweep(args.runs, args.quick)
     result["machine"]["load_average_end"] = list(os.getloadavg())

@@ -29,6 +29,10 @@ Steps (all vectorised):
      the sun's transmittance ``tau_sun`` traced through the volume itself (cast shadows of buildings on unseen
      ground and facades), normals from the occupancy gradient, and ``a``, ``b`` (albedo/pi x sun / sky
      irradiance, per class ground / structure and channel) fitted to the observed surfaces (:func:`_fit_shading`);
+   * *the street continues along its axis* (:mod:`.fill`): an unobserved surface's shading is multiplied by
+     the observed/shaded ratio (its material) of the observed surfaces at the same lateral offset from the
+     ego's line of travel and the same height, wherever along the street they are (shrunk towards 1 where few
+     were observed): the road, kerbs, hedges and facades behind and beside look like those ahead;
    * interior voxels copy the colour of a neighbouring surface voxel (nearest-neighbour lookups may land
      a voxel or two inside).
 """
@@ -43,6 +47,7 @@ import torch
 from scipy import ndimage
 
 from ..conventions import check_shape, ldr_uint8_to_hdr, luminance, transform_points
+from .fill import lateral_offsets_m, street_axis_xy, street_extrusion
 from .volume import CH_ALPHA, CH_AXIS, CH_COLOR, CH_SIGMA, N_CHANNELS, HybridLighting, LogGrid, world_envmap_directions
 
 WORK_WIDTH = 480
@@ -57,6 +62,8 @@ SATURATED_LDR = 0.97
 EGO_BOX_EGO_M = ((-1.5, 4.0), (-1.2, 1.2), (-0.5, 2.2))  # LiDAR returns inside the ego car are dropped
 THICKEN_VOXELS = 2
 SHADOW_SAMPLES = 48  # samples of the sun-visibility rays that shade unobserved surfaces
+STREET_PRIOR_WEIGHT = 3.0  # the shading model counts as this many observed voxels of a street cell (see .fill);
+# chosen a priori (a cell needs a few observed voxels to outweigh the model), not fitted to any scene
 
 
 @dataclass(frozen=True)
@@ -74,6 +81,7 @@ class ViewObservation:
         far_is_sky: (F,) bool, True for sky pixels (False: distant scenery).
         far_saturated: (F,) bool, the pixel is clipped (its radiance is a lower bound).
         camera_centre: (3,) camera centre in the volume frame.
+        ego_forward: (3,) unit forward axis of the ego vehicle in the volume frame (the street's direction), or None.
     """
 
     channel: str
@@ -86,6 +94,7 @@ class ViewObservation:
     far_is_sky: np.ndarray
     far_saturated: np.ndarray
     camera_centre: np.ndarray
+    ego_forward: np.ndarray | None = None
 
 
 def extend_facades(depth_m: np.ndarray, sky: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -177,8 +186,17 @@ def observe_view(view, T_vol_from_cam: np.ndarray, exposure_ratio: float, lidar_
     return ViewObservation(
         channel=view.channel, points=p_vol, radiance=hdr[near], view_dirs=view_dirs, capped=capped,
         far_dirs=d_far, far_radiance=hdr[far], far_is_sky=sky[far], far_saturated=ldr_max[far] >= SATURATED_LDR,
-        camera_centre=centre,
+        camera_centre=centre, ego_forward=_ego_forward(view, T_vol_from_cam),
     )
+
+
+def _ego_forward(view, T_vol_from_cam: np.ndarray) -> np.ndarray | None:
+    """The ego's forward axis (3,) in the volume frame, or None if the view has no ego pose."""
+    T_ge, T_gc = getattr(view, "T_global_from_ego", None), getattr(view, "T_global_from_cam", None)
+    if T_ge is None or T_gc is None:
+        return None
+    R = np.asarray(T_vol_from_cam)[:3, :3] @ np.asarray(T_gc)[:3, :3].T @ np.asarray(T_ge)[:3, :3]
+    return R[:, 0]
 
 
 # ----------------------------------------------------------------------------- sky dome
@@ -458,6 +476,20 @@ def build_volume(grid: LogGrid, observations: list[ViewObservation], lidar_point
                                  default * light.sun_irradiance, default * light.sky_irradiance_h)
         shaded[cls] = direct[cls, None] * coef[0][None] + sky_view[cls, None] * coef[1][None]
         stats[f"shading_{name}"] = {"sun_rgb": coef[0].tolist(), "sky_rgb": coef[1].tolist(), "from": how}
+    # street prior (see .fill): the materials of the observed surfaces continue along the street; an unobserved
+    # surface keeps its own shading (sun, shadow, sky) times the observed/shaded ratio of its street cell
+    if np.isfinite(STREET_PRIOR_WEIGHT):  # inf: the shading model alone (ablation)
+        axis_xy = street_axis_xy(next((o.ego_forward for o in observations if o.ego_forward is not None), None))
+        lat_m = lateral_offsets_m(centres[s_idx, :2], axis_xy)
+        k_s = s_idx % Z
+        unobs = ~obs_s
+        # a surface voxel's centre sits up to half its size (plus the walls' thickening) off the surface
+        half_w = (0.5 + THICKEN_VOXELS) * size_s[unobs, :2].max(axis=1)
+        sums = street_extrusion(lat_m[obs_s], k_s[obs_s], np.concatenate([obs_rgb[s_idx[obs_s]], shaded[obs_s]], 1),
+                                lat_m[unobs], k_s[unobs], half_w, np.concatenate([shaded[unobs], shaded[unobs]], 1),
+                                STREET_PRIOR_WEIGHT, Z)
+        shaded[unobs] *= sums[:, :3] / np.maximum(sums[:, 3:], 1e-9)
+        stats["street_axis_xy"] = axis_xy.tolist()
     color = np.zeros((n, 3))
     color[s_idx] = shaded
     obs_idx = np.flatnonzero(observed.reshape(-1))
