@@ -4,8 +4,10 @@ The paper's multi-view extension: the sky's parameters are pooled over the views
 from the strongest evidence any camera has) and all images are unprojected into one volume defined in a
 common frame. The *volume frame* is z up (global up), x along the reference camera's horizontal viewing
 direction, origin on the ground under the reference camera (the first camera given). Radiance is on the
-reference camera's scale; the cameras are assumed to share one exposure (``exposure_ratio`` 1; the hook
-for per-camera ratios is kept in :meth:`SampleLighting.for_view` and :func:`~.build.observe_view`).
+reference camera's scale; each camera's exposure relative to the reference (nuScenes cameras run their own
+auto-exposure) comes from the LiDAR points neighbouring cameras both see (:mod:`.exposure`): images are
+divided by it when unprojected (:func:`~.build.observe_view`), and :meth:`SampleLighting.for_view`
+multiplies the shared lighting by it.
 """
 
 from __future__ import annotations
@@ -50,6 +52,7 @@ from .estimate import (
     _l1_estimate,
     _l1_view_evidence,
 )
+from .exposure import exposure_ratios
 from .levels import (
     L2_GRID,
     L3_GRID,
@@ -290,8 +293,7 @@ def estimate_views_lighting(views: Sequence, location: str | None, level: str, l
     ref_est = per_view[ref.channel]
     cloud = float(ref_est.params["cloud_cover"])
     scale_ref = float(ref_est.params["scale"])
-    # One exposure for all cameras: the rig's cameras run the same auto-exposure, and their overlaps are
-    # too thin (vignetted image edges, view-dependent glass) to calibrate a ratio reliably.
+    # L1 fits each camera on its own scale; the shared volume (below) needs the cameras' exposure ratios.
     ratios = {v.channel: 1.0 for v in views}
     timing["l1"] = time.perf_counter() - t0
     params = {
@@ -306,7 +308,11 @@ def estimate_views_lighting(views: Sequence, location: str | None, level: str, l
         return done(SampleLighting("L1", reason_l1, ref.channel, per_view, ratios, None, T_global_from_vol,
                                    _clean(params), timing))
 
-    # ---- observations in the volume frame
+    # ---- exposure of each camera relative to the reference, then observations in the volume frame
+    t = time.perf_counter()
+    ratios, params["exposure"] = exposure_ratios(views, lidar.points_global if lidar is not None else None)
+    params["exposure_ratio"] = ratios
+    timing["exposure"] = time.perf_counter() - t
     t = time.perf_counter()
     T_vol_from_global = invert_transform(T_global_from_vol)
     T_vol_from_cams = [T_vol_from_global @ np.asarray(v.T_global_from_cam) for v in views]

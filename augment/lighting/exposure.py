@@ -1,0 +1,112 @@
+"""Relative exposure of a sample's cameras, from the LiDAR points two cameras both see.
+
+nuScenes cameras each run their own auto-exposure: the same surface can be several times brighter in
+one camera than in its neighbour (real sample, scene-0061: CAM_FRONT_LEFT records the truck and the
+building that CAM_FRONT also sees ~7x brighter in linear radiance). Lighting shared by a sample's cameras
+is on the reference camera's scale, so each camera's ratio converts it to that camera's image units.
+
+A pair of cameras is calibrated by the LiDAR points visible in both (nearest LiDAR return at their
+pixel in both images, neither pixel clipped nor black): the ratio is the median of their linear
+luminance ratios. Ratios chain along overlapping neighbours (the nuScenes ring FRONT - FRONT_LEFT -
+BACK_LEFT - BACK - ...), over the pairs with most shared points. A camera with no chain to the
+reference keeps ratio 1, and the report says so.
+"""
+
+from __future__ import annotations
+
+from typing import Sequence
+
+import numpy as np
+
+from ..conventions import ldr_uint8_to_hdr, luminance, project_points, transform_points
+
+MIN_SHARED_POINTS = 40  # fewer shared points than this do not calibrate a pair
+Z_BUFFER_CELL_PX = 8  # visibility test: nearest LiDAR return within cells of this size
+Z_BUFFER_SLACK = 1.03  # a point is visible when within 3 % of the nearest return of its cell
+LDR_VALID = (8, 247)  # pixels outside (black, clipped) carry no ratio
+
+
+def visible_lidar_pixels(view, points_global: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Pixels (N, 2) of LiDAR points (N, 3, global) in ``view`` and whether each is visible there.
+
+    Visible: in front of the camera, inside the image, and the nearest LiDAR return of its
+    ``Z_BUFFER_CELL_PX`` cell (within ``Z_BUFFER_SLACK``), i.e. not hidden behind another surface.
+    """
+    H, W = np.asarray(view.image).shape[:2]
+    points_cam = transform_points(view.T_cam_from_global, points_global)
+    uv, depth = project_points(view.K, points_cam)
+    inside = (depth > 0.5) & np.all(np.isfinite(uv), axis=1)
+    inside &= (uv[:, 0] >= 0) & (uv[:, 0] < W - 1) & (uv[:, 1] >= 0) & (uv[:, 1] < H - 1)
+    cells_x = W // Z_BUFFER_CELL_PX + 1
+    cell = np.zeros(len(uv), np.int64)
+    cell[inside] = (uv[inside, 1] // Z_BUFFER_CELL_PX).astype(np.int64) * cells_x + (
+        uv[inside, 0] // Z_BUFFER_CELL_PX).astype(np.int64)
+    nearest = np.full((H // Z_BUFFER_CELL_PX + 1) * cells_x, np.inf)
+    np.minimum.at(nearest, cell[inside], depth[inside])
+    visible = inside & (depth <= nearest[cell] * Z_BUFFER_SLACK)
+    return uv, visible
+
+
+def _radiance_at(view, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Linear luminance at pixels (nearest) and whether the pixel is usable (not black, not clipped)."""
+    image = np.asarray(view.image)
+    px = np.round(uv).astype(np.int64)
+    ldr = image[px[:, 1], px[:, 0]]
+    usable = (ldr.max(axis=1) <= LDR_VALID[1]) & (ldr.min(axis=1) >= LDR_VALID[0])
+    return luminance(ldr_uint8_to_hdr(ldr[None])[0]), usable
+
+
+def pair_ratio(view_a, view_b, points_global: np.ndarray) -> tuple[float, int]:
+    """Exposure of ``view_b`` relative to ``view_a`` (b's image units per a's) and the points it rests on."""
+    uv_a, vis_a = visible_lidar_pixels(view_a, points_global)
+    uv_b, vis_b = visible_lidar_pixels(view_b, points_global)
+    shared = np.flatnonzero(vis_a & vis_b)
+    if len(shared) == 0:
+        return 1.0, 0
+    la, ok_a = _radiance_at(view_a, uv_a[shared])
+    lb, ok_b = _radiance_at(view_b, uv_b[shared])
+    ok = ok_a & ok_b & (la > 0) & (lb > 0)
+    n = int(np.count_nonzero(ok))
+    if n < MIN_SHARED_POINTS:
+        return 1.0, n
+    return float(np.exp(np.median(np.log(lb[ok]) - np.log(la[ok])))), n
+
+
+def exposure_ratios(views: Sequence, points_global: np.ndarray | None) -> tuple[dict[str, float], dict]:
+    """Channel -> image units per reference (``views[0]``) unit, and a report of how each was found.
+
+    Without LiDAR every ratio is 1 (one exposure assumed).
+    """
+    channels = [v.channel for v in views]
+    ratios = {c: 1.0 for c in channels}
+    if points_global is None or len(views) < 2 or len(points_global) == 0:
+        return ratios, {"method": "assumed equal (no LiDAR)" if points_global is None else "single view"}
+    pairs = {}
+    for i in range(len(views)):
+        for j in range(i + 1, len(views)):
+            ratio, n = pair_ratio(views[i], views[j], points_global)
+            pairs[(i, j)] = (ratio, n)
+    # Grow from the reference along the best-supported pair first (a maximum spanning tree).
+    known = {0: 1.0}
+    how = {channels[0]: "reference"}
+    while True:
+        best = None
+        for (i, j), (ratio, n) in pairs.items():
+            if n >= MIN_SHARED_POINTS and ((i in known) != (j in known)) and (best is None or n > best[2]):
+                best = (i, j, n, ratio)
+        if best is None:
+            break
+        i, j, n, ratio = best
+        if i in known:
+            known[j] = known[i] * ratio
+            how[channels[j]] = f"{n} LiDAR points shared with {channels[i]}"
+        else:
+            known[i] = known[j] / ratio
+            how[channels[i]] = f"{n} LiDAR points shared with {channels[j]}"
+    for k, value in known.items():
+        ratios[channels[k]] = float(value)
+    for c in channels:
+        how.setdefault(c, "no overlap with a calibrated camera: reference exposure assumed")
+    return ratios, {"method": "shared LiDAR points", "per_camera": how,
+                    "pairs": {f"{channels[i]}/{channels[j]}": {"ratio": r, "points": n}
+                              for (i, j), (r, n) in pairs.items()}}
