@@ -30,7 +30,7 @@ from typing import Sequence
 import cv2
 import numpy as np
 
-from .metrics import psnr_db
+from .metrics import env_log_error, psnr_db
 
 LEVELS = ("L0", "L1", "L2", "L3", "auto")
 PRESETS = ("draft", "default", "high")
@@ -80,16 +80,6 @@ def affected_region(source: np.ndarray, *composites: np.ndarray, grow_px: int = 
         changed |= np.abs(c.astype(np.int16) - source.astype(np.int16)).max(axis=2) > 1
     k = 2 * grow_px + 1
     return cv2.dilate(changed.astype(np.uint8), np.ones((k, k), np.uint8)) > 0
-
-
-def env_log_error(estimated, true, height: int = 32, width: int = 64) -> float:
-    """Solid-angle-weighted mean of (log(1 + L_est) - log(1 + L_true))^2 over the full sphere (sun included)."""
-    from .conventions import equirect_solid_angles
-
-    a = np.log1p(np.maximum(estimated.to_envmap(height, width), 0.0)).mean(axis=2)
-    b = np.log1p(np.maximum(true.to_envmap(height, width), 0.0)).mean(axis=2)
-    w = equirect_solid_angles(height, width)
-    return float(np.sum(w * (a - b) ** 2) / np.sum(w))
 
 
 def make_cases(dataroot, scenes: Sequence[str], seeds: Sequence[int], camera: str = "CAM_FRONT") -> list[Case]:
@@ -153,7 +143,7 @@ def run_configuration(case: Case, level: str, preset: str) -> dict:
         row["sun_error_deg"] = float(np.degrees(np.arccos(c)))
     else:
         row["sun_error_deg"] = None
-    row["env_log_error"] = env_log_error(light, case.true_light)
+    row["env_log_error"] = env_log_error(light.to_envmap(32, 64), case.true_light.to_envmap(32, 64))
     return row
 
 

@@ -59,6 +59,7 @@ from streetaug.augment.lighting.levels import L3_GRID  # noqa: E402
 from streetaug.augment.lighting.light import DistantLight  # noqa: E402
 from streetaug.augment.lighting.multiview import estimate_sample_lighting, estimate_views_lighting  # noqa: E402
 from streetaug.augment.lighting.volume import sample_world_equirect  # noqa: E402
+from streetaug.augment.metrics import env_log_error, psnr_db  # noqa: E402
 from streetaug.augment.scenegen.ground_truth import GroundTruthScene, ground_truth_light, read_ground_truth  # noqa: E402
 from streetaug.augment.scenegen.make import SAMPLE_SCENES  # noqa: E402
 from streetaug.datasets.bundled import bundled_dataroot  # noqa: E402
@@ -94,15 +95,6 @@ def irradiance(light: DistantLight, normals: np.ndarray) -> np.ndarray:
     return e
 
 
-def env_log_error(est: np.ndarray, gt: np.ndarray) -> float:
-    """Solid-angle weighted mean of (log(1 + x^) - log(1 + x))^2 over the map (both resized to gt's size)."""
-    H, W = gt.shape[:2]
-    if est.shape[:2] != (H, W):
-        est = cv2.resize(est.astype(np.float32), (W, H), interpolation=cv2.INTER_AREA)
-    w = equirect_solid_angles(H, W)[..., None]
-    return float((w * (np.log1p(np.maximum(est, 0)) - np.log1p(np.maximum(gt, 0))) ** 2).sum() / (3 * w.sum()))
-
-
 def sun_sky_ratio(light: DistantLight, up_cam: np.ndarray) -> float:
     """Horizontal irradiance of the sun over that of the sky (luminance); 0 without a sun."""
     e = irradiance(DistantLight(light.envmap, None), up_cam[None])[0]
@@ -111,7 +103,8 @@ def sun_sky_ratio(light: DistantLight, up_cam: np.ndarray) -> float:
 
 
 def psnr(a: np.ndarray, b: np.ndarray) -> float:
-    return float(10 * np.log10(1.0 / max(float(np.mean((a - b) ** 2)), 1e-12)))
+    """PSNR (dB) of images in [0, 1]."""
+    return psnr_db(a, b, peak=1.0)
 
 
 def si_psnr(pred: np.ndarray, gt: np.ndarray) -> float:

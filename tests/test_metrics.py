@@ -24,3 +24,15 @@ def test_psnr_identical_and_empty():
     a = np.full((3, 3), 7, np.uint8)
     assert psnr_db(a, a) == float("inf")
     assert math.isnan(psnr_db(a, a + 1, np.zeros((3, 3), bool)))
+
+
+def test_env_log_error():
+    from streetaug.augment.metrics import env_log_error
+
+    true = np.full((16, 32, 3), 1.0, np.float32)
+    assert env_log_error(true, true) == 0.0
+    est = true.copy()
+    est[..., 0] = np.e * 2 - 1  # log1p: log(2) -> 1 + log(2) in one channel of three, everywhere
+    assert abs(env_log_error(est, true) - 1.0 / 3) < 1e-6
+    big = np.full((64, 128, 3), 1.0, np.float32)  # resized to the true map's size
+    assert env_log_error(big, true) < 1e-9
