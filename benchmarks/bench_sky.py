@@ -19,8 +19,8 @@ Sections (all numbers land in the JSON):
    unsaturated pixels, the model's sun added at that scale).
 3. ``single_image``: 1600 x 900 perspective views (70 deg horizontal FOV) cut from the held-out sunny
    panoramas at 12 azimuths around the sun (level camera) + 3 tilted views with the sun in the frame;
-   median angular error of the predicted sun direction (network x sky-brightness likelihood, and the
-   network alone), fraction < 20 deg, calibration of the predicted
+   median angular error of the predicted sun direction (network + the explicit cues of
+   ``skynet/sun_cues.py``: sun disc, clear-sky fit; and the network alone), fraction < 20 deg, calibration of the predicted
    68 % cone, how often a sun is reported; baseline: a constant guess (sun 45 deg up, straight ahead).
    Same views of ``venice`` (no sun): how often the predictor (wrongly) reports a sun.
 4. ``sphere_insertion``: diffuse (albedo 0.8) and mirror spheres lit by the predicted light vs by the
@@ -300,14 +300,16 @@ def section_single_image(panos, gt, models, quick=False) -> tuple[dict, list]:
             pred = predict_sky(image, K, up_cam, models=models)
             t_pred = time.perf_counter() - t
             err = float(angle_deg(pred.direction_cam, sun_cam))
-            pred_cnn = predict_sky(image, K, up_cam, models=models, use_sky_fit=False)
+            pred_cnn = predict_sky(image, K, up_cam, models=models, use_cues=False)
             err_cnn = float(angle_deg(pred_cnn.direction_cam, sun_cam))
             prior = R_wc.T @ lonlat_to_world_dir(np.array(yaw), np.array(np.radians(45.0)))
             row = {"pano": name, "kind": label, "yaw_deg": float(np.degrees(yaw)), "pitch_deg": float(np.degrees(pitch)),
                    "sun_in_view": in_view, "err_deg": err, "err_deg_cnn_only": err_cnn,
                    "prior_err_deg": float(angle_deg(prior, sun_cam)),
-                   "uncertainty_deg": pred.uncertainty_deg, "visibility": pred.visibility_raw,
-                   "sun_reported": pred.confident, "predict_s": t_pred}
+                   "uncertainty_deg": pred.uncertainty_deg, "uncertainty_deg_cnn_only": pred_cnn.uncertainty_deg,
+                   "visibility": pred.visibility_raw, "sun_reported": pred.confident,
+                   "sun_disc_detected": "sun disc" in pred.reason, "predict_s": t_pred,
+                   "predict_cues_s": pred.timing_s.get("cues", 0.0)}
             # sphere insertion: predicted light (ground = the image's mean radiance below the horizon) vs truth
             hdr_img = ldr_uint8_to_hdr(image).astype(np.float64)
             ys = np.arange(VIEW_H)
@@ -355,12 +357,23 @@ def section_single_image(panos, gt, models, quick=False) -> tuple[dict, list]:
         "cnn_only_fraction_under_20deg": float(np.mean([r["err_deg_cnn_only"] < 20.0 for r in sunny])),
         "prior_baseline_err_deg_median": float(np.median([r["prior_err_deg"] for r in sunny])),
         "calibration_fraction_within_68pct_cone": float(np.mean(errs <= unc)),
+        "cnn_only_calibration_fraction_within_68pct_cone": float(np.mean([r["err_deg_cnn_only"] <= r["uncertainty_deg_cnn_only"]
+                                                                           for r in sunny])),
+        "sun_disc_detected_in_view": f"{sum(r['sun_disc_detected'] for r in sunny if r['sun_in_view'])} / {int(in_v.sum())}",
+        "sun_disc_detected_out_of_view_or_no_sun": int(sum(r["sun_disc_detected"] for r in rows
+                                                           if not r["sun_in_view"] or r["pano"] == "venice")),
+        "predict_s_median": float(np.median([r["predict_s"] for r in rows])),
         "sun_reported_fraction_sunny": float(np.mean([r["sun_reported"] for r in sunny])),
         "sun_err_deg_median_when_reported": float(np.median(errs[[r["sun_reported"] for r in sunny]]))
         if any(r["sun_reported"] for r in sunny) else None,
         "sun_reported_fraction_venice_no_sun": float(np.mean([r["sun_reported"] for r in rows if r["pano"] == "venice"])),
         "per_pano_err_deg_median": {n: float(np.median([r["err_deg"] for r in rows if r["pano"] == n]))
                                     for n in ("sky", "sunrise")},
+        "per_pano_err_deg_median_in_out_of_view": {
+            n: {k: float(np.median(v)) if v else None for k, v in (
+                ("in", [r["err_deg"] for r in rows if r["pano"] == n and r["sun_in_view"]]),
+                ("out", [r["err_deg"] for r in rows if r["pano"] == n and not r["sun_in_view"]]))}
+            for n in ("sky", "sunrise")},
     }
     mse = {}
     for key in ("mse_learned", "mse_constant", "mse_current_image_only", "mse_metadata_refined"):
@@ -382,24 +395,36 @@ def section_bundled() -> dict:
         for ch, cam in gt["cameras"].items():
             view = reader.camera_view(cam["sample_data_token"])
             pred = predict_sky(np.asarray(view.image), view.K)
+            cnn = predict_sky(np.asarray(view.image), view.K, use_cues=False)
             rows.append({"scene": scene, "camera": ch, "err_deg": float(angle_deg(pred.direction_cam, cam["sun_direction_camera"])),
+                         "err_deg_cnn_only": float(angle_deg(cnn.direction_cam, cam["sun_direction_camera"])),
+                         "sun_disc_detected": "sun disc" in pred.reason,
                          "visibility": pred.visibility_raw, "uncertainty_deg": pred.uncertainty_deg,
                          "sun_reported": pred.confident, "cloud_cover": gt["sky"]["cloud_cover"]})
     clear = [r["err_deg"] for r in rows if r["cloud_cover"] < 0.5]
     return {"views": rows, "clear_err_deg_median": float(np.median(clear)),
+            "clear_err_deg_median_cnn_only": float(np.median([r["err_deg_cnn_only"] for r in rows if r["cloud_cover"] < 0.5])),
+            "clear_calibration_fraction_within_68pct_cone": float(np.mean([r["err_deg"] <= r["uncertainty_deg"]
+                                                                          for r in rows if r["cloud_cover"] < 0.5])),
             "clear_fraction_under_20deg": float(np.mean(np.array(clear) < 20)),
             "overcast_sun_reported": [r["sun_reported"] for r in rows if r["cloud_cover"] >= 0.5]}
 
 
-def section_speed(models) -> dict:
+def section_speed(models, panos) -> dict:
     rng = np.random.default_rng(0)
     image = rng.integers(0, 255, (900, 1600, 3), dtype=np.uint8)
     K = intrinsics_from_fov(1600, 900, 70.0)
     pred = predict_sky(image, K, models=models)
+    # the costly case for the cues: a level view with a large clear sky (the sky fit runs on the most pixels)
+    rad = render_perspective(panos["sky"], K, camera_from_angles(0.0, 0.0, 0.0), VIEW_W, VIEW_H, supersample=1)
+    sky_view = np.clip(np.round(hdr_to_ldr(rad * D.auto_exposure(rad)) * 255), 0, 255).astype(np.uint8)
     mask = np.zeros((900, 1600), bool)
     mask[:300] = True
     return {
         "predict_sky_1600x900_s": _median_time(lambda: predict_sky(image, K, models=models), 10),
+        "predict_sky_1600x900_sky_view_s": _median_time(lambda: predict_sky(sky_view, K, models=models), 10),
+        "predict_sky_1600x900_sky_view_cnn_only_s": _median_time(
+            lambda: predict_sky(sky_view, K, models=models, use_cues=False), 10),
         "decode_sky_s": _median_time(lambda: decode_sky(pred.sky, models[0]), 10),
         "sky_to_light_128x256_s": _median_time(lambda: sky_to_light(pred.sky, pred.R_heading_from_cam, sky_model=models[0]), 5),
         "refine_sky_20_steps_s": _median_time(lambda: refine_sky(pred.sky, image, K, mask, steps=20, models=models), 3),
@@ -426,7 +451,7 @@ def main() -> None:
     models = get_models()
     result = {"machine": {"cpu": platform.processor() or platform.machine(), "load_avg_start": os.getloadavg(),
                           "torch_threads": 1}}
-    result["speed_size"] = section_speed(models)
+    result["speed_size"] = section_speed(models, panos)
     result["resolution"] = section_resolution(panos, gt)
     result["sky_reconstruction"] = section_reconstruction(panos, gt, models[0])
     single, mse, figs = section_single_image(panos, gt, models, args.quick)
@@ -457,7 +482,11 @@ def main() -> None:
         print(f"sphere MSE {k}: diffuse {v['diffuse']:.2e} mirror {v['mirror']:.2e}")
     print(f"bundled scenes (clear): median {result['bundled_scenes']['clear_err_deg_median']:.1f} deg")
     sp = result["speed_size"]
-    print(f"predict_sky {sp['predict_sky_1600x900_s'] * 1e3:.0f} ms, refine 20 steps {sp['refine_sky_20_steps_s'] * 1e3:.0f} ms, "
+    print(f"per-pano median (in / out of view): {s['per_pano_err_deg_median_in_out_of_view']}; "
+          f"cnn only {s['cnn_only_err_deg_median']:.1f} deg; discs in view {s['sun_disc_detected_in_view']}")
+    print(f"predict_sky {sp['predict_sky_1600x900_s'] * 1e3:.0f} ms (noise image), "
+          f"{sp['predict_sky_1600x900_sky_view_s'] * 1e3:.0f} ms (sky view; network only "
+          f"{sp['predict_sky_1600x900_sky_view_cnn_only_s'] * 1e3:.0f} ms), refine 20 steps {sp['refine_sky_20_steps_s'] * 1e3:.0f} ms, "
           f"weights {sum(sp['weights_bytes'].values()) / 1e6:.2f} MB; wrote {args.out}")
 
 

@@ -35,6 +35,13 @@ VISIBILITY_MIN = 0.3  # below: no sun is reported (overcast, night, hidden)
 UNCERTAINTY_MAX_DEG = 35.0  # above (68 % cone): the direction is too uncertain to report a sun
 SUN_REGION_PX = 2.5  # the decoded sun is taken from this radius (dome pixels) around f_dir
 MIN_SUN_FRACTION = 0.05  # a decoded peak counts as a sun if it carries this fraction of the dome's irradiance
+DISC_VISIBILITY = 0.7  # a sun disc seen in the image: the visibility is at least this
+CNN_WEIGHT = 0.5  # exponent of the network's direction distribution in the posterior
+FIT_TEMPERATURE = 4.0  # divides the clear-sky fit's log-likelihood (calibrated on held-in views)
+IN_VIEW_PENALTY = 8.0  # log-likelihood penalty of a sun on bright unclipped pixels in view
+GLARE_MAX_UNCERTAINTY_DEG = 15.0  # a fitted sun this sure, in view on clipped pixels, is taken as seen ...
+GLARE_VISIBILITY = 0.5  # ... with at least this visibility (the network underrates suns in view)
+GLARE_MIN_ELEVATION_DEG = 4.0  # ... unless it is lower (a clipped twilight glow on the horizon is not a sun)
 REFINE_MAX_PIXELS = 3000
 SATURATED_LDR = 0.97
 
@@ -80,7 +87,7 @@ class SkyPrediction:
         sun_dir_cam: (3,) unit direction towards the sun (camera frame), or None when not confident.
         sun_visibility: 0..1 (0 when no sun is reported).
         direction_cam: (3,) the network's peak direction (camera frame), reported or not.
-        visibility_raw: the network's visibility before the decision.
+        visibility_raw: the visibility before the decision (the network's, raised when the sun is seen).
         uncertainty_deg: half-angle of the cone around the direction holding 68 % of the predicted
             direction distribution.
         confident: whether a sun is reported.
@@ -177,47 +184,30 @@ def simple_sky_mask(ldr: np.ndarray, rays_h: np.ndarray) -> np.ndarray:
     return sky_mask(ldr, elevation, min_elevation_deg=2.0, min_lum=0.25, bright_percentile=40.0, max_grad=0.15)
 
 
-def sky_gradient_loglik(ldr: np.ndarray, rays_h: np.ndarray, sky_mask: np.ndarray, bin_dirs: np.ndarray,
-                        turbidity: float = 3.0, max_pixels: int = 600) -> tuple[np.ndarray, dict]:
-    """Log-likelihood (n_bins,) of each candidate sun direction given the visible sky's brightness pattern.
+def _on_clipped_pixels(d_cam: np.ndarray, K: np.ndarray, image: np.ndarray) -> bool:
+    """Whether the camera-frame direction (3,) projects into ``image`` (h, w, 3) uint8 (intrinsics K) within
+    one pixel of a clipped pixel (max channel >= SATURATED_LDR)."""
+    if d_cam[2] <= 1e-3:
+        return False
+    uv = K @ d_cam
+    u, v = int(round(uv[0] / uv[2])), int(round(uv[1] / uv[2]))
+    h, w = image.shape[:2]
+    if not (0 <= u < w and 0 <= v < h):
+        return False
+    patch = image[max(v - 1, 0):v + 2, max(u - 1, 0):u + 2]
+    return bool(patch.max() >= SATURATED_LDR * 255)
 
-    Classical evidence (Lalonde et al.): the sun-dependent factor of the Perez/Preetham luminance,
-    ``1 + C exp(D gamma) + E cos^2 gamma`` (gamma = angle to the sun), explains the log-luminance of the
-    unsaturated sky pixels up to a per-image constant and a per-elevation term (fitted out by a linear
-    model in ``1/cos(theta)``-like features).  The residual ``E(s)`` becomes a Gaussian log-likelihood
-    ``-n_eff (E(s) - E_min) / (2 sigma^2)`` with ``n_eff`` <= 40 (neighbouring pixels are not independent).
-    Returns zeros (no evidence) when fewer than 80 usable sky pixels are visible.
-    """
-    from ..sky import _PEREZ_Y
 
-    ok = sky_mask & (ldr.max(axis=-1) < SATURATED_LDR) & (ldr.min(axis=-1) > 0.02)
-    info = {"sky_pixels": int(ok.sum())}
-    if ok.sum() < 80:
-        return np.zeros(len(bin_dirs)), info
-    idx = np.flatnonzero(ok.ravel())
-    if len(idx) > max_pixels:
-        idx = idx[np.linspace(0, len(idx) - 1, max_pixels).astype(np.int64)]
-    d = rays_h.reshape(-1, 3)[idx]
-    hdr = ldr_uint8_to_hdr(np.round(ldr.reshape(-1, 3)[idx] * 255).astype(np.uint8)[None])[0]
-    y = np.log(np.maximum(luminance(hdr.astype(np.float64)), 1e-6))
-    A, B, C, D, E = _PEREZ_Y[:, 0] * turbidity + _PEREZ_Y[:, 1]
-    gamma = np.arccos(np.clip(d @ bin_dirs.T, -1.0, 1.0))  # (N, n_bins)
-    g = np.log(np.maximum(1.0 + C * np.exp(D * gamma) + E * np.cos(gamma) ** 2, 1e-6))
-    # per-image constant + elevation term: regress y - g on [1, 1/cos(theta)-like] per candidate
-    cos_t = np.clip(d[:, 2], 0.05, 1.0)
-    X = np.stack([np.ones_like(cos_t), np.log1p(A * np.exp(B / cos_t)) if A > -1 else 1.0 / cos_t], axis=1)
-    P = X @ np.linalg.pinv(X)  # projection onto the nuisance terms
-    r = (y[:, None] - g) - P @ (y[:, None] - g)
-    err = np.mean(r**2, axis=0)
-    e_min = float(err.min())
-    sigma2 = max(e_min, 0.004)
-    n_eff = min(len(idx), 40)
-    info.update(fit_residual=e_min, contrast=float(err.max() - e_min))
-    return -n_eff * (err - e_min) / (2.0 * sigma2), info
+def _posterior_direction(p: np.ndarray, bins: np.ndarray) -> np.ndarray:
+    """Unit mean direction of ``p`` (n,) over ``bins`` (n, 3) within 20 deg of its mode."""
+    mode = bins[int(np.argmax(p))]
+    near = bins @ mode >= np.cos(np.radians(20.0))
+    d = (p[near, None] * bins[near]).sum(axis=0)
+    return d / np.linalg.norm(d)
 
 
 def predict_sky(image_rgb: np.ndarray, K: np.ndarray, up_cam: np.ndarray | None = None,
-                models=None, use_sky_fit: bool = False) -> SkyPrediction:
+                models=None, use_cues: bool = True) -> SkyPrediction:
     """Sky vector and sun of one LDR image without metadata (or with a known up direction).
 
     Args:
@@ -225,12 +215,16 @@ def predict_sky(image_rgb: np.ndarray, K: np.ndarray, up_cam: np.ndarray | None 
         K: (3, 3) intrinsics (pixel centres at integers).
         up_cam: (3,) gravity up in the camera frame; default (0, -1, 0) (a level camera).
         models: (sky model, image predictor), default the shipped ones.
-        use_sky_fit: multiply the network's direction distribution by the likelihood of the visible
-            sky's brightness pattern (:func:`sky_gradient_loglik`) and take the posterior's main mode.
-            Off by default: measured on held-out views it makes the direction over-confident
-            (benchmarks/results/sky_benchmark.json).
+        use_cues: combine the network with the explicit cues of :mod:`.sun_cues`: a sun disc seen in
+            the image gives the direction directly (its visibility is at least ``DISC_VISIBILITY``);
+            otherwise the network's direction distribution (to the power ``CNN_WEIGHT``) is multiplied
+            by the clear-sky fit's likelihood and by the "not on bright unclipped pixels in view" term,
+            and a sure posterior (68 % cone <= ``GLARE_MAX_UNCERTAINTY_DEG``) that lands on clipped
+            pixels in view counts as a seen sun (visibility >= ``GLARE_VISIBILITY``).  False: the
+            network alone.
     """
     from .data import VIEW_SIZE, resize_view, view_rays
+    from .sun_cues import detect_sun_disc, in_view_sky_loglik, sky_fit_loglik
 
     torch = _torch()
     image_rgb = np.asarray(image_rgb)
@@ -254,39 +248,54 @@ def predict_sky(image_rgb: np.ndarray, K: np.ndarray, up_cam: np.ndarray | None 
     p = torch.exp(o["dir_logp"][0]).double().numpy()
     bins = net.bin_dirs.double().numpy()
     vis = float(torch.sigmoid(o["vis_logit"][0]))
-    fit_info: dict = {}
-    if use_sky_fit:
-        ldr_s = small.astype(np.float64) / 255.0
-        rays_h = rays[0].numpy().transpose(1, 2, 0).astype(np.float64)
-        loglik, fit_info = sky_gradient_loglik(ldr_s, rays_h, simple_sky_mask(ldr_s, rays_h), bins)
-        if np.any(loglik != 0):
-            logp = np.log(np.maximum(p, 1e-12)) + loglik
+    vis_used = vis
+    cue = "network"
+    disc = detect_sun_disc(image_rgb, K, up / np.linalg.norm(up)) if use_cues else None
+    if disc is not None:
+        direction = R @ disc.direction_cam
+        unc = disc.uncertainty_deg
+        vis_used = max(vis, DISC_VISIBILITY)
+        cue = f"sun disc at pixel ({disc.pixel_xy[0]:.0f}, {disc.pixel_xy[1]:.0f})"
+    else:
+        if use_cues:
+            ldr_s = small.astype(np.float64) / 255.0
+            rays_h = rays[0].numpy().transpose(1, 2, 0).astype(np.float64)
+            mask = simple_sky_mask(ldr_s, rays_h)
+            loglik, _ = sky_fit_loglik(small, rays_h, mask, bins, temperature=FIT_TEMPERATURE)
+            # the sun would clip the pixel it sits on: bright unclipped pixels above the horizon are not it
+            no_sun = ((ldr_s.max(axis=-1) < SATURATED_LDR) & (luminance(ldr_s) > 0.25)
+                      & (rays_h[..., 2] > np.sin(np.radians(-1.0))))
+            loglik = loglik + in_view_sky_loglik(bins, R, Ks, no_sun, IN_VIEW_PENALTY)
+            logp = CNN_WEIGHT * np.log(np.maximum(p, 1e-12)) + loglik
             p = np.exp(logp - logp.max())
             p /= p.sum()
-            mode = bins[int(np.argmax(p))]
-            near = bins @ mode >= np.cos(np.radians(20.0))
-            d = (p[near, None] * bins[near]).sum(axis=0)
-            direction = d / np.linalg.norm(d)
-    unc = direction_cone_deg(p, bins, direction)
+            direction = _posterior_direction(p, bins)
+            cue = "network x clear-sky fit"
+        unc = direction_cone_deg(p, bins, direction)
+        sure_and_high = unc <= GLARE_MAX_UNCERTAINTY_DEG and direction[2] >= np.sin(np.radians(GLARE_MIN_ELEVATION_DEG))
+        if use_cues and sure_and_high and _on_clipped_pixels(R.T @ direction, Ks, small):
+            vis_used = max(vis, GLARE_VISIBILITY)  # the fitted sun sits in the clipped glare of the image
+            cue += ", in the clipped glare"
+    t3 = time.perf_counter()
     sky = SkyVector(np.expm1(o["log_int"][0].double().numpy()), direction, o["latent"][0].double().numpy())
     direction_cam = R.T @ direction
     reasons = []
-    if vis < VISIBILITY_MIN:
-        reasons.append(f"sun visibility {vis:.2f} < {VISIBILITY_MIN}")
+    if vis_used < VISIBILITY_MIN:
+        reasons.append(f"sun visibility {vis_used:.2f} < {VISIBILITY_MIN}")
     if unc > UNCERTAINTY_MAX_DEG:
         reasons.append(f"direction uncertainty {unc:.0f} deg > {UNCERTAINTY_MAX_DEG:.0f}")
     if direction[2] < -0.02:
         reasons.append("peak below the horizon")
     confident = not reasons
     if confident:
-        reason = f"sun from the image: visibility {vis:.2f}, 68% cone {unc:.0f} deg"
-        out = SkyPrediction(sky, sky, R, direction_cam, vis, direction_cam, vis, unc, True, reason)
+        reason = f"sun from the image ({cue}): visibility {vis_used:.2f}, 68% cone {unc:.0f} deg"
+        out = SkyPrediction(sky, sky, R, direction_cam, vis_used, direction_cam, vis_used, unc, True, reason)
     else:
         dome = decode_sky(sky, sky_model)
         diffuse = replace(sky, intensity_rgb=_diffuse_intensity(dome, direction))
-        reason = "no reliable sun in the image (" + "; ".join(reasons) + "): diffuse sky"
-        out = SkyPrediction(diffuse, sky, R, None, 0.0, direction_cam, vis, unc, False, reason)
-    timing = {"prepare": t1 - t0, "network": t2 - t1, "total": time.perf_counter() - t0}
+        reason = f"no reliable sun in the image ({cue}: " + "; ".join(reasons) + "): diffuse sky"
+        out = SkyPrediction(diffuse, sky, R, None, 0.0, direction_cam, vis_used, unc, False, reason)
+    timing = {"prepare": t1 - t0, "network": t2 - t1, "cues": t3 - t2, "total": time.perf_counter() - t0}
     return replace(out, timing_s=timing)
 
 

@@ -1,0 +1,326 @@
+"""Explicit physical cues to the sun's direction in one LDR image: the sun disc, and the clear-sky pattern.
+
+Frames: image rays are unit vectors in the camera frame (OpenCV) or in a **heading frame** (z up, see
+:mod:`.dome`); every direction returned is a unit vector towards the sun.  Images are uint8 RGB with the
+contract's camera response; radiance is recovered with :func:`...conventions.ldr_uint8_to_hdr` (up to an
+unknown exposure and white balance, which every fit here is invariant to).
+
+* :func:`detect_sun_disc` — the sun in view: a round clipped blob above the horizon, bounded by glare
+  (not by occluders) that is brighter than the open sky beyond it; the centre of its largest inscribed
+  disc back-projected through K.
+* :func:`clear_sky_log_rgb` — the project's Preetham clear sky (:mod:`..sky`), vectorised over many
+  candidate suns at once (the same formulas and coefficients as ``sky._clear_sky_shape``).
+* :func:`sky_fit_loglik` — the sun out of view: fit that sky to the visible unsaturated sky pixels in
+  log space, with the per-channel exposure, a horizon haze and the turbidity profiled out and a robust
+  (Cauchy) loss against clouds; returns a log-likelihood over candidate sun directions.
+* :func:`in_view_sky_loglik` — no disc found: directions that project onto bright but unclipped
+  pixels of the image cannot hold the sun.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from ...conventions import ldr_uint8_to_hdr, luminance, scale_intrinsics
+from .. import sky as _sky
+
+DISC_WIDTH_PX = 400  # the disc detector works on the image resized to this width
+SATURATED = 0.97  # LDR (max channel) at or above which a pixel counts as clipped
+DISC_MIN_RADIUS_DEG = 1.0  # smaller clipped blobs: lamps, glints, sky between leaves, a sun behind cloud
+DISC_MAX_RADIUS_DEG = 12.0  # a clipped blob with a larger inscribed disc is a blown-out sky, not the sun
+DISC_MIN_FALLOFF = 0.08  # glare ring minus the sky beyond it (LDR luminance)
+DISC_MIN_ELEVATION_DEG = -1.0  # the disc centre is above this elevation
+FIT_TURBIDITIES = (2.0, 3.0, 5.0, 8.0)
+FIT_MIN_ELEVATION_DEG = 3.0  # sky pixels below this (haze, horizon glare) are not fitted
+FIT_MAX_PIXELS = 300
+FIT_MIN_BLUE_RED = 0.75  # clear sky is bluer than red (linear); facades, clouds, haze are not fitted
+FIT_CAUCHY_SCALE = 0.15  # log-radiance residual scale of the robust loss (clouds are outliers)
+FIT_HAZE_SCALE_DEG = 8.0  # horizon haze brightening ~ exp(-elevation / this), strength fitted per channel
+FIT_N_EFF = 30.0  # independent pixels' worth of evidence in a fully covered, perfectly fitted sky
+FIT_LOSS_FLOOR = 0.2  # the evidence is divided by (floor + best loss): a poorly fitting sky says less
+FIT_FULL_COVERAGE = 0.25  # fraction of the image's pixels fitted for the full evidence (fewer: proportionally less)
+
+
+# ----------------------------------------------------------------------------- rays
+
+
+def image_rays_cam(K: np.ndarray, height: int, width: int) -> np.ndarray:
+    """(height, width, 3) float64 unit camera-frame rays of the pixel centres (integers) of an image with K."""
+    u, v = np.meshgrid(np.arange(width, dtype=np.float64), np.arange(height, dtype=np.float64))
+    rays = np.stack([u, v, np.ones_like(u)], -1) @ np.linalg.inv(np.asarray(K, dtype=np.float64)).T
+    return rays / np.linalg.norm(rays, axis=-1, keepdims=True)
+
+
+# ----------------------------------------------------------------------------- sun in view
+
+
+@dataclass(frozen=True)
+class SunDisc:
+    """A sun seen in the image.
+
+    Attributes:
+        direction_cam: (3,) unit vector towards the sun, camera frame.
+        pixel_xy: (2,) its centroid in the input image's pixels (x right, y down, centres at integers).
+        radius_deg: angular radius of the largest disc inscribed in the clipped blob.
+        uncertainty_deg: half-angle of the 68 % cone around ``direction_cam``.
+        halo: mean LDR luminance of the ring around the blob (glare), 0..1.
+        clipped: the core touches the image border (its centre may be biased inwards).
+    """
+
+    direction_cam: np.ndarray
+    pixel_xy: np.ndarray
+    radius_deg: float
+    uncertainty_deg: float
+    halo: float
+    clipped: bool
+
+
+def detect_sun_disc(image_rgb: np.ndarray, K: np.ndarray, up_cam: np.ndarray) -> SunDisc | None:
+    """The sun in view, or None.
+
+    Candidates are 8-connected blobs of clipped pixels (max channel >= ``SATURATED``, every channel
+    >= 0.9 on average) above the horizon.  A sun's glare may merge with bright clouds or haze, so each
+    blob is summarised by its largest inscribed disc (distance transform): centre = centroid of the
+    pixels at >= 0.7 x the largest distance, radius r.  That core is a sun if
+
+    * ``DISC_MIN_RADIUS_DEG`` <= r <= ``DISC_MAX_RADIUS_DEG`` (smaller: lamps, glints; larger: a
+      blown-out sky);
+    * the blob is round around it: in at least 6 of 8 sectors the clipped region ends within
+      1.6 r + 0.5 deg (a band of horizon glow or a patch of sky extends far on several sides), and the
+      unclipped pixels just outside it (up to 1.5 r + 0.5 deg) are bright (at most 10 % below LDR
+      luminance 0.5: glare, not the edge of a tree or a building);
+    * it glows: the ring [1.2 r + 0.3 deg, 2 r + 1 deg] is brighter than the open sky beyond it
+      ([2 r + 4 deg, 2 r + 16 deg], sky pixels), on average by ``DISC_MIN_FALLOFF`` and in at least
+      3/4 of its sectors.
+
+    Among suns the one with the largest r wins.
+
+    Args:
+        image_rgb: (H, W, 3) uint8 RGB (contract response).
+        K: (3, 3) intrinsics of ``image_rgb`` (pixel centres at integers).
+        up_cam: (3,) unit gravity up, camera frame.
+    """
+    from ..estimate import sky_mask
+
+    H0, W0 = image_rgb.shape[:2]
+    s = min(1.0, DISC_WIDTH_PX / W0)
+    w, h = max(int(round(W0 * s)), 8), max(int(round(H0 * s)), 8)
+    small = cv2.resize(np.ascontiguousarray(image_rgb), (w, h), interpolation=cv2.INTER_AREA) if s < 1 else image_rgb
+    sx, sy = w / W0, h / H0
+    Ks = scale_intrinsics(K, sx, sy)
+    ldr = small.astype(np.float64) / 255.0
+    hot = ((ldr.max(axis=-1) >= SATURATED) & (ldr.min(axis=-1) >= 0.8)).astype(np.uint8)
+    if not hot.any():
+        return None
+    rays = image_rays_cam(Ks, h, w)
+    up = np.asarray(up_cam, dtype=np.float64) / np.linalg.norm(up_cam)
+    lum = luminance(ldr)
+    sky = sky_mask(ldr, np.arcsin(np.clip(rays @ up, -1.0, 1.0)), min_elevation_deg=0.0, min_lum=0.2,
+                   bright_percentile=30.0, max_grad=0.2)
+    _, labels, stats, _ = cv2.connectedComponentsWithStats(hot, connectivity=8)
+    # distance to the nearest unclipped pixel; OpenCV does not count the image border as one, so a sun
+    # cut by the border keeps its full inscribed disc (centred as near the true centre as the image allows)
+    dist = cv2.distanceTransform(hot, cv2.DIST_L2, 5)
+    px_rad = 1.0 / np.sqrt(Ks[0, 0] * Ks[1, 1])  # angular size of a pixel near the centre (rad)
+    best = None
+    for lab in np.argsort(-stats[1:, cv2.CC_STAT_AREA])[:8] + 1:
+        m = labels == lab
+        if ldr[m].min(axis=-1).mean() < 0.9:  # a sun clips every channel
+            continue
+        r_px = float(dist[m].max())
+        core = m & (dist >= 0.7 * r_px)
+        d = rays[core].sum(axis=0)
+        d /= np.linalg.norm(d)
+        r = r_px * px_rad * float(d[2]) ** 2  # pixels shrink (in angle) away from the centre
+        if np.degrees(np.arcsin(np.clip(d @ up, -1, 1))) < DISC_MIN_ELEVATION_DEG:
+            continue
+        if not DISC_MIN_RADIUS_DEG <= np.degrees(r) <= DISC_MAX_RADIUS_DEG:
+            continue
+        ang = np.arccos(np.clip(rays @ d, -1.0, 1.0))
+        # round around the core: the clipped region ends near the disc in most directions
+        sector_m = _ring_sectors(rays[m], d)
+        extent = np.array([ang[m][sector_m == k].max() if np.any(sector_m == k) else 0.0 for k in range(8)])
+        if np.sum(extent <= 1.6 * r + np.radians(0.5)) < 6:
+            continue
+        # bounded by glare, not by occluders (a patch of sky between trees or buildings)
+        ring0 = (ang >= r) & (ang < 1.5 * r + np.radians(0.5)) & (hot == 0)
+        if ring0.sum() < 4 or np.mean(lum[ring0] < 0.5) > 0.1:
+            continue
+        ring1 = (ang >= 1.2 * r + np.radians(0.3)) & (ang < 2.0 * r + np.radians(1.0))
+        ring3 = (ang >= 2.0 * r + np.radians(4.0)) & (ang < 2.0 * r + np.radians(16.0)) & sky
+        if ring1.sum() < 4 or ring3.sum() < 10:
+            continue
+        halo = float(lum[ring1].mean())
+        beyond = float(np.median(lum[ring3]))
+        sector = _ring_sectors(rays[ring1], d)
+        lit = np.array([lum[ring1][sector == k].mean() >= beyond + 0.5 * DISC_MIN_FALLOFF
+                        for k in range(8) if np.any(sector == k)])
+        if halo - beyond < DISC_MIN_FALLOFF or len(lit) < 4 or lit.mean() < 0.75:
+            continue
+        ys, xs = np.nonzero(core)
+        clipped = bool(xs.min() == 0 or ys.min() == 0 or xs.max() == w - 1 or ys.max() == h - 1)
+        if best is None or r > best[0]:
+            best = (r, d, halo, clipped, core)
+    if best is None:
+        return None
+    r, d, halo, clipped, core = best
+    unc = max(1.0, 0.3 * np.degrees(r)) + (np.degrees(r) if clipped else 0.0)  # a cut core: centre biased inwards
+    ys, xs = np.nonzero(core)
+    pix = np.array([(xs.mean() + 0.5) / sx - 0.5, (ys.mean() + 0.5) / sy - 0.5])
+    return SunDisc(d, pix, float(np.degrees(r)), float(unc), halo, clipped)
+
+
+def _ring_sectors(rays: np.ndarray, d: np.ndarray) -> np.ndarray:
+    """Sector index 0..7 (N,) of unit rays (N, 3) around the axis ``d`` (3,)."""
+    a = np.cross(d, [0.0, 0.0, 1.0] if abs(d[2]) < 0.9 else [1.0, 0.0, 0.0])
+    a /= np.linalg.norm(a)
+    b = np.cross(d, a)
+    phi = np.arctan2(rays @ b, rays @ a)
+    return np.floor((phi + np.pi) / (2 * np.pi) * 8).astype(np.int64) % 8
+
+
+# ----------------------------------------------------------------------------- clear sky
+
+
+def _sun_geometry(dirs_h: np.ndarray, sun_dirs_h: np.ndarray):
+    """(cos theta (N, 1), gamma (N, M) float32, cos^2 gamma (N, M) float32, sun zenith angle (M,)); suns below
+    ``sky.MIN_SHAPE_ELEVATION_DEG`` are raised to it (as ``sky._sky_components`` does)."""
+    sun = np.asarray(sun_dirs_h, dtype=np.float64)
+    min_z = np.sin(np.radians(_sky.MIN_SHAPE_ELEVATION_DEG))
+    horiz = sun[:, :2] / np.maximum(np.linalg.norm(sun[:, :2], axis=1, keepdims=True), 1e-9)
+    z = np.maximum(sun[:, 2], min_z)
+    sun = np.concatenate([horiz * np.sqrt(1.0 - z * z)[:, None], z[:, None]], axis=1)
+    theta_s = np.arccos(np.clip(sun[:, 2], -1.0, 1.0))
+    cos_t = np.maximum(np.clip(dirs_h[:, 2], 0.0, 1.0), 1e-3)[:, None]
+    cos_g = np.clip(dirs_h @ sun.T, -1.0, 1.0).astype(np.float32)
+    return cos_t, np.arccos(cos_g), cos_g * cos_g, theta_s
+
+
+def clear_sky_log_rgb(dirs_h: np.ndarray, sun_dirs_h: np.ndarray, turbidity: float, geometry=None) -> np.ndarray:
+    """Log of the relative Preetham clear-sky RGB (N, M, 3) float32 for N sky directions and M candidate suns.
+
+    Same model as :func:`..sky._clear_sky_shape` (Perez distribution of Y, x, y with Preetham's
+    turbidity coefficients, zenith chromaticity polynomials, xyY -> linear sRGB), vectorised over the
+    suns.  Only relative values matter (each sun's zenith normalisation is a constant per channel).
+
+    Args:
+        dirs_h: (N, 3) unit directions (z up), above the horizon.
+        sun_dirs_h: (M, 3) unit sun directions (z up); suns below 1 deg are evaluated at 1 deg.
+        turbidity: Preetham turbidity in [1.7, 12].
+        geometry: ``_sun_geometry(dirs_h, sun_dirs_h)`` if already computed (shared across turbidities).
+    """
+    T = float(turbidity)
+    cos_t, gamma, cos_g2, theta_s = geometry or _sun_geometry(dirs_h, sun_dirs_h)
+    tvec = np.array([T * T, T, 1.0])
+    svec = np.stack([theta_s**3, theta_s**2, theta_s, np.ones_like(theta_s)])  # (4, M)
+    x_z = tvec @ _sky._ZENITH_X @ svec
+    y_z = tvec @ _sky._ZENITH_Y @ svec
+    out = []
+    for zenith_value, table in ((np.ones_like(theta_s), _sky._PEREZ_Y), (x_z, _sky._PEREZ_X), (y_z, _sky._PEREZ_YC)):
+        A, B, C, D, E = table[:, 0] * T + table[:, 1]
+        f0 = _sky._perez(np.ones_like(theta_s), theta_s, (A, B, C, D, E))  # (M,) at the zenith
+        # _sky._perez written out with cos(gamma) computed once (N x M is the costly part)
+        horizon = (1.0 + A * np.exp(B / cos_t)).astype(np.float32)  # (N, 1)
+        perez = horizon * (1.0 + C * np.exp(np.float32(D) * gamma) + np.float32(E) * cos_g2)
+        out.append(perez * (zenith_value / f0)[None].astype(np.float32))
+    Y, x, y = out
+    y = np.maximum(y, 1e-6)
+    X, Z = x / y * Y, (1.0 - x - y) / y * Y
+    floor = 1e-4 * np.maximum(Y, 1e-9)
+    M = _sky._XYZ_TO_SRGB.astype(np.float32)
+    return np.stack([np.log(np.maximum(M[c, 0] * X + M[c, 1] * Y + M[c, 2] * Z, floor)) for c in range(3)], axis=-1)
+
+
+def sky_fit_loglik(image_small: np.ndarray, rays_h: np.ndarray, sky_mask: np.ndarray, sun_dirs_h: np.ndarray,
+                   turbidities: tuple[float, ...] = FIT_TURBIDITIES, temperature: float = 1.0,
+                   max_pixels: int = FIT_MAX_PIXELS) -> tuple[np.ndarray, dict]:
+    """Log-likelihood (M,) of candidate suns given the visible clear-sky pattern (0 = best candidate).
+
+    The unsaturated sky pixels (``sky_mask``, LDR 0.03..0.9, above ``FIT_MIN_ELEVATION_DEG``, blue/red
+    >= ``FIT_MIN_BLUE_RED``: no brick or beige facades) give ``y = log HDR`` per channel (at most
+    ``max_pixels``, evenly subsampled).  For each candidate sun and turbidity the residual
+    ``r = y - log(clear sky) - a - b haze`` is scored with a Cauchy loss ``log(1 + (r / c)^2)``
+    (c = ``FIT_CAUCHY_SCALE``) averaged over the pixels, where per channel ``a`` is the unknown exposure
+    and white balance and ``b >= 0`` an unknown horizon haze, ``haze = exp(-elevation /
+    FIT_HAZE_SCALE_DEG)`` (real horizons are brighter than Preetham's; without it a bright horizon pulls
+    the sun into the view), fitted by iteratively re-weighted least squares (clouds are outliers).  The
+    turbidity is profiled out (minimum over ``turbidities``).  With ``L`` that loss:
+
+        loglik = -FIT_N_EFF * coverage * (L - L_min) / (temperature * (FIT_LOSS_FLOOR + L_min))
+
+    where coverage = min(1, fitted fraction of the image / ``FIT_FULL_COVERAGE``): a small or badly
+    fitting sky patch says little (neighbouring pixels are far from independent, and facades or clouds
+    taken for sky fit badly).  Zeros (no evidence) if fewer than 60 usable pixels.
+
+    Args:
+        image_small: (h, w, 3) uint8 image.
+        rays_h: (h, w, 3) unit heading-frame rays of its pixels.
+        sky_mask: (h, w) bool sky pixels.
+        sun_dirs_h: (M, 3) candidate sun directions (heading frame).
+        temperature: divides the log-likelihood (calibration).
+    """
+    ldr = image_small.astype(np.float64) / 255.0
+    elev_ok = rays_h[..., 2] > np.sin(np.radians(FIT_MIN_ELEVATION_DEG))
+    blue = image_small[..., 2].astype(np.float64) >= FIT_MIN_BLUE_RED ** (1 / 2.2) * image_small[..., 0]
+    ok = sky_mask & elev_ok & blue & (ldr.max(axis=-1) < 0.9) & (ldr.min(axis=-1) > 0.03)
+    info: dict = {"fit_pixels": int(ok.sum())}
+    M = len(sun_dirs_h)
+    if ok.sum() < 60:
+        return np.zeros(M), info
+    idx = np.flatnonzero(ok.ravel())
+    if len(idx) > max_pixels:
+        idx = idx[np.linspace(0, len(idx) - 1, max_pixels).astype(np.int64)]
+    d = rays_h.reshape(-1, 3)[idx].astype(np.float64)
+    y = np.log(np.maximum(ldr_uint8_to_hdr(image_small.reshape(-1, 3)[idx][None])[0].astype(np.float64), 1e-5))
+    y = y.astype(np.float32)
+    best = np.full(M, np.inf)
+    best_t = np.zeros(M)
+    c = np.float32(FIT_CAUCHY_SCALE)
+    geometry = _sun_geometry(d, sun_dirs_h)
+    # nuisance per channel: exposure (a constant) + horizon haze of unknown strength, a (b >= 0) x haze(elevation)
+    haze = np.exp(-np.arcsin(np.clip(d[:, 2], 0.0, 1.0)) / np.radians(FIT_HAZE_SCALE_DEG)).astype(np.float32)
+    haze = haze[:, None, None]
+    for T in turbidities:
+        r0 = y[:, None, :] - clear_sky_log_rgb(d, sun_dirs_h, T, geometry)  # (N, M, 3)
+        wts = np.ones_like(r0)
+        for _ in range(3):  # weighted LS of the nuisance, re-weighted (Cauchy, IRLS): clouds are outliers
+            sw, sh, shh = wts.sum(0), (wts * haze).sum(0), (wts * haze * haze).sum(0)
+            sr, shr = (wts * r0).sum(0), (wts * haze * r0).sum(0)
+            b = np.maximum((sw * shr - sh * sr) / np.maximum(sw * shh - sh * sh, 1e-6), 0.0)
+            r = r0 - ((sr - b * sh) / sw)[None] - b[None] * haze
+            wts = 1.0 / (1.0 + (r / c) ** 2)
+        loss = np.log1p((r / c) ** 2).sum(axis=(0, 2), dtype=np.float64) / len(idx)
+        better = loss < best
+        best = np.where(better, loss, best)
+        best_t = np.where(better, T, best_t)
+    coverage = min(1.0, ok.mean() / FIT_FULL_COVERAGE)
+    loglik = -FIT_N_EFF * coverage * (best - best.min()) / (max(temperature, 1e-6) * (FIT_LOSS_FLOOR + best.min()))
+    info.update(fit_loss=float(best.min()), fit_contrast=float(best.max() - best.min()), coverage=coverage,
+                turbidity=float(best_t[int(np.argmin(best))]))
+    return loglik, info
+
+
+def in_view_sky_loglik(sun_dirs_h: np.ndarray, R_heading_from_cam: np.ndarray, K_small: np.ndarray,
+                       no_sun: np.ndarray, penalty: float = 4.0) -> np.ndarray:
+    """(M,) ``-penalty`` for candidate suns that project onto ``no_sun`` pixels of the image, else 0.
+
+    Args:
+        sun_dirs_h: (M, 3) candidate directions (heading frame).
+        R_heading_from_cam: (3, 3).
+        K_small: (3, 3) intrinsics of the ``no_sun`` mask's image.
+        no_sun: (h, w) bool pixels that cannot be on the sun (e.g. bright but unclipped sky: the sun
+            would clip them; dark pixels may hide it behind an occluder and should stay False).
+    """
+    h, w = no_sun.shape
+    d_cam = np.asarray(sun_dirs_h, dtype=np.float64) @ np.asarray(R_heading_from_cam)  # rows: R^T d
+    front = d_cam[:, 2] > 1e-3
+    uv = d_cam @ np.asarray(K_small).T
+    u = np.round(uv[:, 0] / np.where(front, uv[:, 2], 1.0)).astype(np.int64)
+    v = np.round(uv[:, 1] / np.where(front, uv[:, 2], 1.0)).astype(np.int64)
+    inside = front & (u >= 0) & (u < w) & (v >= 0) & (v < h)
+    hit = np.zeros(len(d_cam), bool)
+    hit[inside] = no_sun[v[inside], u[inside]]
+    return np.where(hit, -penalty, 0.0)

@@ -1,0 +1,201 @@
+"""Single-image sun cues (skynet/sun_cues.py) and their use in predict_sky: sun disc, clear-sky fit, no-sun cases."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from streetaug.augment.conventions import hdr_to_ldr, intrinsics_from_fov, luminance
+from streetaug.augment.lighting import sky as S
+from streetaug.augment.lighting.skynet.dome import angle_deg, camera_from_angles, dome_directions, heading_from_camera
+from streetaug.augment.lighting.skynet.sun_cues import (
+    clear_sky_log_rgb,
+    detect_sun_disc,
+    image_rays_cam,
+    in_view_sky_loglik,
+    sky_fit_loglik,
+)
+
+W, H, FOV = 640, 360, 70.0
+
+
+def _sun(az_deg: float, el_deg: float) -> np.ndarray:
+    az, el = np.radians(az_deg), np.radians(el_deg)
+    return np.array([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)])
+
+
+def _render(sun_world, yaw_deg=0.0, pitch_deg=0.0, turbidity=3.0, cloud_cover=0.0, glare=True, gains=(1.0, 1.0, 1.0),
+            occluders=False):
+    """uint8 view (H, W, 3), K, up_cam, sun_cam of the project's analytic sky over a grey ground (z-up world).
+
+    The sun: a disc (0.27 deg) carrying 70 % of its irradiance and an aureole ``exp(-angle / 2 deg)`` carrying
+    30 %; auto-exposed (geometric mean luminance -> 0.18) through the contract response.
+    """
+    K = intrinsics_from_fov(W, H, FOV)
+    R = camera_from_angles(np.radians(yaw_deg), np.radians(pitch_deg), 0.0)
+    d = image_rays_cam(K, H, W).reshape(-1, 3) @ R.T
+    rad = S.sky_radiance(d, sun_world, turbidity, cloud_cover)
+    if glare and sun_world[2] > 0 and cloud_cover < 0.5:
+        e = S.sun_irradiance(sun_world, turbidity, cloud_cover)
+        ang = np.arccos(np.clip(d @ sun_world, -1.0, 1.0))
+        half = np.radians(0.27)
+        disc = (ang <= half)[:, None] * (0.7 * e / (2 * np.pi * (1 - np.cos(half))))
+        w = np.radians(2.0)
+        rad = rad + disc + (np.exp(-ang / w) / (2 * np.pi * w * w))[:, None] * 0.3 * e
+    rad = (rad * np.asarray(gains)).reshape(H, W, 3)
+    if occluders:  # dark "buildings" rising from the horizon in the left and right thirds
+        u = np.arange(W)[None, :]
+        v = np.arange(H)[:, None]
+        tall = ((u < W // 3) & (v > H * 0.15)) | ((u > 2 * W // 3) & (v > H * 0.3))
+        rad[tall] = 0.02 * np.median(rad)
+    k = 0.18 / np.exp(np.mean(np.log(np.maximum(luminance(rad), 1e-9))))
+    image = np.clip(np.round(hdr_to_ldr(rad * k) * 255), 0, 255).astype(np.uint8)
+    return image, K, R.T @ np.array([0.0, 0.0, 1.0]), R.T @ sun_world
+
+
+# ----------------------------------------------------------------------------- the sky model
+
+
+@pytest.mark.parametrize("T", [2.0, 5.0, 9.0])
+def test_clear_sky_is_the_sky_modules_preetham_sky(T):
+    rng = np.random.default_rng(1)
+    dirs = rng.normal(size=(200, 3))
+    dirs[:, 2] = np.abs(dirs[:, 2])
+    dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
+    suns = np.array([_sun(10, 5), _sun(-120, 45), _sun(70, 80)])
+    got = clear_sky_log_rgb(dirs, suns, T)
+    assert got.shape == (200, 3, 3)
+    for j, s in enumerate(suns):
+        ref = np.log(np.maximum(S._clear_sky_shape(dirs, s, T), 1e-12))
+        np.testing.assert_allclose(got[:, j], ref, atol=1e-4)
+
+
+# ----------------------------------------------------------------------------- sun in view
+
+
+@pytest.mark.parametrize("yaw, pitch, sun_az, sun_el", [(0, 20, 10, 25), (30, 10, 2, 18), (-40, 35, -15, 50)])
+def test_detector_finds_a_sun_disc_within_a_degree(yaw, pitch, sun_az, sun_el):
+    image, K, up, sun_cam = _render(_sun(sun_az, sun_el), yaw, pitch)
+    uv = K @ sun_cam
+    assert sun_cam[2] > 0 and 0 <= uv[0] / uv[2] < W and 0 <= uv[1] / uv[2] < H  # really in view
+    disc = detect_sun_disc(image, K, up)
+    assert disc is not None
+    assert angle_deg(disc.direction_cam, sun_cam) < 1.0
+    assert np.hypot(*(disc.pixel_xy - uv[:2] / uv[2])) < 0.02 * W
+    assert disc.uncertainty_deg >= angle_deg(disc.direction_cam, sun_cam)
+
+
+def test_detector_is_invariant_to_white_balance_and_finds_nothing_without_a_sun():
+    sun = _sun(10, 25)
+    image, K, up, sun_cam = _render(sun, 0, 20, gains=(1.2, 1.0, 0.8))
+    disc = detect_sun_disc(image, K, up)
+    assert disc is not None and angle_deg(disc.direction_cam, sun_cam) < 1.0
+    # the same sky with the sun behind the camera: nothing
+    image, K, up, _ = _render(_sun(180, 25), 0, 20)
+    assert detect_sun_disc(image, K, up) is None
+
+
+@pytest.mark.parametrize("cloud_cover, occluders", [(1.0, True), (1.0, False), (0.0, True)])
+def test_detector_ignores_blown_out_sky_and_sky_between_buildings(cloud_cover, occluders):
+    """Over-exposed sky (every pixel above the horizon clipped in places) must not look like a sun."""
+    image, K, up, _ = _render(_sun(200, 40), 0, 5, cloud_cover=cloud_cover, occluders=occluders)
+    bright = np.clip(image.astype(np.int32) * 2, 0, 255).astype(np.uint8)  # +1 EV: large clipped regions
+    assert (bright.max(axis=-1) >= 250).mean() > 0.1
+    assert detect_sun_disc(image, K, up) is None
+    assert detect_sun_disc(bright, K, up) is None
+
+
+# ----------------------------------------------------------------------------- sun out of view
+
+
+def _fit(image, K, up, candidates_h):
+    R = heading_from_camera(up)
+    rays_h = image_rays_cam(K, *image.shape[:2]) @ R.T
+    mask = rays_h[..., 2] > np.sin(np.radians(2.0))  # all of the sky (the test image has no occluders)
+    return sky_fit_loglik(image, rays_h, mask, candidates_h)
+
+
+@pytest.mark.parametrize("sun_az, sun_el", [(60, 30), (-75, 20), (150, 40)])
+def test_sky_fit_recovers_the_azimuth_of_a_sun_out_of_view(sun_az, sun_el):
+    image, K, up, sun_cam = _render(_sun(sun_az, sun_el), 0.0, 0.0, turbidity=3.0, gains=(1.1, 1.0, 0.85))
+    assert sun_cam[2] < 0 or abs((K @ sun_cam)[0] / (K @ sun_cam)[2] - W / 2) > W / 2  # out of view
+    cand = dome_directions(24, 96).reshape(-1, 3)
+    loglik, info = _fit(image, K, up, cand)
+    assert info["fit_pixels"] > 1000 and loglik.max() == 0.0
+    R = heading_from_camera(up)
+    best = cand[int(np.argmax(loglik))]
+    sun_h = R @ sun_cam
+    az_err = np.degrees(abs(np.angle(np.exp(1j * (np.arctan2(best[1], best[0]) - np.arctan2(sun_h[1], sun_h[0]))))))
+    assert az_err < 10.0, (az_err, best, sun_h)
+    assert angle_deg(best, sun_h) < 20.0
+    # evidence: directions far from the sun are clearly less likely
+    far = cand @ sun_h < np.cos(np.radians(60.0))
+    assert loglik[far].max() < -3.0
+
+
+def test_sky_fit_without_sky_says_nothing():
+    image, K, up, _ = _render(_sun(60, 30), 0.0, -30.0)  # looking down: ground only
+    loglik, info = _fit(image, K, up, dome_directions(8, 32).reshape(-1, 3))
+    assert info["fit_pixels"] < 60 and np.all(loglik == 0.0)
+
+
+def test_in_view_penalty_only_hits_bright_unclipped_pixels_in_front():
+    K = intrinsics_from_fov(160, 96, 70.0)
+    R = heading_from_camera(np.array([0.0, -1.0, 0.0]))
+    no_sun = np.zeros((96, 160), bool)
+    no_sun[:, :80] = True  # left half: bright unclipped sky
+    left_ahead = R @ (np.array([-0.3, -0.2, 1.0]) / np.linalg.norm([-0.3, -0.2, 1.0]))
+    right_ahead = R @ (np.array([0.3, -0.2, 1.0]) / np.linalg.norm([0.3, -0.2, 1.0]))
+    behind = R @ np.array([0.0, -0.5, -1.0]) / np.linalg.norm([0.0, -0.5, -1.0])
+    pen = in_view_sky_loglik(np.stack([left_ahead, right_ahead, behind]), R, K, no_sun, 5.0)
+    np.testing.assert_array_equal(pen, [-5.0, 0.0, 0.0])
+
+
+# ----------------------------------------------------------------------------- predict_sky with the cues
+
+
+@pytest.fixture(scope="module")
+def models():
+    from streetaug.augment.lighting.skynet.predict import get_models
+
+    return get_models()
+
+
+def test_predict_reports_a_sun_in_view_precisely(models):
+    from streetaug.augment.lighting.skynet.predict import predict_sky
+
+    image, K, up, sun_cam = _render(_sun(10, 25), 0, 20)
+    pred = predict_sky(image, K, up, models=models)
+    assert pred.confident and "sun disc" in pred.reason, pred.reason
+    err = angle_deg(pred.sun_dir_cam, sun_cam)
+    assert err < 1.0 and pred.uncertainty_deg < 5.0
+    assert pred.sun_visibility >= 0.7
+    assert pred.timing_s["total"] < 1.0
+
+
+@pytest.mark.parametrize("sun_az, sun_el", [(60, 30), (-75, 20)])
+def test_predict_finds_a_sun_out_of_view_from_the_clear_sky(models, sun_az, sun_el):
+    """The network alone misses these by ~70 deg; with the clear-sky fit the error is small and inside the cone."""
+    from streetaug.augment.lighting.skynet.predict import predict_sky
+
+    image, K, up, sun_cam = _render(_sun(sun_az, sun_el), 0, 0, gains=(1.1, 1.0, 0.85))
+    pred = predict_sky(image, K, up, models=models)
+    err = angle_deg(pred.direction_cam, sun_cam)
+    assert err < 15.0 and err <= pred.uncertainty_deg <= 30.0, (err, pred.uncertainty_deg, pred.reason)
+    assert "clear-sky fit" in pred.reason and "sun disc" not in pred.reason
+
+
+@pytest.mark.parametrize("kind", ["overcast", "night"])
+def test_overcast_and_night_images_report_no_sun(models, kind):
+    from streetaug.augment.lighting.skynet.predict import predict_sky
+
+    if kind == "overcast":
+        image, K, up, _ = _render(_sun(30, 40), 0, 5, cloud_cover=1.0, occluders=True)
+    else:  # the sun 12 deg below the horizon: a dim night sky, lit windows as small bright dots
+        image, K, up, _ = _render(_sun(30, -12), 0, 5, occluders=True)
+        image = (image.astype(np.float64) * 0.15).astype(np.uint8)
+        for x, y in ((40, 200), (60, 240), (560, 260), (600, 300)):
+            image[y:y + 3, x:x + 3] = 255
+    pred = predict_sky(image, K, up, models=models)
+    assert not pred.confident and pred.sun_dir_cam is None and pred.sun_visibility == 0.0, pred.reason
+    assert "sun disc" not in pred.reason
