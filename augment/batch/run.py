@@ -120,9 +120,12 @@ def run_batch(config: BatchConfig, out_dir: str | Path, run: RunOptions = RunOpt
     t0 = time.perf_counter()
     status: Counter = Counter()
     new_rows: list[dict] = []
+    first_result_s = None  # worker start-up + the first sample
     with tqdm(total=sum(map(len, cameras.values())), unit="img", desc="plan" if run.dry_run else "augment",
               disable=not run.progress, dynamic_ncols=True, smoothing=0.05) as bar:
         for rows in results:
+            if first_result_s is None:
+                first_result_s, first_images = time.perf_counter() - t0, len(rows)
             if not run.dry_run:
                 append_rows(log_path, rows)
             new_rows.extend(rows)
@@ -135,6 +138,10 @@ def run_batch(config: BatchConfig, out_dir: str | Path, run: RunOptions = RunOpt
                 "wall_s": round(wall, 3),
                 "images_per_s": round(len(new_rows) / wall, 4) if wall > 0 and new_rows else None,
                 "executor": executor, "worker_cpu_s": round(cpu_s, 2),
+                "first_result_s": None if first_result_s is None else round(first_result_s, 3),
+                # after the first result: the rate a long run settles at (start-up excluded)
+                "steady_images_per_s": round((len(new_rows) - first_images) / (wall - first_result_s), 4)
+                if first_result_s is not None and wall > first_result_s and len(new_rows) > first_images else None,
                 # worker CPU seconds per wall second: ~ the number of workers when none waits for a core
                 "busy_workers": round(cpu_s / wall, 2) if wall > 0 else None}
     if run.dry_run:
