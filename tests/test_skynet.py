@@ -364,6 +364,25 @@ def test_train_sky_one_step_smoke(tmp_path):
 
 
 @needs_hdri
+def test_train_light_two_steps_then_resume(tmp_path):
+    """The image predictor trains through the shared loop, checkpoints, and a rerun resumes instead of redoing."""
+    from streetaug.augment.lighting.skynet.model import LightNet
+    from streetaug.augment.lighting.skynet.train import LightTrainConfig, load_light_model, train_light
+
+    cfg = LightTrainConfig(steps=2, batch=2, n_streets=0, n_crops=4, mix=(0.0, 0.5, 0.5), threads=1, ckpt_every=1,
+                           val_every=1, out=str(tmp_path / "light.pt"), cache_dir=str(tmp_path), hdri_dir=str(HDRI))
+    lines: list[str] = []
+    report = train_light(cfg, log=lines.append)
+    assert [h["step"] for h in report["history"]] == [1, 2]
+    assert all(np.isfinite(v) for h in report["history"] for v in h["train"].values())
+    assert isinstance(load_light_model(tmp_path / "light.pt"), LightNet)
+    lines.clear()
+    again = train_light(cfg, log=lines.append)  # the checkpoint is at the last step: nothing to redo
+    assert any("resuming from step 2" in line for line in lines)
+    assert [h["step"] for h in again["history"]] == [1, 2]
+
+
+@needs_hdri
 def test_light_loss_smoke(models):
     from streetaug.augment.lighting.skynet.model import LightNet
     from streetaug.augment.lighting.skynet.train import LightBatches, light_losses

@@ -142,6 +142,45 @@ class _Checkpoint:
         return int(p["step"]), json.loads(p["history"]), float(p["elapsed"])
 
 
+def _optimise(model: torch.nn.Module, cfg, rng: np.random.Generator, ckpt: _Checkpoint, next_batch, losses_at,
+              validate, describe, log) -> tuple[list, float]:
+    """The loop both models train with: Adam under :func:`_lr`, gradients clipped at 5, running means of the
+    losses (``"dir"`` in degrees), validation every ``cfg.val_every`` steps, resumable checkpoints.
+
+    Args:
+        next_batch: () -> dict of tensors; losses_at: (step, batch) -> dict of scalar losses with ``"total"``;
+        validate: () -> validation dict; describe: (running, validation) -> a log line.
+
+    Returns:
+        The history (one entry per validation) and the training seconds (over resumptions).
+    """
+    opt = torch.optim.Adam(model.parameters(), lr=cfg.lr)
+    start, history, elapsed0 = ckpt.load(model, opt, rng)
+    if start:
+        log(f"resuming from step {start} ({ckpt.path})")
+    t0 = time.perf_counter() - elapsed0
+    running: dict[str, float] = {}
+    for step in range(start, cfg.steps):
+        for g in opt.param_groups:
+            g["lr"] = _lr(cfg.lr, step, cfg.steps)
+        losses = losses_at(step, next_batch())
+        opt.zero_grad()
+        losses["total"].backward()
+        torch.nn.utils.clip_grad_norm_(model.parameters(), 5.0)
+        opt.step()
+        for k, v in losses.items():
+            v = float(np.degrees(v.item())) if k == "dir" else v.item()
+            running[k] = 0.9 * running.get(k, v) + 0.1 * v
+        done = step + 1
+        if done % cfg.val_every == 0 or done == cfg.steps:
+            val = validate()
+            history.append({"step": done, "time_s": time.perf_counter() - t0, "train": dict(running), "val": val})
+            log(f"step {done}: {describe(running, val)} ({time.perf_counter() - t0:.0f} s)")
+        if done % cfg.ckpt_every == 0 or done == cfg.steps:
+            ckpt.save(done, model, opt, rng, history, time.perf_counter() - t0)
+    return history, time.perf_counter() - t0
+
+
 # ----------------------------------------------------------------------------- sky model
 
 
@@ -191,18 +230,8 @@ def train_sky(cfg: SkyTrainConfig, log=print) -> dict:
     t_data = time.perf_counter() - t_data
     net_cfg = SkyNetConfig(height=cfg.height, width=cfg.width)
     model = SkyModel(net_cfg)
-    opt = torch.optim.Adam(model.parameters(), lr=cfg.lr)
-    ckpt = _Checkpoint(cache / f"ckpt_sky_{_config_hash(cfg)}.pt")
-    start, history, elapsed0 = ckpt.load(model, opt, rng)
-    if start:
-        log(f"resuming from step {start} ({ckpt.path})")
-    log(f"sky model: {count_parameters(model)} parameters, {cfg.steps} steps of {cfg.batch}")
-    t0 = time.perf_counter() - elapsed0
-    running: dict[str, float] = {}
-    for step in range(start, cfg.steps):
-        for g in opt.param_groups:
-            g["lr"] = _lr(cfg.lr, step, cfg.steps)
-        b = {k: _t(v) for k, v in data.batch(cfg.batch, rng).items()}
+
+    def losses_at(step: int, b: dict) -> dict:
         log_int, direction, latent = model.encoder(b["ldr"])
         l_dir = _angular_l1(direction, b["dir"]).mean()
         l_int = ((log_int - b["log_int"]) ** 2).mean()
@@ -210,23 +239,17 @@ def train_sky(cfg: SkyTrainConfig, log=print) -> dict:
         # barely constrains the sun's intensity, and a decoder fed noisy intensities learns to ignore them)
         y = model.decoder(b["log_int"], b["dir"] if step % 2 == 1 else direction, latent)
         l_hdr = (peak_weights(model.decoder, b["dir"]) * (y - b["log_hdr"]) ** 2).mean()
-        loss = l_dir + l_int + l_hdr
-        opt.zero_grad()
-        loss.backward()
-        torch.nn.utils.clip_grad_norm_(model.parameters(), 5.0)
-        opt.step()
-        for k, v in (("dir_deg", float(np.degrees(l_dir.item()))), ("int", l_int.item()), ("hdr", l_hdr.item())):
-            running[k] = 0.9 * running.get(k, v) + 0.1 * v
-        done = step + 1
-        if done % cfg.val_every == 0 or done == cfg.steps:
-            val = sky_validation(model, val_panos)
-            history.append({"step": done, "time_s": time.perf_counter() - t0, "train": dict(running), "val": val})
-            log(f"step {done}: train dir {running['dir_deg']:.1f} deg int {running['int']:.3f} hdr {running['hdr']:.4f} | "
-                f"val log-MSE {val['all']['log_mse']:.4f} peak {val['all']['peak_err_deg_median']:.2f} deg "
-                f"({time.perf_counter() - t0:.0f} s)")
-        if done % cfg.ckpt_every == 0 or done == cfg.steps:
-            ckpt.save(done, model, opt, rng, history, time.perf_counter() - t0)
-    train_s = time.perf_counter() - t0
+        return {"total": l_dir + l_int + l_hdr, "dir": l_dir, "int": l_int, "hdr": l_hdr}
+
+    def describe(running: dict, val: dict) -> str:
+        return (f"train dir {running['dir']:.1f} deg int {running['int']:.3f} hdr {running['hdr']:.4f} | "
+                f"val log-MSE {val['all']['log_mse']:.4f} peak {val['all']['peak_err_deg_median']:.2f} deg")
+
+    log(f"sky model: {count_parameters(model)} parameters, {cfg.steps} steps of {cfg.batch}")
+    history, train_s = _optimise(
+        model, cfg, rng, _Checkpoint(cache / f"ckpt_sky_{_config_hash(cfg)}.pt"),
+        lambda: {k: _t(v) for k, v in data.batch(cfg.batch, rng).items()}, losses_at,
+        lambda: sky_validation(model, val_panos), describe, log)
     val = sky_validation(model, val_panos)
     report = {
         "kind": "sky", "config": asdict(cfg), "architecture": net_cfg.to_dict(), "parameters": count_parameters(model),
@@ -344,35 +367,13 @@ def train_light(cfg: LightTrainConfig, log=print) -> dict:
     data = LightBatches((street, pano_crops, sky_crops), cfg.mix)
     net_cfg = LightNetConfig()
     net = LightNet(net_cfg)
-    opt = torch.optim.Adam(net.parameters(), lr=cfg.lr)
-    ckpt = _Checkpoint(cache / f"ckpt_light_{_config_hash(cfg)}.pt")
-    start, history, elapsed0 = ckpt.load(net, opt, rng)
-    if start:
-        log(f"resuming from step {start} ({ckpt.path})")
     log(f"image predictor: {count_parameters(net)} parameters, {len(street)} street views, {cfg.steps} steps of {cfg.batch}")
-    t0 = time.perf_counter() - elapsed0
-    running: dict[str, float] = {}
-    for step in range(start, cfg.steps):
-        for g in opt.param_groups:
-            g["lr"] = _lr(cfg.lr, step, cfg.steps)
-        b = {k: _t(v) for k, v in data.batch(cfg.batch, rng).items()}
-        losses = light_losses(net, sky, b)
-        opt.zero_grad()
-        losses["total"].backward()
-        torch.nn.utils.clip_grad_norm_(net.parameters(), 5.0)
-        opt.step()
-        for k, v in losses.items():
-            v = float(np.degrees(v.item())) if k == "dir" else v.item()
-            running[k] = 0.9 * running.get(k, v) + 0.1 * v
-        done = step + 1
-        if done % cfg.val_every == 0 or done == cfg.steps:
-            val = light_validation(net, val_panos, dome_hw)
-            history.append({"step": done, "time_s": time.perf_counter() - t0, "train": dict(running), "val": val})
-            log(f"step {done}: " + " ".join(f"{k} {v:.3f}" for k, v in running.items()) +
-                f" | val sun {val['sun_err_deg_median']:.1f} deg ({time.perf_counter() - t0:.0f} s)")
-        if done % cfg.ckpt_every == 0 or done == cfg.steps:
-            ckpt.save(done, net, opt, rng, history, time.perf_counter() - t0)
-    train_s = time.perf_counter() - t0
+    history, train_s = _optimise(
+        net, cfg, rng, _Checkpoint(cache / f"ckpt_light_{_config_hash(cfg)}.pt"),
+        lambda: {k: _t(v) for k, v in data.batch(cfg.batch, rng).items()}, lambda step, b: light_losses(net, sky, b),
+        lambda: light_validation(net, val_panos, dome_hw),
+        lambda running, val: " ".join(f"{k} {v:.3f}" for k, v in running.items())
+        + f" | val sun {val['sun_err_deg_median']:.1f} deg", log)
     report = {
         "kind": "light", "config": asdict(cfg), "architecture": net_cfg.to_dict(), "parameters": count_parameters(net),
         "train_time_s": train_s, "data_time_s": t_data, "threads": cfg.threads, "street_views": len(street),
