@@ -28,8 +28,10 @@ Sections (all numbers land in the JSON):
    baselines: the constant dome of the image's mean radiance (the paper's "no light" / L0) and the
    current image-only ``estimate_lighting_from_image``; plus the metadata path (true sun direction +
    ``refine_sky`` on the sky pixels).
-5. ``bundled_scenes``: sun direction error on the bundled sample scenes' images (no metadata used).
-6. ``speed_size``: inference time per image on one core, weights size on disk.
+5. ``single_image_heldin``: the same on the training panoramas dawn and forest (+ views tilted up 15 deg)
+   and sun reports on city / night: the development set of the sun cues (not a held-out measure).
+6. ``bundled_scenes``: sun direction error on the bundled sample scenes' images (no metadata used).
+7. ``speed_size``: inference time per image on one core, weights size on disk.
 """
 
 from __future__ import annotations
@@ -384,6 +386,57 @@ def section_single_image(panos, gt, models, quick=False) -> tuple[dict, list]:
     return out, mse, figs
 
 
+def section_single_image_heldin(models, quick=False) -> dict:
+    """The sun-direction numbers of ``section_single_image`` on the panoramas the networks were trained on
+    (dawn: a glow, the sun just below the horizon; forest: a high sun behind pines) plus views tilted up
+    15 deg, and how often a sun is (wrongly) reported on city / night.  This is the set the cue constants
+    were developed on; it is not a held-out measure (the network saw these panoramas)."""
+    idx = json.loads((HDRI / "index.json").read_text())["files"]
+    names = ("dawn", "forest", "city", "night")
+    panos = D.load_panoramas(HDRI, names)
+    K = intrinsics_from_fov(VIEW_W, VIEW_H, VIEW_FOV)
+    rows = []
+    for name in names:
+        g = idx[name]["gt_peak"]
+        gt = hdri_direction(g["azimuth_deg"], g["elevation_deg"])
+        views = make_views(panos[name], gt, quick)
+        if name in ("dawn", "forest"):
+            sun_az = float(np.arctan2(gt[1], gt[0]))
+            views += [("up15", sun_az + np.radians(o + 15.0), np.radians(15.0)) for o in range(0, 360, 60 if quick else 30)]
+        else:
+            views = [v for v in views if v[0] == "level"][::2]
+        for label, yaw, pitch in views:
+            R_wc = camera_from_angles(yaw, pitch, 0.0)
+            rad = render_perspective(panos[name], K, R_wc, VIEW_W, VIEW_H, supersample=1)
+            image = np.clip(np.round(hdr_to_ldr(rad * D.auto_exposure(rad)) * 255), 0, 255).astype(np.uint8)
+            up_cam = R_wc.T @ np.array([0.0, 0.0, 1.0])
+            sun_cam = R_wc.T @ gt
+            uv = K @ sun_cam
+            pred = predict_sky(image, K, up_cam, models=models)
+            rows.append({"pano": name, "kind": label, "yaw_deg": float(np.degrees(yaw)), "pitch_deg": float(np.degrees(pitch)),
+                         "sun_in_view": bool(sun_cam[2] > 0 and 0 <= uv[0] / uv[2] < VIEW_W and 0 <= uv[1] / uv[2] < VIEW_H),
+                         "err_deg": float(angle_deg(pred.direction_cam, sun_cam)), "uncertainty_deg": pred.uncertainty_deg,
+                         "sun_reported": pred.confident})
+    sun = [r for r in rows if r["pano"] in ("dawn", "forest")]
+    errs = np.array([r["err_deg"] for r in sun])
+    in_v = np.array([r["sun_in_view"] for r in sun])
+    rep = np.array([r["sun_reported"] for r in sun])
+    return {
+        "views": rows,
+        "note": "held-in (training) panoramas: development numbers, not a held-out measure",
+        "sun_err_deg_median": float(np.median(errs)),
+        "sun_err_deg_median_in_view": float(np.median(errs[in_v])) if in_v.any() else None,
+        "sun_err_deg_median_out_of_view": float(np.median(errs[~in_v])) if (~in_v).any() else None,
+        "per_pano_err_deg_median": {n: float(np.median([r["err_deg"] for r in sun if r["pano"] == n])) for n in ("dawn", "forest")},
+        "fraction_under_20deg": float(np.mean(errs < 20.0)),
+        "calibration_fraction_within_68pct_cone": float(np.mean(errs <= np.array([r["uncertainty_deg"] for r in sun]))),
+        "sun_reported_fraction": float(rep.mean()),
+        "sun_err_deg_median_when_reported": float(np.median(errs[rep])) if rep.any() else None,
+        "sun_reported_no_sun_views": f"{sum(r['sun_reported'] for r in rows if r['pano'] in ('city', 'night'))} / "
+                                     f"{sum(r['pano'] in ('city', 'night') for r in rows)}",
+    }
+
+
 def section_bundled() -> dict:
     from streetaug.datasets.nuscenes import NuScenesReader
 
@@ -457,6 +510,7 @@ def main() -> None:
     single, mse, figs = section_single_image(panos, gt, models, args.quick)
     result["single_image"] = single
     result["sphere_insertion"] = mse
+    result["single_image_heldin"] = section_single_image_heldin(models, args.quick)
     result["bundled_scenes"] = section_bundled()
     result["machine"]["load_avg_end"] = os.getloadavg()
     result["bench_time_s"] = time.perf_counter() - t0
@@ -480,6 +534,10 @@ def main() -> None:
           f"venice sun reported {s['sun_reported_fraction_venice_no_sun']:.2f}")
     for k, v in mse.items():
         print(f"sphere MSE {k}: diffuse {v['diffuse']:.2e} mirror {v['mirror']:.2e}")
+    hi = result["single_image_heldin"]
+    print(f"held-in (development) panoramas dawn/forest: median {hi['sun_err_deg_median']:.1f} deg (in view "
+          f"{hi['sun_err_deg_median_in_view']}, out {hi['sun_err_deg_median_out_of_view']}), calibration "
+          f"{hi['calibration_fraction_within_68pct_cone']:.2f}, no-sun views reported {hi['sun_reported_no_sun_views']}")
     print(f"bundled scenes (clear): median {result['bundled_scenes']['clear_err_deg_median']:.1f} deg")
     sp = result["speed_size"]
     print(f"per-pano median (in / out of view): {s['per_pano_err_deg_median_in_out_of_view']}; "

@@ -11,6 +11,7 @@ from streetaug.augment.lighting.skynet.dome import angle_deg, camera_from_angles
 from streetaug.augment.lighting.skynet.sun_cues import (
     clear_sky_log_rgb,
     detect_sun_disc,
+    glare_extent_deg,
     image_rays_cam,
     in_view_sky_loglik,
     sky_fit_loglik,
@@ -25,11 +26,12 @@ def _sun(az_deg: float, el_deg: float) -> np.ndarray:
 
 
 def _render(sun_world, yaw_deg=0.0, pitch_deg=0.0, turbidity=3.0, cloud_cover=0.0, glare=True, gains=(1.0, 1.0, 1.0),
-            occluders=False):
+            occluders=False, fog=(0.0, 0.0, 0.0)):
     """uint8 view (H, W, 3), K, up_cam, sun_cam of the project's analytic sky over a grey ground (z-up world).
 
     The sun: a disc (0.27 deg) carrying 70 % of its irradiance and an aureole ``exp(-angle / 2 deg)`` carrying
-    30 %; auto-exposed (geometric mean luminance -> 0.18) through the contract response.
+    30 %; auto-exposed (geometric mean luminance -> 0.18) through the contract response.  ``fog`` (3,): the sky
+    is brightened by ``1 + fog x exp(-elevation / 12 deg)`` per channel (a vertical profile Preetham lacks).
     """
     K = intrinsics_from_fov(W, H, FOV)
     R = camera_from_angles(np.radians(yaw_deg), np.radians(pitch_deg), 0.0)
@@ -42,6 +44,8 @@ def _render(sun_world, yaw_deg=0.0, pitch_deg=0.0, turbidity=3.0, cloud_cover=0.
         disc = (ang <= half)[:, None] * (0.7 * e / (2 * np.pi * (1 - np.cos(half))))
         w = np.radians(2.0)
         rad = rad + disc + (np.exp(-ang / w) / (2 * np.pi * w * w))[:, None] * 0.3 * e
+    el = np.arcsin(np.clip(d[:, 2], 0.0, 1.0))[:, None]
+    rad = rad * (1.0 + np.asarray(fog) * np.exp(-el / np.radians(12.0)))
     rad = (rad * np.asarray(gains)).reshape(H, W, 3)
     if occluders:  # dark "buildings" rising from the horizon in the left and right thirds
         u = np.arange(W)[None, :]
@@ -131,6 +135,44 @@ def test_sky_fit_recovers_the_azimuth_of_a_sun_out_of_view(sun_az, sun_el):
     # evidence: directions far from the sun are clearly less likely
     far = cand @ sun_h < np.cos(np.radians(60.0))
     assert loglik[far].max() < -3.0
+
+
+@pytest.mark.parametrize("sun_az, sun_el", [(70, 25), (-110, 35)])
+def test_sky_fit_ignores_the_vertical_profile_of_the_sky(sun_az, sun_el):
+    """Fog brightening the lower sky (differently per channel) is absorbed by the per-band nuisance: the
+    fitted azimuth stays within 10 deg, and the likelihood barely changes from the clear image's."""
+    sun = _sun(sun_az, sun_el)
+    clear, K, up, sun_cam = _render(sun, 0.0, 10.0, gains=(1.1, 1.0, 0.85))
+    foggy, *_ = _render(sun, 0.0, 10.0, gains=(1.1, 1.0, 0.85), fog=(3.0, 2.5, 1.5))
+    assert np.abs(foggy.astype(int) - clear.astype(int)).mean() > 10  # the fog really changes the image
+    cand = dome_directions(24, 96).reshape(-1, 3)
+    sun_h = heading_from_camera(up) @ sun_cam
+    lls = []
+    for image in (clear, foggy):
+        loglik, info = _fit(image, K, up, cand)
+        assert info["fit_pixels"] > 1000
+        best = cand[int(np.argmax(loglik))]
+        az_err = np.degrees(abs(np.angle(np.exp(1j * (np.arctan2(best[1], best[0]) - np.arctan2(sun_h[1], sun_h[0]))))))
+        assert az_err < 10.0, (az_err, best, sun_h)
+        lls.append(loglik)
+    top = lls[0] > -3.0  # the clear image's plausible suns stay plausible in fog, the implausible ones implausible
+    assert lls[1][top].max() == 0.0 or np.mean(lls[1][top] > -6.0) > 0.5
+    assert lls[1][lls[0] < -20.0].max() < -5.0
+
+
+def test_glare_extent_is_the_radius_of_the_clipped_region_under_the_direction():
+    K = intrinsics_from_fov(160, 96, 70.0)
+    image = np.full((96, 160, 3), 120, np.uint8)
+    yy, xx = np.mgrid[:96, :160]
+    image[(xx - 40) ** 2 + (yy - 30) ** 2 <= 4] = 255  # a compact blob (radius ~2 px ~ 1 deg)
+    image[60:66, :] = 255  # a band of clipped horizon glow across the whole image
+    rays = image_rays_cam(K, 96, 160)
+    blob = glare_extent_deg(image, K, rays[30, 40])
+    band = glare_extent_deg(image, K, rays[62, 80])
+    assert blob is not None and blob < 3.0
+    assert band is not None and band > 30.0  # the band spans ~70 deg: the sun could be anywhere along it
+    assert glare_extent_deg(image, K, rays[10, 120]) is None  # unclipped sky
+    assert glare_extent_deg(image, K, -rays[30, 40]) is None  # behind the camera
 
 
 def test_sky_fit_without_sky_says_nothing():

@@ -36,10 +36,10 @@ UNCERTAINTY_MAX_DEG = 35.0  # above (68 % cone): the direction is too uncertain 
 SUN_REGION_PX = 2.5  # the decoded sun is taken from this radius (dome pixels) around f_dir
 MIN_SUN_FRACTION = 0.05  # a decoded peak counts as a sun if it carries this fraction of the dome's irradiance
 DISC_VISIBILITY = 0.7  # a sun disc seen in the image: the visibility is at least this
-CNN_WEIGHT = 0.5  # exponent of the network's direction distribution in the posterior
+CNN_WEIGHT = 0.1  # exponent of the network's direction distribution in the posterior (a weak prior)
 FIT_TEMPERATURE = 4.0  # divides the clear-sky fit's log-likelihood (calibrated on held-in views)
 IN_VIEW_PENALTY = 8.0  # log-likelihood penalty of a sun on bright unclipped pixels in view
-GLARE_MAX_UNCERTAINTY_DEG = 15.0  # a fitted sun this sure, in view on clipped pixels, is taken as seen ...
+GLARE_MAX_UNCERTAINTY_DEG = 15.0  # a fitted sun in a clipped region, this sure (cone >= its radius), is seen ...
 GLARE_VISIBILITY = 0.5  # ... with at least this visibility (the network underrates suns in view)
 GLARE_MIN_ELEVATION_DEG = 4.0  # ... unless it is lower (a clipped twilight glow on the horizon is not a sun)
 REFINE_MAX_PIXELS = 3000
@@ -184,20 +184,6 @@ def simple_sky_mask(ldr: np.ndarray, rays_h: np.ndarray) -> np.ndarray:
     return sky_mask(ldr, elevation, min_elevation_deg=2.0, min_lum=0.25, bright_percentile=40.0, max_grad=0.15)
 
 
-def _on_clipped_pixels(d_cam: np.ndarray, K: np.ndarray, image: np.ndarray) -> bool:
-    """Whether the camera-frame direction (3,) projects into ``image`` (h, w, 3) uint8 (intrinsics K) within
-    one pixel of a clipped pixel (max channel >= SATURATED_LDR)."""
-    if d_cam[2] <= 1e-3:
-        return False
-    uv = K @ d_cam
-    u, v = int(round(uv[0] / uv[2])), int(round(uv[1] / uv[2]))
-    h, w = image.shape[:2]
-    if not (0 <= u < w and 0 <= v < h):
-        return False
-    patch = image[max(v - 1, 0):v + 2, max(u - 1, 0):u + 2]
-    return bool(patch.max() >= SATURATED_LDR * 255)
-
-
 def _posterior_direction(p: np.ndarray, bins: np.ndarray) -> np.ndarray:
     """Unit mean direction of ``p`` (n,) over ``bins`` (n, 3) within 20 deg of its mode."""
     mode = bins[int(np.argmax(p))]
@@ -217,14 +203,15 @@ def predict_sky(image_rgb: np.ndarray, K: np.ndarray, up_cam: np.ndarray | None 
         models: (sky model, image predictor), default the shipped ones.
         use_cues: combine the network with the explicit cues of :mod:`.sun_cues`: a sun disc seen in
             the image gives the direction directly (its visibility is at least ``DISC_VISIBILITY``);
-            otherwise the network's direction distribution (to the power ``CNN_WEIGHT``) is multiplied
-            by the clear-sky fit's likelihood and by the "not on bright unclipped pixels in view" term,
-            and a sure posterior (68 % cone <= ``GLARE_MAX_UNCERTAINTY_DEG``) that lands on clipped
-            pixels in view counts as a seen sun (visibility >= ``GLARE_VISIBILITY``).  False: the
-            network alone.
+            otherwise the network's direction distribution (to the power ``CNN_WEIGHT``: a weak prior)
+            is multiplied by the clear-sky fit's likelihood and by the "not on bright unclipped pixels
+            in view" term.  If the posterior's direction lands in a clipped region of the image, the
+            68 % cone is at least that region's angular radius (the sun can be anywhere under the
+            glare); a cone still <= ``GLARE_MAX_UNCERTAINTY_DEG`` there counts as a seen sun
+            (visibility >= ``GLARE_VISIBILITY``).  False: the network alone.
     """
     from .data import VIEW_SIZE, resize_view, view_rays
-    from .sun_cues import detect_sun_disc, in_view_sky_loglik, sky_fit_loglik
+    from .sun_cues import detect_sun_disc, glare_extent_deg, in_view_sky_loglik, sky_fit_loglik
 
     torch = _torch()
     image_rgb = np.asarray(image_rgb)
@@ -272,10 +259,14 @@ def predict_sky(image_rgb: np.ndarray, K: np.ndarray, up_cam: np.ndarray | None 
             direction = _posterior_direction(p, bins)
             cue = "network x clear-sky fit"
         unc = direction_cone_deg(p, bins, direction)
-        sure_and_high = unc <= GLARE_MAX_UNCERTAINTY_DEG and direction[2] >= np.sin(np.radians(GLARE_MIN_ELEVATION_DEG))
-        if use_cues and sure_and_high and _on_clipped_pixels(R.T @ direction, Ks, small):
-            vis_used = max(vis, GLARE_VISIBILITY)  # the fitted sun sits in the clipped glare of the image
-            cue += ", in the clipped glare"
+        # a fitted sun inside a clipped region of the image is known only to within that region's radius
+        glare = glare_extent_deg(small, Ks, R.T @ direction) if use_cues else None
+        if glare is not None:
+            unc = max(unc, glare)
+            cue += f", in a clipped region of radius {glare:.0f} deg"
+        if glare is not None and unc <= GLARE_MAX_UNCERTAINTY_DEG and \
+                direction[2] >= np.sin(np.radians(GLARE_MIN_ELEVATION_DEG)):
+            vis_used = max(vis, GLARE_VISIBILITY)  # the fitted sun sits in a compact clipped glare: seen
     t3 = time.perf_counter()
     sky = SkyVector(np.expm1(o["log_int"][0].double().numpy()), direction, o["latent"][0].double().numpy())
     direction_cam = R.T @ direction

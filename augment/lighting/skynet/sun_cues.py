@@ -11,8 +11,11 @@ unknown exposure and white balance, which every fit here is invariant to).
 * :func:`clear_sky_log_rgb` — the project's Preetham clear sky (:mod:`..sky`), vectorised over many
   candidate suns at once (the same formulas and coefficients as ``sky._clear_sky_shape``).
 * :func:`sky_fit_loglik` — the sun out of view: fit that sky to the visible unsaturated sky pixels in
-  log space, with the per-channel exposure, a horizon haze and the turbidity profiled out and a robust
-  (Cauchy) loss against clouds; returns a log-likelihood over candidate sun directions.
+  log space, with a free offset per channel and elevation band (exposure, white balance, haze: any
+  vertical profile) and the turbidity profiled out and a robust (Cauchy) loss against clouds; returns a
+  log-likelihood over candidate sun directions.
+* :func:`glare_extent_deg` — how far a clipped region under a direction reaches (a sun placed in it is
+  known only to within that).
 * :func:`in_view_sky_loglik` — no disc found: directions that project onto bright but unclipped
   pixels of the image cannot hold the sun.
 """
@@ -38,7 +41,8 @@ FIT_MIN_ELEVATION_DEG = 3.0  # sky pixels below this (haze, horizon glare) are n
 FIT_MAX_PIXELS = 300
 FIT_MIN_BLUE_RED = 0.75  # clear sky is bluer than red (linear); facades, clouds, haze are not fitted
 FIT_CAUCHY_SCALE = 0.15  # log-radiance residual scale of the robust loss (clouds are outliers)
-FIT_HAZE_SCALE_DEG = 8.0  # horizon haze brightening ~ exp(-elevation / this), strength fitted per channel
+FIT_HAZE_SCALE_DEG = 8.0  # band_deg=None: horizon haze ~ exp(-elevation / this), strength fitted per channel
+FIT_BAND_DEG = 3.0  # the nuisance is a free log offset per channel and elevation band of this width
 FIT_N_EFF = 30.0  # independent pixels' worth of evidence in a fully covered, perfectly fitted sky
 FIT_LOSS_FLOOR = 0.2  # the evidence is divided by (floor + best loss): a poorly fitting sky says less
 FIT_FULL_COVERAGE = 0.25  # fraction of the image's pixels fitted for the full evidence (fewer: proportionally less)
@@ -236,18 +240,21 @@ def clear_sky_log_rgb(dirs_h: np.ndarray, sun_dirs_h: np.ndarray, turbidity: flo
 
 def sky_fit_loglik(image_small: np.ndarray, rays_h: np.ndarray, sky_mask: np.ndarray, sun_dirs_h: np.ndarray,
                    turbidities: tuple[float, ...] = FIT_TURBIDITIES, temperature: float = 1.0,
-                   max_pixels: int = FIT_MAX_PIXELS) -> tuple[np.ndarray, dict]:
+                   max_pixels: int = FIT_MAX_PIXELS, band_deg: float | None = FIT_BAND_DEG) -> tuple[np.ndarray, dict]:
     """Log-likelihood (M,) of candidate suns given the visible clear-sky pattern (0 = best candidate).
 
     The unsaturated sky pixels (``sky_mask``, LDR 0.03..0.9, above ``FIT_MIN_ELEVATION_DEG``, blue/red
     >= ``FIT_MIN_BLUE_RED``: no brick or beige facades) give ``y = log HDR`` per channel (at most
     ``max_pixels``, evenly subsampled).  For each candidate sun and turbidity the residual
-    ``r = y - log(clear sky) - a - b haze`` is scored with a Cauchy loss ``log(1 + (r / c)^2)``
-    (c = ``FIT_CAUCHY_SCALE``) averaged over the pixels, where per channel ``a`` is the unknown exposure
-    and white balance and ``b >= 0`` an unknown horizon haze, ``haze = exp(-elevation /
-    FIT_HAZE_SCALE_DEG)`` (real horizons are brighter than Preetham's; without it a bright horizon pulls
-    the sun into the view), fitted by iteratively re-weighted least squares (clouds are outliers).  The
-    turbidity is profiled out (minimum over ``turbidities``).  With ``L`` that loss:
+    ``r = y - log(clear sky) - g(elevation)`` is scored with a Cauchy loss ``log(1 + (r / c)^2)``
+    (c = ``FIT_CAUCHY_SCALE``) averaged over the pixels.  The nuisance ``g`` (per channel, fitted by
+    iteratively re-weighted least squares: clouds are outliers) is, by default, a free offset per
+    elevation band of ``band_deg``: it absorbs the unknown exposure and white balance *and* any vertical
+    profile (horizon haze, fog, a real sky's brightness-vs-elevation that Preetham gets wrong), so only the
+    sky's variation along each band (with azimuth: brighter towards the sun) and its change from band to
+    band locate the sun.  ``band_deg=None`` is round 1's nuisance: an exposure ``a`` plus a horizon haze
+    ``b >= 0`` times ``exp(-elevation / FIT_HAZE_SCALE_DEG)``.  The turbidity is profiled out (minimum over
+    ``turbidities``).  With ``L`` that loss:
 
         loglik = -FIT_N_EFF * coverage * (L - L_min) / (temperature * (FIT_LOSS_FLOOR + L_min))
 
@@ -261,6 +268,7 @@ def sky_fit_loglik(image_small: np.ndarray, rays_h: np.ndarray, sky_mask: np.nda
         sky_mask: (h, w) bool sky pixels.
         sun_dirs_h: (M, 3) candidate sun directions (heading frame).
         temperature: divides the log-likelihood (calibration).
+        band_deg: width (deg) of the elevation bands of the nuisance offsets; None: exposure + haze.
     """
     ldr = image_small.astype(np.float64) / 255.0
     elev_ok = rays_h[..., 2] > np.sin(np.radians(FIT_MIN_ELEVATION_DEG))
@@ -276,21 +284,32 @@ def sky_fit_loglik(image_small: np.ndarray, rays_h: np.ndarray, sky_mask: np.nda
     d = rays_h.reshape(-1, 3)[idx].astype(np.float64)
     y = np.log(np.maximum(ldr_uint8_to_hdr(image_small.reshape(-1, 3)[idx][None])[0].astype(np.float64), 1e-5))
     y = y.astype(np.float32)
+    elevation = np.arcsin(np.clip(d[:, 2], 0.0, 1.0))
+    if band_deg is not None:
+        band = np.floor(np.degrees(elevation) / band_deg).astype(np.int64)
+        _, band = np.unique(band, return_inverse=True)
+        onehot = np.eye(band.max() + 1, dtype=np.float32)[band]  # (N, bands) membership
     best = np.full(M, np.inf)
     best_t = np.zeros(M)
     c = np.float32(FIT_CAUCHY_SCALE)
     geometry = _sun_geometry(d, sun_dirs_h)
-    # nuisance per channel: exposure (a constant) + horizon haze of unknown strength, a (b >= 0) x haze(elevation)
-    haze = np.exp(-np.arcsin(np.clip(d[:, 2], 0.0, 1.0)) / np.radians(FIT_HAZE_SCALE_DEG)).astype(np.float32)
+    # band_deg=None: nuisance per channel = exposure (a constant) + horizon haze, (b >= 0) x haze(elevation)
+    haze = np.exp(-elevation / np.radians(FIT_HAZE_SCALE_DEG)).astype(np.float32)
     haze = haze[:, None, None]
     for T in turbidities:
         r0 = y[:, None, :] - clear_sky_log_rgb(d, sun_dirs_h, T, geometry)  # (N, M, 3)
         wts = np.ones_like(r0)
         for _ in range(3):  # weighted LS of the nuisance, re-weighted (Cauchy, IRLS): clouds are outliers
-            sw, sh, shh = wts.sum(0), (wts * haze).sum(0), (wts * haze * haze).sum(0)
-            sr, shr = (wts * r0).sum(0), (wts * haze * r0).sum(0)
-            b = np.maximum((sw * shr - sh * sr) / np.maximum(sw * shh - sh * sh, 1e-6), 0.0)
-            r = r0 - ((sr - b * sh) / sw)[None] - b[None] * haze
+            if band_deg is not None:  # per band, candidate and channel: the weighted mean residual
+                n = len(r0)
+                sw = onehot.T @ wts.reshape(n, -1)
+                sr = onehot.T @ (wts * r0).reshape(n, -1)
+                r = r0 - (onehot @ (sr / np.maximum(sw, 1e-6))).reshape(r0.shape)
+            else:
+                sw, sh, shh = wts.sum(0), (wts * haze).sum(0), (wts * haze * haze).sum(0)
+                sr, shr = (wts * r0).sum(0), (wts * haze * r0).sum(0)
+                b = np.maximum((sw * shr - sh * sr) / np.maximum(sw * shh - sh * sh, 1e-6), 0.0)
+                r = r0 - ((sr - b * sh) / sw)[None] - b[None] * haze
             wts = 1.0 / (1.0 + (r / c) ** 2)
         loss = np.log1p((r / c) ** 2).sum(axis=(0, 2), dtype=np.float64) / len(idx)
         better = loss < best
@@ -324,3 +343,29 @@ def in_view_sky_loglik(sun_dirs_h: np.ndarray, R_heading_from_cam: np.ndarray, K
     hit = np.zeros(len(d_cam), bool)
     hit[inside] = no_sun[v[inside], u[inside]]
     return np.where(hit, -penalty, 0.0)
+
+
+def glare_extent_deg(image_small: np.ndarray, K_small: np.ndarray, d_cam: np.ndarray) -> float | None:
+    """Angular radius (deg) of the clipped region the camera-frame direction ``d_cam`` (3,) falls in, or None.
+
+    The 8-connected clipped region (max channel >= ``SATURATED``) of ``image_small`` (h, w, 3) uint8
+    (intrinsics ``K_small``) at the projected pixel (or within one pixel of it); its radius is the largest
+    angle between ``d_cam`` and the rays of its pixels.  A sun placed inside a clipped glare is only known
+    to within that region: a compact blob pins it, a long band of horizon glow does not.
+    """
+    d = np.asarray(d_cam, dtype=np.float64)
+    if d[2] <= 1e-3:
+        return None
+    h, w = image_small.shape[:2]
+    uv = np.asarray(K_small) @ d
+    u, v = int(round(uv[0] / uv[2])), int(round(uv[1] / uv[2]))
+    if not (0 <= u < w and 0 <= v < h):
+        return None
+    hot = (image_small.max(axis=-1) >= SATURATED * 255).astype(np.uint8)
+    _, labels = cv2.connectedComponents(hot, connectivity=8)
+    patch = labels[max(v - 1, 0):v + 2, max(u - 1, 0):u + 2]
+    ids = np.unique(patch[patch > 0])
+    if len(ids) == 0:
+        return None
+    rays = image_rays_cam(K_small, h, w)[np.isin(labels, ids)]
+    return float(np.degrees(np.arccos(np.clip(rays @ (d / np.linalg.norm(d)), -1.0, 1.0)).max()))
