@@ -283,7 +283,9 @@ def _render_view(sample: Sample, view: CameraView, placed: SamplePlacement, esti
     image = view.image
     T_cam_from_global = view.T_cam_from_global
     poses = [T_cam_from_global @ p.T_global_from_object for p in placements]
+    t = time.perf_counter()
     lights = [object_light(estimate, T[:3, 3] + 0.5 * p.wlh[2] * T[:3, 2]) for T, p in zip(poses, placements)]
+    timing["local_light"] = time.perf_counter() - t  # each object's environment at its centre (L2/L3: Eq. 1)
     shown = [i for i in range(len(placements)) if _reaches_view(view, assets[i], poses[i], lights[i], options.quality)]
     report = None if placement_result is None else placement_result.report
     extras = {"placement": placement_result}

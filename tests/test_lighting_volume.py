@@ -261,3 +261,26 @@ def test_lift_out_of_solid_ground():
     # from the lifted point the upper hemisphere is open sky
     up = lonlat_to_world_dir(np.array([0.3]), np.array([1.2]))
     assert np.allclose(h.radiance(lifted[None], up).numpy(), 1.0)
+
+
+def test_cached_envmap_is_traced_once_and_rotates_into_any_frame(monkeypatch):
+    """An object seen by several cameras: its local map is traced once (world convention) and each camera gets it
+    rotated; the rotation matches tracing the camera's map directly; changed parameters invalidate the cache."""
+    from streetaug.augment.lighting.volume import world_to_frame_envmap
+
+    rng = np.random.default_rng(3)
+    h = HybridLighting(_dome(16, 32, torch.float32), grid=TINY, params=_random_params(TINY, rng, dtype=torch.float32))
+    calls = []
+    traced = HybridLighting.envmap_at
+    monkeypatch.setattr(HybridLighting, "envmap_at", lambda self, *a, **k: calls.append(a) or traced(self, *a, **k))
+    p = np.array([1.0, 0.5, 1.2])
+    first = h.envmap_at_cached(p, 32, 64)
+    assert h.envmap_at_cached(p + 1e-5, 32, 64) is first and len(calls) == 1  # the same point to the millimetre
+    c, s = np.cos(0.7), np.sin(0.7)
+    R_vol_from_cam = np.array([[-s, 0.0, c], [c, 0.0, s], [0.0, -1.0, 0.0]])  # a level camera looking 40 deg left
+    rotated = world_to_frame_envmap(first, R_vol_from_cam, 32, 64)
+    direct = traced(h, p, 32, 64, R_vol_from_frame=R_vol_from_cam)
+    assert np.abs(rotated - direct).mean() / np.abs(direct).mean() < 0.05
+    with torch.no_grad():
+        h.params[..., :3] *= 2.0  # in place: a new version of the tensor
+    assert h.envmap_at_cached(p, 32, 64) is not first and len(calls) == 2

@@ -114,7 +114,10 @@ class LightingEstimate:
             return self.light_cam
         T = np.asarray(self.T_vol_from_cam)
         p_vol = self.hybrid.lift_out_of_solid(T[:3, :3] @ p + T[:3, 3])
-        env = self.hybrid.envmap_at(p_vol, height, width, R_vol_from_frame=T[:3, :3]) * np.float32(self.radiometric_scale)
+        from .volume import world_to_frame_envmap  # torch: only with a volume
+
+        env_world = self.hybrid.envmap_at_cached(p_vol, height, width)  # shared by the cameras seeing the point
+        env = world_to_frame_envmap(env_world, T[:3, :3], height, width) * np.float32(self.radiometric_scale)
         sun = self.light_cam.sun
         if sun is not None:
             tau = self.hybrid.sun_transmittance(p_vol)

