@@ -35,6 +35,7 @@ demo: setup
 	@echo "  $(OUT)/                            a nuScenes dataset: NuScenes(version='v1.0-samples', dataroot='$(OUT)')"
 	@echo "  $(OUT)/samples/<CAMERA>/*.jpg      augmented images of every bundled scene"
 	@echo "  $(OUT)/labels/<CAMERA>/*.json      their 3D labels; summary.json, augment_log.jsonl, contact_sheet.png"
+	@echo "  $(OUT)/samples/LIDAR_TOP/*.pcd.bin the LiDAR sweeps with the inserted cars in them"
 	@echo "  $(OUT)/insert-sunny/               one insertion with mask.png and shadow.exr"
 	@echo "  $(OUT)/light-lowsun/               lighting.json, envmap_camera.exr, preview.png"
 
