@@ -35,7 +35,7 @@ import numpy as np  # noqa: E402
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))
 
-from render_fixtures import NUSCENES_K, SHARED_DATA, sunny_light  # noqa: E402
+from render_fixtures import NUSCENES_K, SHARED_DATA, degrade, sharp_polygons, sunny_light  # noqa: E402
 
 from streetaug.augment.assets.procedural import procedural_car  # noqa: E402
 from streetaug.augment.conventions import pose_camera_to_transform  # noqa: E402
@@ -45,27 +45,6 @@ from streetaug.augment.render.insert import QUALITY_PRESETS, render_insertion  #
 
 BLURS = (0.0, 0.5, 1.0, 1.5, 2.0, 3.0)
 NOISES = (0.0, 1.0, 2.0, 4.0, 8.0)  # levels of 255
-
-
-def synthetic_sharp(seed: int, width: int = 640, height: int = 360, ss: int = 8) -> np.ndarray:
-    """(H, W, 3) float32 in [0, 1]: random polygons with ideally pixel-integrated edges."""
-    rng = np.random.default_rng(seed)
-    big = np.empty((height * ss, width * ss, 3), np.uint8)
-    big[:] = rng.integers(60, 200, 3)
-    for _ in range(40):
-        n = int(rng.integers(3, 7))
-        centre = rng.random(2) * [width * ss, height * ss]
-        r = rng.uniform(20, 120) * ss
-        ang = np.sort(rng.random(n)) * 2 * np.pi
-        pts = np.stack([centre[0] + r * np.cos(ang), centre[1] + r * np.sin(ang)], 1).astype(np.int32)
-        cv2.fillPoly(big, [pts], rng.integers(0, 256, 3).tolist())
-    return cv2.resize(big, (width, height), interpolation=cv2.INTER_AREA).astype(np.float32) / 255.0
-
-
-def degrade(img: np.ndarray, blur: float, noise_levels: float, seed: int = 1) -> np.ndarray:
-    out = cv2.GaussianBlur(img, (0, 0), blur) if blur > 0 else img
-    out = out + np.random.default_rng(seed).normal(0, noise_levels / 255.0, out.shape).astype(np.float32)
-    return np.clip(np.round(out * 255.0), 0, 255).astype(np.uint8)
 
 
 def photos() -> list[tuple[str, np.ndarray]]:
@@ -89,7 +68,7 @@ def main() -> None:
     # 1. synthetic
     t_est = []
     for seed in (0, 1, 2):
-        base = synthetic_sharp(seed)
+        base = sharp_polygons(seed, 640, 360, n_polygons=40, radius_px=(20, 120))
         for b in BLURS:
             for n in NOISES:
                 img = degrade(base, b, n)

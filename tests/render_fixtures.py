@@ -122,3 +122,26 @@ def ground_scene(light: DistantLight, K=NUSCENES_K, width: int = 1600, height: i
     sky = env_radiance(light, dirs).reshape(height, width, 3)
     hdr = np.where(np.isfinite(depth)[..., None], ground_rgb[None, None], sky)
     return hdr_to_ldr_uint8(hdr, ev), depth, ev
+
+
+def sharp_polygons(seed: int, width: int, height: int, n_polygons: int, radius_px: tuple[float, float],
+                   ss: int = 8) -> np.ndarray:
+    """(H, W, 3) float32 in [0, 1]: random polygons with ideally pixel-integrated edges (no blur, no noise)."""
+    rng = np.random.default_rng(seed)
+    big = np.empty((height * ss, width * ss, 3), np.uint8)
+    big[:] = rng.integers(60, 200, 3)
+    for _ in range(n_polygons):
+        n = int(rng.integers(3, 7))
+        centre = rng.random(2) * [width * ss, height * ss]
+        r = rng.uniform(*radius_px) * ss
+        ang = np.sort(rng.random(n)) * 2 * np.pi
+        pts = np.stack([centre[0] + r * np.cos(ang), centre[1] + r * np.sin(ang)], 1).astype(np.int32)
+        cv2.fillPoly(big, [pts], rng.integers(0, 256, 3).tolist())
+    return cv2.resize(big, (width, height), interpolation=cv2.INTER_AREA).astype(np.float32) / 255.0
+
+
+def degrade(img: np.ndarray, blur: float, noise_levels: float, seed: int = 1) -> np.ndarray:
+    """A [0, 1] image Gaussian-blurred by ``blur`` px with Gaussian noise of ``noise_levels`` / 255, as uint8."""
+    out = cv2.GaussianBlur(img, (0, 0), blur) if blur > 0 else img
+    out = out + np.random.default_rng(seed).normal(0, noise_levels / 255.0, out.shape).astype(np.float32)
+    return np.clip(np.round(out * 255.0), 0, 255).astype(np.uint8)

@@ -6,6 +6,7 @@ import cv2
 import numpy as np
 import pytest
 
+from render_fixtures import degrade, sharp_polygons
 from streetaug.augment.io import InputError
 from streetaug.augment.render.camera_effects import (
     CameraEffects,
@@ -17,35 +18,14 @@ from streetaug.augment.render.camera_effects import (
 )
 
 
-def _sharp(seed: int = 0, width: int = 320, height: int = 180, ss: int = 8) -> np.ndarray:
-    """Random polygons with ideally pixel-integrated edges, float32 in [0, 1]."""
-    rng = np.random.default_rng(seed)
-    big = np.empty((height * ss, width * ss, 3), np.uint8)
-    big[:] = rng.integers(60, 200, 3)
-    for _ in range(25):
-        n = int(rng.integers(3, 7))
-        centre = rng.random(2) * [width * ss, height * ss]
-        r = rng.uniform(15, 60) * ss
-        ang = np.sort(rng.random(n)) * 2 * np.pi
-        pts = np.stack([centre[0] + r * np.cos(ang), centre[1] + r * np.sin(ang)], 1).astype(np.int32)
-        cv2.fillPoly(big, [pts], rng.integers(0, 256, 3).tolist())
-    return cv2.resize(big, (width, height), interpolation=cv2.INTER_AREA).astype(np.float32) / 255.0
-
-
-def _degrade(img, blur, noise_levels, seed=1):
-    out = cv2.GaussianBlur(img, (0, 0), blur) if blur > 0 else img
-    out = out + np.random.default_rng(seed).normal(0, noise_levels / 255.0, out.shape).astype(np.float32)
-    return np.clip(np.round(out * 255), 0, 255).astype(np.uint8)
-
-
 @pytest.fixture(scope="module")
 def sharp():
-    return _sharp()
+    return sharp_polygons(0, 320, 180, n_polygons=25, radius_px=(15, 60))
 
 
 @pytest.mark.parametrize("blur,noise", [(0.0, 0.0), (1.0, 0.0), (2.0, 0.0), (1.0, 3.0), (1.5, 6.0)])
 def test_estimates_known_blur_and_noise(sharp, blur, noise):
-    e = estimate_camera_effects(_degrade(sharp, blur, noise))
+    e = estimate_camera_effects(degrade(sharp, blur, noise))
     assert isinstance(e, CameraEffects) and e.edge_pixels > 100
     assert abs(e.blur_sigma_px - blur) < 0.25, (e.blur_sigma_px, blur)
     assert abs(255 * e.noise_sigma - noise) < 0.1 * noise + 0.3, (255 * e.noise_sigma, noise)
@@ -53,18 +33,18 @@ def test_estimates_known_blur_and_noise(sharp, blur, noise):
 
 def test_noise_estimate_ignores_edges(sharp):
     """A sharp image full of edges and no noise: the noise estimate stays at (near) zero."""
-    assert 255 * estimate_noise_sigma(_degrade(sharp, 0.0, 0.0)) < 0.3
+    assert 255 * estimate_noise_sigma(degrade(sharp, 0.0, 0.0)) < 0.3
 
 
 def test_estimates_restricted_to_a_mask(sharp):
-    img = _degrade(sharp, 0.0, 0.0)
-    noisy = _degrade(sharp, 0.0, 8.0)
+    img = degrade(sharp, 0.0, 0.0)
+    noisy = degrade(sharp, 0.0, 8.0)
     half = np.zeros(img.shape[:2], bool)
     half[:, : img.shape[1] // 2] = True
     mixed = np.where(half[..., None], noisy, img)
     assert abs(255 * estimate_noise_sigma(mixed, half) - 8.0) < 1.0
     assert 255 * estimate_noise_sigma(mixed, ~half) < 0.5
-    blurred = _degrade(sharp, 2.0, 0.0)
+    blurred = degrade(sharp, 2.0, 0.0)
     mixed = np.where(half[..., None], blurred, img)
     b_left, _ = estimate_blur_sigma(mixed, mask=half)
     b_right, _ = estimate_blur_sigma(mixed, mask=~half)
@@ -113,8 +93,8 @@ def test_match_camera_in_render_insertion():
 
     W, H = 320, 180
     K = intrinsics_from_fov(W, H, 60.0)
-    photo = cv2.resize(_sharp(3), (W, H))
-    image = _degrade(photo, 1.5, 5.0)
+    photo = cv2.resize(sharp_polygons(3, 320, 180, n_polygons=25, radius_px=(15, 60)), (W, H))
+    image = degrade(photo, 1.5, 5.0)
     depth = np.full((H, W), np.inf, np.float32)
     T = pose_camera_to_transform(0.0, 1.0, 10.0, 60.0)
     light = sunny_light()
