@@ -238,10 +238,7 @@ def insert_into_sample(
         views: the cameras to augment; objects are placed in each view's field of view.
         assets_by_channel: channel -> the assets to place in that view (may be empty).
     """
-    from .render.settings import QUALITY_PRESETS
-
-    if options.quality not in QUALITY_PRESETS:
-        raise InputError(f"quality: expected one of {sorted(QUALITY_PRESETS)}, got {options.quality!r}")
+    render_settings(options)  # a bad preset fails before any work
     from .lighting import multiview  # noqa: F401 - heavy first import (torch): start-up, not per-image work
 
     t_start = time.perf_counter()
@@ -397,11 +394,9 @@ def insert_into_image(
 
 def render_settings(options: InsertOptions):
     """The render preset of ``options.quality`` with ``options.match_camera`` applied."""
-    from .render.settings import QUALITY_PRESETS
+    from .render.settings import resolve_settings
 
-    if options.quality not in QUALITY_PRESETS:
-        raise InputError(f"quality: expected one of {sorted(QUALITY_PRESETS)}, got {options.quality!r}")
-    return replace(QUALITY_PRESETS[options.quality], match_camera=options.match_camera)
+    return replace(resolve_settings(options.quality), match_camera=options.match_camera)
 
 
 def _render_objects(image, K, depth_m, lights, assets, T_cam_from_objects, ground_normals_cam, options, rng, timing,

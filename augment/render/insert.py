@@ -21,7 +21,7 @@ from .camera_effects import add_object_noise, blur_object_layer, estimate_camera
 from .composite import composite, depth_visibility
 from .geometry import prepare_asset
 from .sampling import sky_irradiance
-from .settings import QUALITY_PRESETS, RenderSettings
+from .settings import QUALITY_PRESETS, RenderSettings, resolve_settings
 from .shade import render_foreground
 from .bounce import BounceLight
 from .shadow import GroundShadow, car_ambient_radiance, render_shadow
@@ -59,14 +59,6 @@ class Insertion:
     object_radiance: np.ndarray | None = None
 
 
-def _settings(quality: str | RenderSettings) -> RenderSettings:
-    if isinstance(quality, RenderSettings):
-        return quality
-    if quality not in QUALITY_PRESETS:
-        raise InputError(f"quality: expected one of {sorted(QUALITY_PRESETS)}, got {quality!r}")
-    return QUALITY_PRESETS[quality]
-
-
 def render_insertion(image_rgb: np.ndarray, K: np.ndarray, depth_m: np.ndarray, light: DistantLight,
                      asset: Asset, T_cam_from_object: np.ndarray, ground_normal_cam: np.ndarray | None = None,
                      quality: str | RenderSettings = "default", ev: float = 0.0, seed: int = 0) -> Insertion:
@@ -98,7 +90,7 @@ def render_insertion(image_rgb: np.ndarray, K: np.ndarray, depth_m: np.ndarray, 
     check_shape(T, (4, 4), "T_cam_from_object")
     if not np.all(np.isfinite(T)):
         raise InputError("T_cam_from_object: must be finite")
-    settings = _settings(quality)
+    settings = resolve_settings(quality)
     rng = np.random.default_rng(seed)
     timing: dict[str, float] = {}
 

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from ..io import InputError
+
 
 @dataclass(frozen=True)
 class RenderSettings:
@@ -56,3 +58,12 @@ QUALITY_PRESETS: dict[str, RenderSettings] = {
     "high": RenderSettings(aa_grid=2, edge_grid=6, sun_samples=2, env_samples=2, brdf_samples=4,
                            max_glass_depth=4, shadow_factor=3, shadow_sky_dirs=32, shadow_sun_dirs=16),
 }
+
+
+def resolve_settings(quality: str | RenderSettings) -> RenderSettings:
+    """Explicit settings as they are, or the :data:`QUALITY_PRESETS` entry of a name (else a clear error)."""
+    if isinstance(quality, RenderSettings):
+        return quality
+    if quality not in QUALITY_PRESETS:
+        raise InputError(f"quality: expected one of {sorted(QUALITY_PRESETS)}, got {quality!r}")
+    return QUALITY_PRESETS[quality]
