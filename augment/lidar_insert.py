@@ -95,16 +95,6 @@ def car_intensity(points: np.ndarray, is_car: np.ndarray) -> float:
     return float(np.median(values)) if len(values) >= 20 else DEFAULT_CAR_INTENSITY
 
 
-def count_in_box(points_xyz: np.ndarray, T_box_from_frame: np.ndarray, wlh: np.ndarray) -> int:
-    """Points (N, 3) inside a box, boundary included (nuScenes ``num_lidar_pts``; box x = length, y = width)."""
-    return int(np.count_nonzero(_inside(points_xyz, T_box_from_frame, wlh)))
-
-
-def _inside(points_xyz: np.ndarray, T_box_from_frame: np.ndarray, wlh: np.ndarray) -> np.ndarray:
-    p = transform_points(T_box_from_frame, np.asarray(points_xyz, np.float64).reshape(-1, 3))
-    return np.all(np.abs(p) <= np.asarray(wlh, np.float64)[[1, 0, 2]] / 2, axis=1)
-
-
 @dataclass(frozen=True)
 class SampleSweep:
     """A sample's keyframe sweep with its placed objects in it.
@@ -132,25 +122,20 @@ def insert_placements_into_sweep(points: np.ndarray, labels: np.ndarray | None, 
             intensity (without lidarseg), and they lose the points that now hit a placed object.
         class_index: nuScenes category name -> lidarseg class index (``category.index``).
     """
+    from streetaug.placement.rules import points_in_box, points_in_boxes
+
     T_lidar_from_global = invert_transform(T_global_from_lidar)
-    xyz = np.asarray(points, np.float64)[:, :3]
+    xyz_global = transform_points(T_global_from_lidar, np.asarray(points, np.float64)[:, :3])
     if labels is not None:
         is_car = np.asarray(labels) == LIDARSEG_CAR
     else:
-        is_car = np.zeros(len(xyz), bool)
-        for box in boxes:
-            if box.category == "vehicle.car":
-                is_car |= _inside(xyz, invert_transform(box.T_global_from_box) @ T_global_from_lidar, box.wlh)
+        is_car = points_in_boxes(xyz_global, [b for b in boxes if b.category == "vehicle.car"])
     meshes = [(transform_points(T_lidar_from_global @ p.T_global_from_object, a.vertices), a.faces)
               for p, a in zip(placements, assets)]
     sweep = insert_into_sweep(points, meshes, labels, [class_index.get(a.category, LIDARSEG_CAR) for a in assets],
                               car_intensity(points, is_car))
-    moved = xyz[sweep.moved >= 0]
-    lost = {}
-    for box in boxes:
-        n = count_in_box(moved, invert_transform(box.T_global_from_box) @ T_global_from_lidar, box.wlh)
-        if n and box.token:
-            lost[box.token] = n
-    counts = [count_in_box(sweep.points[:, :3], invert_transform(p.box.T_global_from_box) @ T_global_from_lidar,
-                           p.box.wlh) for p in placements]
+    moved = xyz_global[sweep.moved >= 0]
+    lost = {b.token: n for b in boxes if b.token and (n := int(np.count_nonzero(points_in_box(moved, b))))}
+    new_global = transform_points(T_global_from_lidar, sweep.points[:, :3].astype(np.float64))
+    counts = [int(np.count_nonzero(points_in_box(new_global, p.box))) for p in placements]
     return SampleSweep(sweep, counts, lost)

@@ -80,6 +80,13 @@ def box_footprints(boxes: Sequence) -> np.ndarray:
     return np.stack([b.corners()[[0, 1, 5, 4], :2] for b in boxes])
 
 
+def points_in_box(points_global: np.ndarray, box, margin_m: float = 0.0) -> np.ndarray:
+    """(P,) bool: whether each point (P, 3) lies inside the box grown by ``margin_m``, boundary included
+    (a nuScenes ``num_lidar_pts`` count with ``margin_m`` 0)."""
+    p = transform_points(invert_transform(box.T_global_from_box), np.asarray(points_global, np.float64).reshape(-1, 3))
+    return np.all(np.abs(p) <= np.asarray(box.wlh, np.float64)[[1, 0, 2]] / 2 + margin_m, axis=1)
+
+
 def points_in_boxes(points_global: np.ndarray, boxes: Sequence, margin_m: float = 0.0) -> np.ndarray:
     """(P,) bool: whether each point (P, 3) lies inside any box (grown by ``margin_m``)."""
     points_global = np.asarray(points_global, dtype=np.float64)
@@ -90,11 +97,10 @@ def points_in_boxes(points_global: np.ndarray, boxes: Sequence, margin_m: float 
     centers = np.stack([b.center for b in boxes])
     half = np.stack([np.asarray(b.wlh)[[1, 0, 2]] / 2 + margin_m for b in boxes])  # (B, 3) along box x, y, z
     lists = cKDTree(points_global[:, :2]).query_ball_point(centers[:, :2], np.linalg.norm(half, axis=1))
-    for b, idx, hb in zip(boxes, lists, half):  # one small vectorised check per box (tens of boxes)
+    for b, idx in zip(boxes, lists):  # one small vectorised check per box (tens of boxes)
         if idx:
             idx = np.asarray(idx)
-            p = transform_points(invert_transform(b.T_global_from_box), points_global[idx])
-            inside[idx[np.all(np.abs(p) <= hb, axis=1)]] = True
+            inside[idx[points_in_box(points_global[idx], b, margin_m)]] = True
     return inside
 
 

@@ -6,7 +6,9 @@ import numpy as np
 import pytest
 import trimesh
 
-from streetaug.augment.lidar_insert import DEFAULT_CAR_INTENSITY, car_intensity, count_in_box, insert_into_sweep
+from streetaug.augment.lidar_insert import DEFAULT_CAR_INTENSITY, car_intensity, insert_into_sweep
+from streetaug.datasets.sample import Box
+from streetaug.placement.rules import points_in_box
 
 
 def box_mesh(center, extents):
@@ -48,14 +50,14 @@ def test_the_nearer_of_two_objects_takes_the_return():
     assert out.labels is None
 
 
-def test_count_in_box_matches_the_moved_points():
+def test_the_box_counts_exactly_the_moved_points():
     box = box_mesh([10.0, 2.0, 0.5], [4.0, 2.0, 1.5])
     ys, zs = np.meshgrid(np.linspace(-1, 5, 40), np.linspace(-1, 2, 20))
     far = np.column_stack([np.full(ys.size, 40.0), ys.ravel() * 4, zs.ravel() * 4])
     out = insert_into_sweep(sweep(far), [box])
-    T_box_from_lidar = np.eye(4)
-    T_box_from_lidar[:3, 3] = [-10.0, -2.0, -0.5]
-    n = count_in_box(out.points[:, :3], T_box_from_lidar, np.array([2.0, 4.0, 1.5]))  # w (y), l (x), h
+    # the mesh's tight box (LiDAR frame = global frame here): w along y, l along x, h
+    tight = Box(np.array([10.0, 2.0, 0.5]), np.array([2.0, 4.0, 1.5]), np.array([1.0, 0.0, 0.0, 0.0]), "vehicle.car")
+    n = np.count_nonzero(points_in_box(out.points[:, :3], tight))
     assert n == np.count_nonzero(out.moved == 0) > 10
 
 
