@@ -47,29 +47,28 @@ def visible_lidar_pixels(view, points_global: np.ndarray) -> tuple[np.ndarray, n
     return uv, visible
 
 
-def _radiance_at(view, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Linear luminance at pixels (nearest) and whether the pixel is usable (not black, not clipped)."""
-    image = np.asarray(view.image)
-    px = np.round(uv).astype(np.int64)
-    ldr = image[px[:, 1], px[:, 0]]
-    usable = (ldr.max(axis=1) <= LDR_VALID[1]) & (ldr.min(axis=1) >= LDR_VALID[0])
-    return luminance(ldr_uint8_to_hdr(ldr[None])[0]), usable
+def lidar_luminance(view, points_global: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Linear luminance (N,) of ``view``'s pixel (nearest) under each LiDAR point, and whether it is usable:
+    the point is visible there (:func:`visible_lidar_pixels`) and its pixel neither black nor clipped."""
+    uv, visible = visible_lidar_pixels(view, points_global)
+    lum = np.zeros(len(uv))
+    idx = np.flatnonzero(visible)
+    px = np.round(uv[idx]).astype(np.int64)
+    ldr = np.asarray(view.image)[px[:, 1], px[:, 0]]
+    lum[idx] = luminance(ldr_uint8_to_hdr(ldr[None])[0])
+    usable = np.zeros(len(uv), bool)
+    usable[idx] = (ldr.max(axis=1) <= LDR_VALID[1]) & (ldr.min(axis=1) >= LDR_VALID[0])
+    return lum, usable & (lum > 0)
 
 
-def pair_ratio(view_a, view_b, points_global: np.ndarray) -> tuple[float, int]:
-    """Exposure of ``view_b`` relative to ``view_a`` (b's image units per a's) and the points it rests on."""
-    uv_a, vis_a = visible_lidar_pixels(view_a, points_global)
-    uv_b, vis_b = visible_lidar_pixels(view_b, points_global)
-    shared = np.flatnonzero(vis_a & vis_b)
-    if len(shared) == 0:
-        return 1.0, 0
-    la, ok_a = _radiance_at(view_a, uv_a[shared])
-    lb, ok_b = _radiance_at(view_b, uv_b[shared])
-    ok = ok_a & ok_b & (la > 0) & (lb > 0)
+def pair_ratio(a: tuple[np.ndarray, np.ndarray], b: tuple[np.ndarray, np.ndarray]) -> tuple[float, int]:
+    """Exposure of camera b relative to camera a (b's image units per a's) from their :func:`lidar_luminance`,
+    and the number of shared points it rests on."""
+    ok = a[1] & b[1]
     n = int(np.count_nonzero(ok))
     if n < MIN_SHARED_POINTS:
         return 1.0, n
-    return float(np.exp(np.median(np.log(lb[ok]) - np.log(la[ok])))), n
+    return float(np.exp(np.median(np.log(b[0][ok]) - np.log(a[0][ok])))), n
 
 
 def exposure_ratios(views: Sequence, points_global: np.ndarray | None) -> tuple[dict[str, float], dict]:
@@ -81,11 +80,8 @@ def exposure_ratios(views: Sequence, points_global: np.ndarray | None) -> tuple[
     ratios = {c: 1.0 for c in channels}
     if points_global is None or len(views) < 2 or len(points_global) == 0:
         return ratios, {"method": "assumed equal (no LiDAR)" if points_global is None else "single view"}
-    pairs = {}
-    for i in range(len(views)):
-        for j in range(i + 1, len(views)):
-            ratio, n = pair_ratio(views[i], views[j], points_global)
-            pairs[(i, j)] = (ratio, n)
+    samples = [lidar_luminance(v, points_global) for v in views]  # each camera once
+    pairs = {(i, j): pair_ratio(samples[i], samples[j]) for i in range(len(views)) for j in range(i + 1, len(views))}
     # Grow from the reference along the best-supported pair first (a maximum spanning tree).
     known = {0: 1.0}
     how = {channels[0]: "reference"}
