@@ -27,7 +27,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from ...conventions import ldr_uint8_to_hdr, luminance, scale_intrinsics
+from ...conventions import ldr_uint8_to_hdr, luminance, pixel_rays, scale_intrinsics
 from .. import sky as _sky
 
 DISC_WIDTH_PX = 400  # the disc detector works on the image resized to this width
@@ -54,8 +54,7 @@ FIT_FULL_COVERAGE = 0.25  # fraction of the image's pixels fitted for the full e
 def image_rays_cam(K: np.ndarray, height: int, width: int) -> np.ndarray:
     """(height, width, 3) float64 unit camera-frame rays of the pixel centres (integers) of an image with K."""
     u, v = np.meshgrid(np.arange(width, dtype=np.float64), np.arange(height, dtype=np.float64))
-    rays = np.stack([u, v, np.ones_like(u)], -1) @ np.linalg.inv(np.asarray(K, dtype=np.float64)).T
-    return rays / np.linalg.norm(rays, axis=-1, keepdims=True)
+    return pixel_rays(np.asarray(K, dtype=np.float64), np.stack([u.ravel(), v.ravel()], axis=1)).reshape(height, width, 3)
 
 
 # ----------------------------------------------------------------------------- sun in view
