@@ -82,23 +82,23 @@ class GroundTruthScene:
         samples = [(rng.uniform(size=len(n)), rng.uniform(size=len(n))) for _ in range(n_rays)]
         return r._sun_visibility(points_global, n, rng, samples)
 
-    def local_light(self, point_global: np.ndarray, T_cam_from_global: np.ndarray, h: int = 64, w: int = 128,
-                    sky_rays: int = 8) -> DistantLight:
-        """True local light at a point: env map (h, w, 3) camera-frame convention (sun excluded) + visible sun."""
+    def radiance(self, origins_global: np.ndarray, dirs_global: np.ndarray, sky_rays: int = 8,
+                 seed: int = 1) -> np.ndarray:
+        """True radiance (N, 3) along rays (global frame, unit directions) on the image's radiometric scale.
+
+        Rays that escape see the sky model (sun disc excluded); rays that hit the street see its Lambertian
+        shading: albedo / pi x (sun with shadow rays + sky gathered over ``sky_rays`` cosine rays)."""
         r = self.renderer
-        rng = np.random.default_rng(1)
-        R_global_from_cam = T_cam_from_global[:3, :3].T
-        d = camera_envmap_directions(h, w).reshape(-1, 3) @ R_global_from_cam.T
-        p = np.tile(point_global, (len(d), 1))
-        hits = r.rays.intersect(p, d)
-        L = np.zeros((len(d), 3))
+        rng = np.random.default_rng(seed)
+        hits = r.rays.intersect(origins_global, dirs_global)
+        L = np.zeros((len(dirs_global), 3))
         miss = ~hits.hit
-        L[miss] = self.sky.radiance(d[miss])
+        L[miss] = self.sky.radiance(dirs_global[miss])
         hi = np.nonzero(hits.hit)[0]
         if len(hi):
             q = r.rays.hit_points(hits)[hi]
             face = hits.face[hi]
-            nq = r._oriented_normals(face, d[hi])
+            nq = r._oriented_normals(face, dirs_global[hi])
             T_street = r.T_street_from_global
             albedo, _ = surface_albedo(self.scene.materials, self.scene.face_material[face],
                                        transform_points(T_street, q), nq @ T_street[:3, :3].T)
@@ -108,7 +108,14 @@ class GroundTruthScene:
             samples = [(rng.uniform(size=len(hi)), rng.uniform(size=len(hi))) for _ in range(sky_rays)]
             e = e + r._sky_gather(q, nq, samples, rng)
             L[hi] = albedo / np.pi * e
-        env = (L * self.k).reshape(h, w, 3).astype(np.float32)
+        return L * self.k
+
+    def local_light(self, point_global: np.ndarray, T_cam_from_global: np.ndarray, h: int = 64, w: int = 128,
+                    sky_rays: int = 8) -> DistantLight:
+        """True local light at a point: env map (h, w, 3) camera-frame convention (sun excluded) + visible sun."""
+        r = self.renderer
+        d = camera_envmap_directions(h, w).reshape(-1, 3) @ T_cam_from_global[:3, :3]
+        env = self.radiance(np.tile(point_global, (len(d), 1)), d, sky_rays).reshape(h, w, 3).astype(np.float32)
         sun = None
         if np.any(r.sun_e > 0):
             v = float(self.sun_visibility(point_global[None])[0])
