@@ -27,6 +27,7 @@ from streetaug.augment.lighting.estimate import (
     GROUND_ALBEDO,
     estimate_lighting,
     estimate_lighting_from_image,
+    sky_mask,
 )
 from streetaug.augment.lighting.outputs import write_lighting_outputs
 from streetaug.augment.lighting.sky import (
@@ -317,6 +318,45 @@ def test_real_sample_estimate_runs():
     assert est.sun_source == "ephemeris" and est.light_cam.sun is not None
     assert 0.0 < est.params["scale"] < 1.0
     assert np.all(np.isfinite(est.light_cam.envmap))
+
+
+def _sky_and_facade_image():
+    """(ldr, elevation): blue sky on the left half, a pale smooth facade on the right half (both bright, smooth,
+    touching the top), dark ground below the middle row."""
+    h, w = 60, 100
+    ldr = np.zeros((h, w, 3))
+    ldr[:, :50] = (0.55, 0.7, 0.95)
+    ldr[:, 52:] = (0.9, 0.88, 0.85)
+    ldr[:, 50:52] = 0.1  # the building's edge
+    ldr[30:] = 0.2
+    elevation = np.radians(np.linspace(20, -20, h))[:, None] * np.ones((1, w))
+    return ldr, elevation
+
+
+def test_sky_mask_drops_a_bright_region_that_lidar_hits():
+    ldr, elevation = _sky_and_facade_image()
+    both = sky_mask(ldr, elevation)
+    assert both[:20, :45].all() and both[:20, 58:].all()  # without LiDAR the facade passes for sky
+    v, u = np.mgrid[2:26:3, 60:100:5]
+    facade_hits = np.stack([u.ravel(), v.ravel()], 1).astype(float)  # returns on the facade, as a wall gives
+    stray = np.array([[10.0, 5.0], [20.0, 8.0]])  # two returns at the sky's edge: a wire, a branch
+    mask = sky_mask(ldr, elevation, surface_uv=np.concatenate([facade_hits, stray]))
+    assert mask[:20, :45].all() and not mask[:, 52:].any()
+
+
+def test_real_glass_facade_is_not_sky_but_the_open_sky_is():
+    sample, view = _real_view()
+    left = sample.cameras["CAM_FRONT_LEFT"]
+    fraction = {}
+    for cam in (view, left):
+        for lidar in (sample.lidar, None):
+            est = estimate_lighting(cam, sample.location, "L1", lidar=lidar)
+            fraction[cam.channel, lidar is not None] = est.params["evidence"]["sky"]["fraction"]
+    # CAM_FRONT: open sky above the road, no return in it: the same with and without LiDAR (18 % of the image)
+    assert 0.15 < fraction["CAM_FRONT", True] == fraction["CAM_FRONT", False] < 0.25
+    # CAM_FRONT_LEFT: the glass facade (6 % of the image) is sky without LiDAR; with it only the small panes
+    # above the top beam remain
+    assert fraction["CAM_FRONT_LEFT", False] > 0.05 and fraction["CAM_FRONT_LEFT", True] < 0.03
 
 
 # ----------------------------------------------------------------------------- evidence from annotated objects

@@ -135,14 +135,20 @@ def _wall_scene(timestamp_us: int):
     wall = np.concatenate([wall, wall + np.r_[horiz, 0.0] * 0.5])
     lit_ego = shaded_ego[:2] - 14.0 * horiz
     lidar = LidarSweep(wall, np.zeros(len(wall), np.float32), np.eye(4), T_GLOBAL_FROM_EGO, timestamp_us)
-    # image: the sky above the horizon, grey ground below (the wall is not drawn: LiDAR only)
+    # image: the sky above the horizon, grey ground below, the wall (where it is in view) grey too
     up_cam = np.array([0.0, -1.0, 0.0])
     sun_cam = (T_EGO_FROM_CAM[:3, :3].T @ sun_ego)
     light = make_sky_light(sun_cam, up_cam, cloud_cover=0.2, ground_albedo=0.15, scale=0.004)
     u, v = np.meshgrid(np.arange(W_IMG), np.arange(H_IMG))
     rays = pixel_rays(K, np.stack([u.ravel(), v.ravel()], 1))
     rad = light.radiance(np.zeros_like(rays), rays)
-    rad[rays[:, 1] > 0.01] = 0.04
+    rays_ego = rays @ T_EGO_FROM_CAM[:3, :3].T
+    o_ego = T_EGO_FROM_CAM[:3, 3]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = ((centre - o_ego[:2]) @ horiz) / (rays_ego[:, :2] @ horiz)
+    hit = o_ego[None] + t[:, None] * rays_ego
+    on_wall = (t > 0) & (np.abs((hit[:, :2] - centre) @ side) <= 15.0) & (hit[:, 2] >= 0.0) & (hit[:, 2] <= 25.0)
+    rad[(rays[:, 1] > 0.01) | on_wall] = 0.04
     image = hdr_to_ldr_uint8(rad.reshape(H_IMG, W_IMG, 3))
     view = CameraView("CAM_FRONT", "tok", "synthetic.png", K, W_IMG, H_IMG, T_EGO_FROM_CAM, T_GLOBAL_FROM_EGO,
                       timestamp_us, _load_image=lambda: image)

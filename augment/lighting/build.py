@@ -159,7 +159,7 @@ def observe_view(view, T_vol_from_cam: np.ndarray, exposure_ratio: float, lidar_
     normal, offset = ground_plane_cam
     up_cam = np.asarray(T_vol_from_cam)[2, :3]  # volume +z in the camera frame
     if work is None:
-        work = _prepare(image, view.K, up_cam / np.linalg.norm(up_cam))
+        work = _prepare(image, view.K, up_cam / np.linalg.norm(up_cam), lidar_points_cam)
     sky = _sky_mask(work)
     if sky.shape != (h, w):
         sky = cv2.resize(sky.astype(np.uint8), (w, h), interpolation=cv2.INTER_NEAREST) > 0

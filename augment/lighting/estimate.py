@@ -41,7 +41,15 @@ from dataclasses import dataclass, field, replace
 import cv2
 import numpy as np
 
-from ..conventions import check_shape, ldr_uint8_to_hdr, luminance, pixel_rays, scale_intrinsics
+from ..conventions import (
+    check_shape,
+    ldr_uint8_to_hdr,
+    luminance,
+    pixel_rays,
+    project_points,
+    scale_intrinsics,
+    transform_points,
+)
 from .light import DistantLight
 from .sky import (
     OVERCAST_RGB,
@@ -58,6 +66,12 @@ DEFAULT_TURBIDITY = 3.0
 DEFAULT_CAMERA_HEIGHT_M = 1.5
 ENVMAP_HEIGHT, ENVMAP_WIDTH = 128, 256
 SKY_MIN_ELEVATION_DEG = 3.0
+# a bright smooth region with LiDAR returns in it is a surface (pale or glass facade), not sky: at least this
+# many returns, at least this many per pixel of the region (the sky's own edges catch a stray return or two)
+SKY_SURFACE_MIN_HITS = 5
+SKY_SURFACE_MIN_DENSITY = 5e-3
+SKY_MIN_UNCLIPPED_FRACTION = 0.15
+SURFACE_MIN_RANGE_M = 2.0  # nearer returns (the ego car, the camera's own mount) say nothing about the sky
 SATURATED_LDR = 0.97
 OBJECT_SHADOW_MIN_CONTRAST = 1.5  # an object's shadow at least this marked proves a visible sun
 WORK_WIDTH = 480
@@ -137,6 +151,7 @@ class _Work:
     rays_cam: np.ndarray  # (h, w, 3) unit camera-frame rays
     elevation: np.ndarray  # (h, w) rad above the horizon
     K: np.ndarray  # (3, 3) intrinsics of the downscaled image
+    surface_uv: np.ndarray | None = None  # (N, 2) pixels of LiDAR returns (surfaces) in this image, or None
 
 
 def downscale_image(image_rgb: np.ndarray, K: np.ndarray, max_width: int) -> tuple[np.ndarray, np.ndarray]:
@@ -148,7 +163,8 @@ def downscale_image(image_rgb: np.ndarray, K: np.ndarray, max_width: int) -> tup
     return small, scale_intrinsics(K, w / W, h / H)
 
 
-def _prepare(image_rgb: np.ndarray, K: np.ndarray, up_cam: np.ndarray) -> _Work:
+def _prepare(image_rgb: np.ndarray, K: np.ndarray, up_cam: np.ndarray,
+             lidar_points_cam: np.ndarray | None = None) -> _Work:
     check_shape(image_rgb, ("H", "W", 3), "image_rgb")
     check_shape(K, (3, 3), "K")
     small, Ks = downscale_image(image_rgb, K, WORK_WIDTH)
@@ -156,7 +172,13 @@ def _prepare(image_rgb: np.ndarray, K: np.ndarray, up_cam: np.ndarray) -> _Work:
     u, v = np.meshgrid(np.arange(w), np.arange(h))
     rays = pixel_rays(Ks, np.stack([u.ravel(), v.ravel()], axis=1)).reshape(h, w, 3)
     elevation = np.arcsin(np.clip(rays @ up_cam, -1.0, 1.0))
-    return _Work(ldr_uint8_to_hdr(small).astype(np.float64), small / 255.0, rays, elevation, Ks)
+    surface_uv = None
+    if lidar_points_cam is not None:
+        pts = np.asarray(lidar_points_cam, dtype=np.float64)
+        pts = pts[np.linalg.norm(pts, axis=1) >= SURFACE_MIN_RANGE_M]
+        uv, _ = project_points(Ks, pts)
+        surface_uv = uv[np.isfinite(uv).all(axis=1)]
+    return _Work(ldr_uint8_to_hdr(small).astype(np.float64), small / 255.0, rays, elevation, Ks, surface_uv)
 
 
 def _box_shadow_evidence(work: _Work, T_cam_from_global: np.ndarray, boxes, sun_dir_global: np.ndarray) -> dict | None:
@@ -288,12 +310,15 @@ def _ground_evidence(work: _Work, up_cam: np.ndarray, camera_height_m: float) ->
 
 
 def sky_mask(ldr: np.ndarray, elevation: np.ndarray, min_elevation_deg: float = SKY_MIN_ELEVATION_DEG,
-             min_lum: float = 0.3, bright_percentile: float = 50.0, max_grad: float = 0.12) -> np.ndarray:
+             min_lum: float = 0.3, bright_percentile: float = 50.0, max_grad: float = 0.12,
+             surface_uv: np.ndarray | None = None) -> np.ndarray:
     """(h, w) bool: bright, smooth pixels above ``min_elevation_deg`` in regions that touch the top of the image.
 
     ``ldr`` (h, w, 3) floats in [0, 1]; ``elevation`` (h, w) rad of each pixel's ray above the horizon.
     Bright = luminance >= max(``min_lum``, the ``bright_percentile`` of the pixels above the horizon);
-    smooth = blurred Sobel gradient < ``max_grad``.
+    smooth = blurred Sobel gradient < ``max_grad``. ``surface_uv`` (N, 2): pixels where LiDAR returns land;
+    a region holding ``SKY_SURFACE_MIN_HITS`` of them (and ``SKY_SURFACE_MIN_DENSITY`` per pixel) is a pale
+    or glass facade, not sky.
     """
     lum_ldr = luminance(ldr)
     gx = cv2.Sobel(lum_ldr, cv2.CV_64F, 1, 0, ksize=3)
@@ -306,11 +331,20 @@ def sky_mask(ldr: np.ndarray, elevation: np.ndarray, min_elevation_deg: float = 
     candidate = (above & bright & (grad < max_grad)).astype(np.uint8)
     n, labels = cv2.connectedComponents(candidate, connectivity=4)
     top_labels = np.unique(labels[0][candidate[0] > 0])
-    return np.isin(labels, top_labels[top_labels > 0]) & (candidate > 0)
+    top_labels = top_labels[top_labels > 0]
+    if surface_uv is not None and len(surface_uv) and len(top_labels):
+        h, w = labels.shape
+        iu, iv = np.round(surface_uv[:, 0]).astype(np.int64), np.round(surface_uv[:, 1]).astype(np.int64)
+        inside = (iu >= 0) & (iu < w) & (iv >= 0) & (iv < h)
+        hits = np.bincount(labels[iv[inside], iu[inside]], minlength=n)
+        size = np.bincount(labels.ravel(), minlength=n)
+        surface = (hits >= SKY_SURFACE_MIN_HITS) & (hits >= SKY_SURFACE_MIN_DENSITY * size)
+        top_labels = top_labels[~surface[top_labels]]
+    return np.isin(labels, top_labels) & (candidate > 0)
 
 
 def _sky_mask(work: _Work) -> np.ndarray:
-    return sky_mask(work.ldr, work.elevation)
+    return sky_mask(work.ldr, work.elevation, surface_uv=work.surface_uv)
 
 
 def _sky_evidence(work: _Work, sky_mask: np.ndarray) -> dict | None:
@@ -319,7 +353,9 @@ def _sky_evidence(work: _Work, sky_mask: np.ndarray) -> dict | None:
         return None
     unsat = sky_mask & (work.ldr.max(axis=-1) < SATURATED_LDR)
     out = {"fraction": frac, "saturated_fraction": float(1.0 - unsat.sum() / sky_mask.sum())}
-    if unsat.sum() >= 20 and unsat.sum() >= 0.2 * sky_mask.sum():
+    # colour and level need a sizeable unclipped part of the sky: a few unclipped pixels of a clipped sky are
+    # its horizon haze, not its colour
+    if unsat.sum() >= 20 and unsat.sum() >= SKY_MIN_UNCLIPPED_FRACTION * sky_mask.sum():
         rgb = work.hdr[unsat]
         out["mask"] = unsat
         out["median_lum"] = float(np.median(luminance(rgb)))
@@ -500,7 +536,7 @@ def estimate_lighting(view, location: str | None, level: str = "L1", *, lidar=No
     timing = {"decode": time.perf_counter() - t0}
     if level == "L0":
         return _estimate_l0(image, timing)
-    fit = _l1_view_evidence(view, location, timing, boxes)
+    fit = _l1_view_evidence(view, location, timing, boxes, lidar)
     return _l1_estimate(fit, timing)
 
 
@@ -531,7 +567,7 @@ class _ViewL1:
     t_start: float
 
 
-def _l1_view_evidence(view, location: str | None, timing: dict, boxes=None) -> _ViewL1:
+def _l1_view_evidence(view, location: str | None, timing: dict, boxes=None, lidar=None) -> _ViewL1:
     t0 = time.perf_counter()
     image = np.asarray(view.image)
     up_cam = up_direction_camera(view)
@@ -554,7 +590,8 @@ def _l1_view_evidence(view, location: str | None, timing: dict, boxes=None) -> _
     R_cam_from_global = np.asarray(view.T_cam_from_global)[:3, :3]
     sun_dir_cam = R_cam_from_global @ sun_pos.direction_global
     sun_dir_cam = sun_dir_cam / np.linalg.norm(sun_dir_cam)
-    work = _prepare(image, view.K, up_cam)
+    lidar_cam = None if lidar is None else transform_points(np.asarray(view.T_cam_from_global), lidar.points_global)
+    work = _prepare(image, view.K, up_cam, lidar_cam)
     timing["prepare"] = time.perf_counter() - t0
     t2 = time.perf_counter()
     box_shadows = _box_shadow_evidence(work, np.asarray(view.T_cam_from_global), boxes, sun_pos.direction_global) \

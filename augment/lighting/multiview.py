@@ -283,7 +283,7 @@ def estimate_views_lighting(views: Sequence, location: str | None, level: str, l
         return done(SampleLighting("L0", "L0: constant dome of each image's mean linear radiance", ref.channel,
                                    per_view, {c: 1.0 for c in per_view}, None, T_global_from_vol,
                                    {"location": location}, timing))
-    fits = [_l1_view_evidence(v, location, {}, boxes) for v in views]
+    fits = [_l1_view_evidence(v, location, {}, boxes, lidar) for v in views]
     cloud, cloud_note, cloud_evidence = _shared_cloud(fits) if len(views) > 1 else (None, None, {})
     per_view = {f.view.channel: _l1_estimate(f, {}, cloud, cloud_note) for f in fits}
     ref_est = per_view[ref.channel]
