@@ -16,7 +16,15 @@ Usage: ``python benchmarks/bench_lighting.py [--runs 3] [--quick] [--out benchma
    ``envmap_at(target camera centre)`` (256 x 512 map, bilinear) with the contract's camera response at EV 0
    and compared with its real image at 320 x 180 (si-PSNR: the prediction scaled by the least-squares factor).
    Monocular: CAM_FRONT -> CAM_FRONT_LEFT, CAM_BACK; leave-one-out: each camera from the other two.
-   The same on the bundled scenes.
+   The same on the bundled scenes. Also reported: PSNR with the target camera's auto-exposure modelled
+   (``exposure.auto_exposure_ev``: metered to the sources' mean LDR level; nuScenes cameras each expose on
+   their own, and nothing of the target image is used), and two oracles that use the target image (its
+   mean colour; its mean colour per row): ceilings for predictions that carry no structure of a view the
+   sources never saw.
+   **Paper protocol** (section ``forward``): the paper's novel view is the front camera 1.5 s later, which
+   mostly sees what the input saw. No later frame exists for the real sample, so this runs on the bundled
+   scenes, whose truth the scene renderer traces: CAM_FRONT moved ``FORWARD_M`` along the street, lighting
+   from CAM_FRONT (monocular) or all three cameras (multi-view).
    **Street prior ablation** (section ``street_prior``): the same L3 monocular / leave-one-out scores with the
    street prior of :mod:`augment.lighting.fill` on and off (``build.STREET_PRIOR_WEIGHT`` = inf: the shading
    model alone colours unobserved surfaces), on the bundled scenes and the real sample.
@@ -55,6 +63,7 @@ from streetaug.augment.conventions import (  # noqa: E402
     transform_points,
 )
 from streetaug.augment.lighting.estimate import estimate_lighting  # noqa: E402
+from streetaug.augment.lighting.exposure import auto_exposure_ev  # noqa: E402
 from streetaug.augment.lighting.levels import L3_GRID  # noqa: E402
 from streetaug.augment.lighting.light import DistantLight  # noqa: E402
 from streetaug.augment.lighting.multiview import estimate_sample_lighting, estimate_views_lighting  # noqa: E402
@@ -72,7 +81,7 @@ LEVELS = ("L0", "L1", "L2", "L3")
 ENV_H, ENV_W = 64, 128
 NORMALS = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]], dtype=np.float64)
 NOVEL_W = 320
-ALL_SECTIONS = ("speed", "bundled", "real", "street_prior", "grid")
+ALL_SECTIONS = ("speed", "bundled", "real", "forward", "street_prior", "grid")
 
 
 # ----------------------------------------------------------------------------- ground truth of the bundled scenes
@@ -141,9 +150,33 @@ def novel_view_scores(sample, sources: list[str], target: str, level: str, grid=
     rad = render_novel_view(sl, view, sample.cameras[sources[0]])
     h, w = rad.shape[:2]
     gt = cv2.resize(np.asarray(view.image), (w, h), interpolation=cv2.INTER_AREA) / 255.0
+    source_mean = float(np.mean([np.asarray(sample.cameras[c].image).mean() / 255.0 for c in sources]))
+    return {"sources": sources, "target": target, "level": sl.level} | scores(rad, gt, source_mean)
+
+
+def scores(rad: np.ndarray, gt: np.ndarray, source_mean_ldr: float) -> dict:
+    """PSNR of a predicted view (linear radiance) against the real one (LDR in [0, 1]): at the lighting's own
+    exposure (EV 0), with the target camera's auto-exposure modelled (metered to the sources' mean level, see
+    ``exposure.auto_exposure_ev``; uses nothing of the target image), and scale-invariant (the paper's si-PSNR)."""
     pred = hdr_to_ldr(rad)
-    return {"sources": sources, "target": target, "level": sl.level, "psnr": psnr(pred, gt), "si_psnr": si_psnr(pred, gt),
+    pred_ae = hdr_to_ldr(rad, auto_exposure_ev(rad, source_mean_ldr))
+    return {"psnr": psnr(pred, gt), "psnr_auto_exposure": psnr(pred_ae, gt), "si_psnr": si_psnr(pred, gt),
             "pred": pred, "gt": gt}
+
+
+def oracle_scores(gt: np.ndarray) -> dict:
+    """PSNR of predictions that know the target image (not methods; ceilings of what carries no structure):
+    its mean colour, and its mean colour per image row (per elevation, for a level camera)."""
+    return {"target_mean_colour": psnr(np.broadcast_to(gt.mean((0, 1)), gt.shape), gt),
+            "target_row_means": psnr(np.broadcast_to(gt.mean(1, keepdims=True), gt.shape), gt)}
+
+
+def mean_scores(rows: list[dict]) -> dict:
+    return {"psnr_mean": float(np.mean([r["psnr"] for r in rows])),
+            "psnr_auto_exposure_mean": float(np.mean([r["psnr_auto_exposure"] for r in rows])),
+            "si_psnr_mean": float(np.mean([r["si_psnr"] for r in rows])),
+            "per_target": [{k: r[k] for k in ("sources", "target", "psnr", "psnr_auto_exposure", "si_psnr") if k in r}
+                           for r in rows]}
 
 
 NOVEL_SETUPS = {
@@ -161,14 +194,68 @@ def novel_view_table(sample, levels=("L1", "L3"), grid=None) -> tuple[dict, list
     for setup, pairs in NOVEL_SETUPS.items():
         for level in levels:
             rows = [novel_view_scores(sample, src, tgt, level, grid) for src, tgt in pairs]
-            out[f"{setup}/{level}"] = {
-                "psnr_mean": float(np.mean([r["psnr"] for r in rows])),
-                "si_psnr_mean": float(np.mean([r["si_psnr"] for r in rows])),
-                "per_target": [{k: r[k] for k in ("sources", "target", "psnr", "si_psnr")} for r in rows],
-            }
+            out[f"{setup}/{level}"] = mean_scores(rows)
             if level == levels[-1]:
                 images += [np.concatenate([r["gt"], r["pred"]], axis=1) for r in rows]
+                oracle = [oracle_scores(r["gt"]) for r in rows]
+                out[f"{setup}/oracle"] = {k: float(np.mean([o[k] for o in oracle])) for k in oracle[0]} | {
+                    "per_target": [{"target": r["target"]} | o for r, o in zip(rows, oracle)]}
     return out, images
+
+
+FORWARD_M = 10.0  # the paper's novel view: the front camera 1.5 s later (~7 m/s in town)
+
+
+def forward_view(view, forward_m: float):
+    """The same camera with its ego moved ``forward_m`` along the ego's +x (a later frame of a straight drive)."""
+    step = np.eye(4)
+    step[0, 3] = forward_m
+    return replace(view, T_global_from_ego=view.T_global_from_ego @ step)
+
+
+def true_view(gts: GroundTruthScene, view, width: int = NOVEL_W) -> np.ndarray:
+    """True radiance (h, w, 3) a bundled scene's camera sees (its renderer's shading, no camera effects)."""
+    H, W = view.height, view.width
+    h = int(round(H * width / W))
+    u, v = np.meshgrid((np.arange(width) + 0.5) * W / width - 0.5, (np.arange(h) + 0.5) * H / h - 0.5)
+    rays = pixel_rays(view.K, np.stack([u.ravel(), v.ravel()], 1))
+    rays_global = rays / np.linalg.norm(rays, axis=1, keepdims=True) @ view.T_global_from_cam[:3, :3].T
+    origins = np.tile(view.T_global_from_cam[:3, 3], (len(rays), 1))
+    return gts.radiance(origins, rays_global).reshape(h, width, 3)
+
+
+def forward_section(levels=("L0", "L1", "L2", "L3", "auto")) -> dict:
+    """The paper's protocol on the bundled scenes (ground truth known): lighting from CAM_FRONT (monocular) or
+    all cameras of the sample (multi-view); target: CAM_FRONT ``FORWARD_M`` further along the street, its true
+    image traced by the scene's renderer and compared with ``envmap_at(new camera centre)`` at EV 0 (the
+    bundled cameras share one exposure)."""
+    dataroot = bundled_dataroot()
+    reader = NuScenesReader(dataroot, "v1.0-samples")
+    out: dict = {"forward_m": FORWARD_M}
+    for name in sorted(SAMPLE_SCENES):
+        sample = reader.sample(reader.sample_tokens(name)[0])
+        gts = GroundTruthScene(dataroot, name)
+        front = sample.cameras["CAM_FRONT"]
+        target = forward_view(front, FORWARD_M)
+        gt = hdr_to_ldr(true_view(gts, target))
+        scene: dict = {"oracle": oracle_scores(gt)}
+        for setup, sources in (("monocular", ["CAM_FRONT"]), ("multi_view", sorted(sample.cameras))):
+            for level in levels:
+                sl = estimate_views_lighting([sample.cameras[c] for c in sources], sample.location, level,
+                                             lidar=sample.lidar, boxes=sample.boxes)
+                rad = render_novel_view(sl, target, front)
+                source_mean = float(np.mean([np.asarray(sample.cameras[c].image).mean() / 255.0 for c in sources]))
+                r = scores(rad, gt, source_mean)
+                scene[f"{setup}/{level}"] = {"chosen_level": sl.level} | {
+                    k: r[k] for k in ("psnr", "psnr_auto_exposure", "si_psnr")}
+        out[name] = scene
+        print(f"forward {FORWARD_M:.0f} m {name}: " + ", ".join(
+            f"{k} {v['psnr']:.2f}/{v['si_psnr']:.2f}" for k, v in scene.items() if k != "oracle"), flush=True)
+    scenes = [out[n] for n in sorted(SAMPLE_SCENES)]
+    out["mean"] = {key: {m: float(np.mean([sc[key][m] for sc in scenes])) for m in ("psnr", "psnr_auto_exposure", "si_psnr")}
+                   for key in scenes[0] if key != "oracle"}
+    out["mean"]["oracle"] = {m: float(np.mean([sc["oracle"][m] for sc in scenes])) for m in scenes[0]["oracle"]}
+    return out
 
 
 # ----------------------------------------------------------------------------- sections
@@ -259,7 +346,12 @@ def real_section(quick: bool) -> tuple[dict, list]:
     levels = ("L0", "L1", "L2", "L3") if not quick else ("L1", "L3")
     table, images = novel_view_table(sample, levels)
     for k, v in table.items():
-        print(f"real novel view {k}: PSNR {v['psnr_mean']:.2f} dB, si-PSNR {v['si_psnr_mean']:.2f} dB", flush=True)
+        if k.endswith("/oracle"):
+            print(f"real novel view {k}: target mean colour {v['target_mean_colour']:.2f} dB, "
+                  f"target row means {v['target_row_means']:.2f} dB", flush=True)
+        else:
+            print(f"real novel view {k}: PSNR {v['psnr_mean']:.2f} dB (auto-exposure {v['psnr_auto_exposure_mean']:.2f}), "
+                  f"si-PSNR {v['si_psnr_mean']:.2f} dB", flush=True)
     return table, images
 
 
@@ -279,10 +371,7 @@ def street_prior_section() -> dict:
             for name, sample in samples:
                 for setup in ("monocular", "leave_one_out"):
                     rows = [novel_view_scores(sample, src, tgt, "L3") for src, tgt in NOVEL_SETUPS[setup]]
-                    out.setdefault(name, {}).setdefault(setup, {})[label] = {
-                        "psnr_mean": float(np.mean([r["psnr"] for r in rows])),
-                        "si_psnr_mean": float(np.mean([r["si_psnr"] for r in rows])),
-                        "per_target": [{k: r[k] for k in ("target", "psnr", "si_psnr")} for r in rows]}
+                    out.setdefault(name, {}).setdefault(setup, {})[label] = mean_scores(rows)
     finally:
         build.STREET_PRIOR_WEIGHT = weight
     for name, _ in samples:
@@ -375,6 +464,8 @@ def main() -> None:
         result["bundled"], tiles = bundled_section(args.runs, args.quick)
     if "real" in sections:
         result["real_novel_view"], images = real_section(args.quick)
+    if "forward" in sections:
+        result["forward_novel_view"] = forward_section()
     if "street_prior" in sections:
         result["street_prior_ablation"] = street_prior_section()
     if "grid" in sections:

@@ -8,8 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from streetaug.augment.conventions import hdr_to_ldr_uint8, ldr_uint8_to_hdr
-from streetaug.augment.lighting.exposure import exposure_ratios
+from streetaug.augment.conventions import hdr_to_ldr, hdr_to_ldr_uint8, ldr_uint8_to_hdr
+from streetaug.augment.lighting.exposure import auto_exposure_ev, exposure_ratios
 from streetaug.augment.lighting.multiview import estimate_views_lighting
 from streetaug.datasets.bundled import BUNDLED_VERSION, bundled_dataroot
 from streetaug.datasets.nuscenes import NuScenesReader
@@ -80,3 +80,15 @@ def test_real_cameras_differ_in_exposure():
     ratios, info = exposure_ratios([sample.cameras[c] for c in CAMERAS], sample.lidar.points_global)
     assert ratios["CAM_FRONT_LEFT"] > 3.0
     assert info["pairs"]["CAM_FRONT/CAM_FRONT_LEFT"]["points"] >= 100
+
+
+def test_auto_exposure_meters_to_the_target_mean_and_follows_the_scene():
+    rng = np.random.default_rng(0)
+    radiance = rng.lognormal(-2.0, 1.0, size=(40, 60, 3))
+    ev = auto_exposure_ev(radiance, 0.43)
+    assert abs(hdr_to_ldr(radiance, ev).mean() - 0.43) < 1e-3
+    # a scene 4x brighter is metered 2 stops down; a brighter target mean needs more exposure
+    assert auto_exposure_ev(4.0 * radiance, 0.43) == pytest.approx(ev - 2.0, abs=1e-3)
+    assert auto_exposure_ev(radiance, 0.6) > ev + 0.5
+    with pytest.raises(ValueError, match="target_mean_ldr"):
+        auto_exposure_ev(radiance, 1.2)

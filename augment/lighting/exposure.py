@@ -18,7 +18,7 @@ from typing import Sequence
 
 import numpy as np
 
-from ..conventions import ldr_uint8_to_hdr, luminance, project_points, transform_points
+from ..conventions import hdr_to_ldr, ldr_uint8_to_hdr, luminance, project_points, transform_points
 
 MIN_SHARED_POINTS = 40  # fewer shared points than this do not calibrate a pair
 Z_BUFFER_CELL_PX = 8  # visibility test: nearest LiDAR return within cells of this size
@@ -106,3 +106,24 @@ def exposure_ratios(views: Sequence, points_global: np.ndarray | None) -> tuple[
     return ratios, {"method": "shared LiDAR points", "per_camera": how,
                     "pairs": {f"{channels[i]}/{channels[j]}": {"ratio": r, "points": n}
                               for (i, j), (r, n) in pairs.items()}}
+
+
+def auto_exposure_ev(radiance: np.ndarray, target_mean_ldr: float, ev_range: tuple[float, float] = (-16.0, 16.0),
+                     steps: int = 40) -> float:
+    """EV at which ``radiance`` (linear, any shape (..., 3)) records with mean LDR value ``target_mean_ldr``.
+
+    A model of a camera's auto-exposure for an image it has not taken (a novel view): nuScenes cameras
+    meter each frame to a similar mean level, so a camera whose exposure is unknown is taken to record at
+    the mean LDR level of the rig's other cameras. Bisection on the contract's response (monotone in EV);
+    an all-black radiance returns the upper end of ``ev_range``.
+    """
+    if not 0.0 < target_mean_ldr < 1.0:
+        raise ValueError(f"target_mean_ldr must be in (0, 1), got {target_mean_ldr}")
+    lo, hi = ev_range
+    for _ in range(steps):
+        mid = 0.5 * (lo + hi)
+        if float(hdr_to_ldr(radiance, mid).mean()) < target_mean_ldr:
+            lo = mid
+        else:
+            hi = mid
+    return 0.5 * (lo + hi)
