@@ -4,9 +4,15 @@ nuScenes stores only a sweep's returns. A beam whose return lies behind an inser
 a wall, a car further away) would now have returned from the object: the point moves along its beam
 onto the object's surface (first hit; 1 mm inside), keeps its ring index, takes the intensity typical of this
 sweep's real cars and, with lidarseg, the object's class. Points in front of the object are unchanged.
-Beams that returned nothing (sky) stay without a return, so an object lit only by such beams is
-under-sampled; at 10-40 m, where objects stand on the road, almost every beam through them returned
-from the ground or a structure behind.
+Beams that returned nothing can hit an inserted object too. nuScenes keeps them in the sweep: the file
+lists every firing of the spinning sensor (all rings, in ring order, firing after firing), and a beam
+without a return is stored as a point at the sensor's own position (after ego-motion compensation, within
+a metre or two of the origin). Its beam is rebuilt from its ring's elevation (median over the ring's real
+returns) and its firing's azimuth (the direction of the firing's real returns); where it meets an object
+within the sensor's range, the point becomes a return on the object. This matters at the horizon: the
+beams 1-2 deg below it reach the road only beyond ~50-80 m and mostly return nothing, yet they cross the
+upper half of a car 20-40 m away. A sweep not stored in firing order (e.g. the bundled scenes', which omit
+empty beams) keeps its empty beams empty.
 
 Frames: everything in the LiDAR sensor frame (nuScenes ``.pcd.bin``: x, y, z, intensity, ring).
 """
@@ -29,6 +35,10 @@ INSIDE_SURFACE_M = 1e-3
 # Intensity of moved points when the sweep has no real car to learn it from (nuScenes 0-255 scale;
 # painted car bodies mostly return 5-40).
 DEFAULT_CAR_INTENSITY = 15.0
+NO_RETURN_RANGE_M = 2.0  # a stored point this close to the sensor is a beam that returned nothing
+MAX_RANGE_M = 80.0  # an empty beam returns from an object at most this far (HDL-32E: 70-100 m)
+MIN_RING_RETURNS = 20  # a ring's elevation needs this many real returns beyond 5 m
+EMPTY_BEAM_MIN_ELEVATION_DEG = -10.0  # steeper beams return from the road within 10 m (or the ego's roof)
 
 
 @dataclass(frozen=True)
@@ -71,6 +81,12 @@ def insert_into_sweep(points: np.ndarray, meshes_lidar: Sequence[tuple[np.ndarra
     directions[ok] = xyz[ok] / range_m[ok, None]
     best_t = np.where(ok, range_m, -np.inf)  # a hit must come before the return (or the other objects)
     origins = np.zeros_like(xyz)
+    empty = empty_beams(points)
+    if empty is not None:  # beams without a return: from the sensor's position, as far as the sensor reaches
+        ok = ok | empty.mask
+        origins[empty.mask] = xyz[empty.mask]
+        directions[empty.mask] = empty.directions
+        best_t[empty.mask] = MAX_RANGE_M
     for index, (vertices, faces) in enumerate(meshes_lidar):
         hits = RayScene(vertices, faces).intersect(origins[ok], directions[ok])
         closer = np.zeros(len(points), bool)
@@ -78,7 +94,7 @@ def insert_into_sweep(points: np.ndarray, meshes_lidar: Sequence[tuple[np.ndarra
         best_t[closer] = hits.t[closer[ok]]
         moved[closer] = index
     hit = moved >= 0
-    out[hit, :3] = (directions[hit] * (best_t[hit, None] + INSIDE_SURFACE_M)).astype(np.float32)
+    out[hit, :3] = (origins[hit] + directions[hit] * (best_t[hit, None] + INSIDE_SURFACE_M)).astype(np.float32)
     out[hit, 3] = intensity
     new_labels = None
     if labels is not None:
@@ -87,6 +103,79 @@ def insert_into_sweep(points: np.ndarray, meshes_lidar: Sequence[tuple[np.ndarra
                              np.uint8)
         new_labels[hit] = classes[moved[hit]]
     return SweepInsertion(out, new_labels, moved)
+
+
+@dataclass(frozen=True)
+class EmptyBeams:
+    """The beams of a sweep that returned nothing.
+
+    Attributes:
+        mask: (N,) bool, the points that stand for a beam without a return (stored at the sensor's position
+            at that firing: the beam's origin).
+        directions: (mask.sum(), 3) unit directions of those beams (LiDAR frame).
+    """
+
+    mask: np.ndarray
+    directions: np.ndarray
+
+
+def empty_beams(points: np.ndarray) -> EmptyBeams | None:
+    """The beams without a return of a sweep stored in firing order, or None when it is not.
+
+    Firing order: point ``i`` is ring ``i % n_rings`` of firing ``i // n_rings`` (nuScenes LIDAR_TOP: 32
+    rings x ~1084 firings). Directions are taken from the sensor's position at each firing (its empty beams'
+    stored position, interpolated between firings). A beam's elevation is its ring's (median of the ring's
+    returns beyond 5 m; a ring with too few: the line through the others' elevations over the ring index),
+    its azimuth its firing's (mean direction of the firing's real returns; a firing without any takes its
+    neighbours').
+    """
+    points = np.asarray(points)
+    check_shape(points, ("N", 5), "LiDAR points")
+    n = len(points)
+    ring = np.round(points[:, 4]).astype(np.int64)
+    n_rings = int(ring.max()) + 1 if n else 0
+    if n_rings < 2 or n % n_rings or not np.array_equal(ring, np.arange(n) % n_rings):
+        return None
+    xyz = points[:, :3].astype(np.float64)
+    range_m = np.linalg.norm(xyz, axis=1)
+    far = range_m > 5.0
+    elevation = np.arctan2(xyz[:, 2], np.hypot(xyz[:, 0], xyz[:, 1]))
+    ring_elevation = np.full(n_rings, np.nan)
+    for r in range(n_rings):
+        sel = far & (ring == r)
+        if sel.sum() >= MIN_RING_RETURNS:
+            ring_elevation[r] = np.median(elevation[sel])
+    known_ring = np.isfinite(ring_elevation)
+    if known_ring.sum() < 2:
+        return None
+    if not known_ring.all():  # rings that (almost) never returned: the rings' fan is linear in the ring index
+        slope, offset = np.polyfit(np.flatnonzero(known_ring), ring_elevation[known_ring], 1)
+        ring_elevation[~known_ring] = offset + slope * np.flatnonzero(~known_ring)
+    # near points of steep rings are returns from the ego car's roof, not empty beams
+    shallow = ring_elevation > np.radians(EMPTY_BEAM_MIN_ELEVATION_DEG)
+    empty = (range_m < NO_RETURN_RANGE_M) & shallow[ring]
+    if not empty.any():
+        return None
+    # the sensor's position at each firing: where its empty beams are stored (ego motion over the sweep)
+    firing = np.arange(n) // n_rings
+    n_firings = n // n_rings
+    known = np.flatnonzero(np.bincount(firing[empty], minlength=n_firings) > 0)
+    sensor_known = np.array([np.median(xyz[empty & (firing == f)], axis=0) for f in known])
+    sensor = np.stack([np.interp(np.arange(n_firings), known, sensor_known[:, c]) for c in range(3)], axis=1)
+    rel = xyz - sensor[firing]
+    # firing azimuth: mean horizontal direction of its real returns (unit vectors: no wrap-around at +-180 deg)
+    horiz = rel[:, :2] / np.maximum(np.hypot(rel[:, 0], rel[:, 1]), 1e-9)[:, None]
+    per_firing = np.where(far[:, None], horiz, 0.0).reshape(n_firings, n_rings, 2).sum(axis=1)
+    have = np.linalg.norm(per_firing, axis=1) > 1e-9
+    if have.sum() < 2:
+        return None
+    angle = np.unwrap(np.arctan2(per_firing[have, 1], per_firing[have, 0]))
+    firing_angle = np.interp(np.arange(n_firings), np.flatnonzero(have), angle)
+    mask = empty
+    az = firing_angle[firing[mask]]
+    el = ring_elevation[ring[mask]]
+    directions = np.stack([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)], axis=1)
+    return EmptyBeams(mask, directions)
 
 
 def car_intensity(points: np.ndarray, is_car: np.ndarray) -> float:
