@@ -85,6 +85,29 @@ def test_sky_dome_pastes_observations_and_corrects_the_model():
     assert np.all(dome2 >= model - 1e-6)
 
 
+def test_each_cameras_sky_corrects_the_dome_around_its_own_azimuth():
+    H, W = 16, 64
+    model = np.full((H, W, 3), 1.0, np.float32)
+    rng = np.random.default_rng(0)
+    el = rng.uniform(0.1, 0.6, 400)
+
+    def dirs_at(az0):
+        az = az0 + rng.uniform(-0.3, 0.3, 400)
+        return np.stack([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)], 1)
+
+    front, back = _obs(dirs_at(0.0), np.full((400, 3), 2.0), np.ones(400, bool)), \
+        _obs(dirs_at(np.pi), np.full((400, 3), 8.0), np.ones(400, bool))
+    dome, _ = build_sky_dome(model, [front, back])
+    col = lambda az: int((az / (2 * np.pi) + 0.5) * W) % W  # noqa: E731
+    # unobserved sky above either camera's view follows that camera's correction, not one shared per row
+    assert dome[2, col(0.0)] == pytest.approx(2.0, rel=0.05)
+    assert dome[2, col(np.pi - 1e-3)] == pytest.approx(8.0, rel=0.05)
+    assert 2.5 < dome[2, col(np.pi / 2), 0] < 7.5  # in between: in between
+    # one camera: one correction per row, whatever the azimuth
+    only, _ = build_sky_dome(model, [front])
+    assert np.allclose(only[2], only[2, col(0.0)])
+
+
 def test_structure_heights_raise_cut_columns_to_the_conditional_median():
     top = np.array([5.0, 6.0, 8.0, 12.0, 20.0, 30.0, 9.0, 11.0, 14.0, 18.0, 22.0, 2.0])
     cam_top = top.copy()

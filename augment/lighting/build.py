@@ -61,6 +61,7 @@ SIGMA_SURFACE = 2.0  # lobe sharpness of surfaces (broad: near-diffuse)
 SATURATED_LDR = 0.97
 EGO_BOX_EGO_M = ((-1.5, 4.0), (-1.2, 1.2), (-0.5, 2.2))  # LiDAR returns inside the ego car are dropped
 THICKEN_VOXELS = 2
+SKY_GAIN_KAPPA = 2.0  # several cameras: von Mises weight of a camera's sky correction over azimuth (~60 deg wide)
 SHADOW_SAMPLES = 48  # samples of the sun-visibility rays that shade unobserved surfaces
 STREET_PRIOR_WEIGHT = 3.0  # the shading model counts as this many observed voxels of a street cell (see .fill);
 # chosen a priori (a cell needs a few observed voxels to outweigh the model), not fitted to any scene
@@ -241,24 +242,31 @@ def build_sky_dome(model_world: np.ndarray, observations: list[ViewObservation],
     # clouds) differs from the clear-sky model mostly with elevation
     upper = (np.arange(H) + 0.5 < H / 2)[:, None] & np.ones((1, W), bool)
     sel = is_sky & (dirs[:, 2] > 0.02)
-    gain_rows = np.zeros((H, 3))
+    log_gain = np.zeros((H, W, 3))
     gain = np.ones(3)
     if sel.sum() >= 20:
         log_ratio = np.log(np.maximum(rgb[sel], 1e-9) / model.reshape(-1, 3)[pix[sel]])
         # a clipped pixel only says "at least": no correction unless the model is dimmer than the clip level
         log_ratio[sat[sel]] = np.maximum(log_ratio[sat[sel]], 0.0)
         gain = np.exp(np.median(log_ratio, axis=0))
-        rows = row[sel]
-        have = np.flatnonzero(np.bincount(rows, minlength=H) >= 5)
-        have = have[have < H // 2]
-        if len(have):
-            med = np.array([np.median(log_ratio[rows == r], axis=0) for r in have])
-            for c in range(3):
-                gain_rows[:, c] = np.interp(np.arange(H), have, med[:, c])
+        view = np.concatenate([np.full(len(o.far_dirs), i) for i, o in enumerate(observations)])[sel]
+        rows, lon_sel = row[sel], lon[sel]
+        per_view = [v for v in range(len(observations)) if (view == v).sum() >= 20]
+        if len(per_view) < 2:
+            log_gain[:] = _row_log_gains(log_ratio, rows, H)[:, None, :]
         else:
-            gain_rows[:] = np.log(gain)
-    gain_rows = np.clip(gain_rows, np.log(0.1), np.log(10.0))
-    corrected = model * np.where(upper[..., None], np.exp(gain_rows)[:, None, :], 1.0)
+            # several cameras' skies: each corrects the sky around its own azimuth (the sky near the sun, or
+            # one camera's haze, is not every direction's)
+            col_lon = (np.arange(W) + 0.5) / W * 2 * np.pi - np.pi
+            weights = []
+            for v in per_view:
+                m = view == v
+                centre = np.arctan2(np.sin(lon_sel[m]).sum(), np.cos(lon_sel[m]).sum())
+                weights.append(m.sum() * np.exp(SKY_GAIN_KAPPA * (np.cos(col_lon - centre) - 1.0)))
+                log_gain += _row_log_gains(log_ratio[m], rows[m], H)[:, None, :] * weights[-1][None, :, None]
+            log_gain /= np.sum(weights, axis=0)[None, :, None]
+    log_gain = np.clip(log_gain, np.log(0.1), np.log(10.0))
+    corrected = model * np.where(upper[..., None], np.exp(log_gain), 1.0)
     # blend the observations into their neighbourhood (normalised convolution of the log ratio)
     log_res = np.where(observed[..., None], np.log(np.maximum(mean_obs, 1e-9) / corrected), 0.0)
     sig = blur_deg / 360.0 * W
@@ -275,6 +283,17 @@ def build_sky_dome(model_world: np.ndarray, observations: list[ViewObservation],
     dome = dome * np.maximum(1.0, floor / lum)[..., None]
     stats.update(observed_fraction=float(observed.mean()), sky_gain_rgb=gain.tolist())
     return dome.astype(np.float32), stats
+
+
+def _row_log_gains(log_ratio: np.ndarray, rows: np.ndarray, H: int) -> np.ndarray:
+    """(H, 3) log sky correction per dome row: the median log ratio of the rows with >= 5 sky pixels (upper
+    half), interpolated between them and constant beyond; the overall median without any such row."""
+    have = np.flatnonzero(np.bincount(rows, minlength=H) >= 5)
+    have = have[have < H // 2]
+    if not len(have):
+        return np.broadcast_to(np.median(log_ratio, axis=0), (H, 3)).copy()
+    med = np.array([np.median(log_ratio[rows == r], axis=0) for r in have])
+    return np.stack([np.interp(np.arange(H), have, med[:, c]) for c in range(3)], axis=1)
 
 
 def model_sky_world(sun_dir_vol: np.ndarray, turbidity: float, cloud_cover: float, ground_albedo: float, scale: float,
