@@ -165,10 +165,17 @@ def scores(rad: np.ndarray, gt: np.ndarray, source_mean_ldr: float) -> dict:
 
 
 def oracle_scores(gt: np.ndarray) -> dict:
-    """PSNR of predictions that know the target image (not methods; ceilings of what carries no structure):
-    its mean colour, and its mean colour per image row (per elevation, for a level camera)."""
+    """PSNR of predictions that know the target image (not methods: how much of a view's own layout a score
+    needs): its mean colour, its mean colour per image row (per elevation, for a level camera), and its mean
+    colour in each cell of a 4 x 4 and an 8 x 8 grid."""
+    h, w = gt.shape[:2]
+
+    def cells(n: int) -> np.ndarray:
+        return cv2.resize(cv2.resize(gt, (n, n), interpolation=cv2.INTER_AREA), (w, h), interpolation=cv2.INTER_NEAREST)
+
     return {"target_mean_colour": psnr(np.broadcast_to(gt.mean((0, 1)), gt.shape), gt),
-            "target_row_means": psnr(np.broadcast_to(gt.mean(1, keepdims=True), gt.shape), gt)}
+            "target_row_means": psnr(np.broadcast_to(gt.mean(1, keepdims=True), gt.shape), gt),
+            "target_4x4_means": psnr(cells(4), gt), "target_8x8_means": psnr(cells(8), gt)}
 
 
 def mean_scores(rows: list[dict]) -> dict:
@@ -348,7 +355,8 @@ def real_section(quick: bool) -> tuple[dict, list]:
     for k, v in table.items():
         if k.endswith("/oracle"):
             print(f"real novel view {k}: target mean colour {v['target_mean_colour']:.2f} dB, "
-                  f"target row means {v['target_row_means']:.2f} dB", flush=True)
+                  f"row means {v['target_row_means']:.2f} dB, 4x4 means {v['target_4x4_means']:.2f} dB, "
+                  f"8x8 means {v['target_8x8_means']:.2f} dB", flush=True)
         else:
             print(f"real novel view {k}: PSNR {v['psnr_mean']:.2f} dB (auto-exposure {v['psnr_auto_exposure_mean']:.2f}), "
                   f"si-PSNR {v['si_psnr_mean']:.2f} dB", flush=True)
