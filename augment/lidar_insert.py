@@ -159,8 +159,7 @@ def empty_beams(points: np.ndarray) -> EmptyBeams | None:
     # the sensor's position at each firing: where its empty beams are stored (ego motion over the sweep)
     firing = np.arange(n) // n_rings
     n_firings = n // n_rings
-    known = np.flatnonzero(np.bincount(firing[empty], minlength=n_firings) > 0)
-    sensor_known = np.array([np.median(xyz[empty & (firing == f)], axis=0) for f in known])
+    known, sensor_known = _group_medians(firing[empty], xyz[empty])
     sensor = np.stack([np.interp(np.arange(n_firings), known, sensor_known[:, c]) for c in range(3)], axis=1)
     rel = xyz - sensor[firing]
     # firing azimuth: mean horizontal direction of its real returns (unit vectors: no wrap-around at +-180 deg)
@@ -176,6 +175,17 @@ def empty_beams(points: np.ndarray) -> EmptyBeams | None:
     el = ring_elevation[ring[mask]]
     directions = np.stack([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)], axis=1)
     return EmptyBeams(mask, directions)
+
+
+def _group_medians(groups: np.ndarray, values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The distinct ``groups`` (sorted) and each one's per-column (lower) median of ``values`` (N, C)."""
+    keys, counts = np.unique(groups, return_counts=True)
+    starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
+    out = np.empty((len(keys), values.shape[1]))
+    for c in range(values.shape[1]):
+        ordered = values[np.lexsort((values[:, c], groups)), c]
+        out[:, c] = ordered[starts + (counts - 1) // 2]
+    return keys, out
 
 
 def car_intensity(points: np.ndarray, is_car: np.ndarray) -> float:
