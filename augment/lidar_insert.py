@@ -37,7 +37,8 @@ INSIDE_SURFACE_M = 1e-3
 DEFAULT_CAR_INTENSITY = 15.0
 NO_RETURN_RANGE_M = 2.0  # a stored point this close to the sensor is a beam that returned nothing
 MAX_RANGE_M = 80.0  # an empty beam returns from an object at most this far (HDL-32E: 70-100 m)
-MIN_RING_RETURNS = 20  # a ring's elevation needs this many real returns beyond 5 m
+RING_FIT_MIN_RANGE_M = 5.0  # returns this far give the rings' elevations and the firings' azimuths
+MIN_RING_RETURNS = 20  # a ring's elevation needs this many of them
 EMPTY_BEAM_MIN_ELEVATION_DEG = -10.0  # steeper beams return from the road within 10 m (or the ego's roof)
 
 
@@ -125,7 +126,7 @@ def empty_beams(points: np.ndarray) -> EmptyBeams | None:
     Firing order: point ``i`` is ring ``i % n_rings`` of firing ``i // n_rings`` (nuScenes LIDAR_TOP: 32
     rings x ~1084 firings). Directions are taken from the sensor's position at each firing (its empty beams'
     stored position, interpolated between firings). A beam's elevation is its ring's (median of the ring's
-    returns beyond 5 m; a ring with too few: the line through the others' elevations over the ring index),
+    returns beyond ``RING_FIT_MIN_RANGE_M``; a ring with too few: the line through the others' elevations over the ring index),
     its azimuth its firing's (mean direction of the firing's real returns; a firing without any takes its
     neighbours').
     """
@@ -138,7 +139,7 @@ def empty_beams(points: np.ndarray) -> EmptyBeams | None:
         return None
     xyz = points[:, :3].astype(np.float64)
     range_m = np.linalg.norm(xyz, axis=1)
-    far = range_m > 5.0
+    far = range_m > RING_FIT_MIN_RANGE_M
     elevation = np.arctan2(xyz[:, 2], np.hypot(xyz[:, 0], xyz[:, 1]))
     ring_elevation = np.full(n_rings, np.nan)
     for r in range(n_rings):
@@ -170,11 +171,10 @@ def empty_beams(points: np.ndarray) -> EmptyBeams | None:
         return None
     angle = np.unwrap(np.arctan2(per_firing[have, 1], per_firing[have, 0]))
     firing_angle = np.interp(np.arange(n_firings), np.flatnonzero(have), angle)
-    mask = empty
-    az = firing_angle[firing[mask]]
-    el = ring_elevation[ring[mask]]
+    az = firing_angle[firing[empty]]
+    el = ring_elevation[ring[empty]]
     directions = np.stack([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)], axis=1)
-    return EmptyBeams(mask, directions)
+    return EmptyBeams(empty, directions)
 
 
 def _group_medians(groups: np.ndarray, values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
