@@ -11,8 +11,8 @@ a metre or two of the origin). Its beam is rebuilt from its ring's elevation (me
 returns) and its firing's azimuth (the direction of the firing's real returns); where it meets an object
 within the sensor's range, the point becomes a return on the object. This matters at the horizon: the
 beams 1-2 deg below it reach the road only beyond ~50-80 m and mostly return nothing, yet they cross the
-upper half of a car 20-40 m away. A sweep not stored in firing order (e.g. the bundled scenes', which omit
-empty beams) keeps its empty beams empty.
+upper half of a car 20-40 m away. A sweep not stored in firing order (e.g. one whose empty beams were
+dropped) keeps its empty beams empty.
 
 Frames: everything in the LiDAR sensor frame (nuScenes ``.pcd.bin``: x, y, z, intensity, ring).
 """

@@ -140,6 +140,28 @@ def test_lidar_road_points_lie_on_the_ground(dataroot: Path) -> None:
         assert set(np.unique(labels)) <= {0, 12, 17, 24, 26, 27, 28, 30}
 
 
+def test_lidar_stores_every_beam_in_firing_order_as_nuscenes_does(dataroot: Path) -> None:
+    from streetaug.augment.lidar_insert import empty_beams
+    from streetaug.augment.scenegen.lidar import N_AZIMUTH, N_RINGS, beam_directions_sensor
+
+    t = _tables(dataroot)
+    scene = next(s for s in t["scene"] if s["name"] == "sample-sunny")
+    sd = next(d for d in t["sample_data"] if d["sample_token"] == scene["first_sample_token"] and d["fileformat"] == "pcd")
+    pts = np.fromfile(dataroot / sd["filename"], dtype=np.float32).reshape(-1, 5)
+    _, labels, _ = _lidar_global(dataroot, t, "sample-sunny")
+    assert pts.shape == (N_RINGS * N_AZIMUTH, 5)
+    np.testing.assert_array_equal(pts[:, 4], np.arange(len(pts)) % N_RINGS)  # ring after ring, firing after firing
+    none = ~pts[:, :3].any(axis=1)  # no return: at the sensor, intensity 0, class noise
+    assert 0 < none.sum() < len(pts) // 2 and not pts[none, 3].any() and not labels[none].any()
+    # the insertion rebuilds those beams where the generator cast them
+    empty = empty_beams(pts)
+    d, ring = beam_directions_sensor()
+    firing_order = np.arange(len(d)).reshape(N_RINGS, N_AZIMUTH).T.ravel()
+    truth = d[firing_order][empty.mask]
+    assert empty.mask.sum() > 0.5 * none.sum()  # the steep rings' (below -10 deg) are left alone
+    assert np.degrees(np.arccos(np.clip((empty.directions * truth).sum(1), -1, 1))).max() < 0.05
+
+
 def test_boxes_contain_their_lidar_points(dataroot: Path) -> None:
     t = _tables(dataroot)
     for name in SAMPLE_SCENES:

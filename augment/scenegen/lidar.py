@@ -3,6 +3,9 @@
 The sensor frame follows nuScenes' LIDAR_TOP: x = right, y = forward, z = up (a -90 deg yaw from
 the ego frame), mounted ~1.84 m above the ground.  Points are written as float32 x 5
 (x, y, z, intensity, ring) in the sensor frame; labels are nuScenes-lidarseg uint8 class indices.
+Like a nuScenes sweep, every beam is stored, firing after firing (all rings of one azimuth, then the
+next azimuth); a beam without a return sits at the sensor's position (the origin: the simulated sensor
+does not move during the sweep) with intensity 0 and lidarseg class 0 (noise).
 """
 
 from __future__ import annotations
@@ -33,11 +36,12 @@ class LidarScan:
 
     Attributes:
         points_sensor: (N, 3) float64 points in the LIDAR_TOP frame, metres.
-        intensity: (N,) float32 0..255.
+        intensity: (N,) float32 0..255 (0: no return).
         ring: (N,) int64 beam index 0 (lowest) .. 31.
-        labels: (N,) uint8 nuScenes-lidarseg class index.
-        face: (N,) int64 index of the scene triangle hit.
-        object_index: (N,) int64 index into ``scene.objects`` of the hit object, -1 for background.
+        labels: (N,) uint8 nuScenes-lidarseg class index (0, noise: no return).
+        face: (N,) int64 index of the scene triangle hit, -1 for no return.
+        object_index: (N,) int64 index into ``scene.objects`` of the hit object, -1 for background or no return.
+    N = N_RINGS x N_AZIMUTH, firing after firing (see the module doc).
     """
 
     points_sensor: np.ndarray
@@ -81,19 +85,29 @@ def simulate_lidar(scene: StreetScene, T_global_from_lidar: np.ndarray, seed: in
     keep = hits.hit & (hits.t < MAX_RANGE_M) & (hits.t > MIN_RANGE_M)
     rng = np.random.default_rng(seed)
     r = hits.t[keep] + rng.normal(0.0, RANGE_NOISE_M, keep.sum())
-    points_sensor = d_sensor[keep] * r[:, None]
-    face = hits.face[keep]
-    n = scene.face_normals_global[face]
+    face_kept = hits.face[keep]
+    n = scene.face_normals_global[face_kept]
     cos = np.abs(np.einsum("ij,ij->i", n, d_global[keep]))
-    refl = np.array([m.lidar_reflectivity for m in scene.materials])[scene.face_material[face]]
-    intensity = np.clip(np.round(255.0 * refl * (0.3 + 0.7 * cos) * np.exp(-r / 150.0)), 1, 255).astype(np.float32)
+    refl = np.array([m.lidar_reflectivity for m in scene.materials])[scene.face_material[face_kept]]
+    # every beam, returned or not (empty: at the sensor, intensity 0, class 0, no face, no object)
+    points_sensor = np.zeros((len(d_sensor), 3))
+    points_sensor[keep] = d_sensor[keep] * r[:, None]
+    intensity = np.zeros(len(d_sensor), np.float32)
+    intensity[keep] = np.clip(np.round(255.0 * refl * (0.3 + 0.7 * cos) * np.exp(-r / 150.0)), 1, 255)
+    face = np.full(len(d_sensor), -1, np.int64)
+    face[keep] = face_kept
+    labels = np.zeros(len(d_sensor), np.uint8)
+    labels[keep] = scene.face_label[face_kept]
+    object_index = np.full(len(d_sensor), -1, np.int64)
+    object_index[keep] = scene.face_object[face_kept]
+    firing_order = np.arange(len(d_sensor)).reshape(N_RINGS, N_AZIMUTH).T.ravel()  # ring-major -> firing-major
     return LidarScan(
-        points_sensor=points_sensor,
-        intensity=intensity,
-        ring=ring[keep],
-        labels=scene.face_label[face],
-        face=face,
-        object_index=scene.face_object[face],
+        points_sensor=points_sensor[firing_order],
+        intensity=intensity[firing_order],
+        ring=ring[firing_order],
+        labels=labels[firing_order],
+        face=face[firing_order],
+        object_index=object_index[firing_order],
     )
 
 
