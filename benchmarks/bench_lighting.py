@@ -11,6 +11,7 @@ Usage: ``python benchmarks/bench_lighting.py [--runs 3] [--quick] [--out benchma
    LiDAR, as batch does with one camera): sun direction error (ephemeris path), sun/sky ratio error of the
    distant light, and per point the diffuse irradiance error over 6 normals (sun included), the sun
    transmittance error and the log-encoded env-map error ``mean_w (log(1 + x^) - log(1 + x))^2`` (sun excluded).
+   The same errors with the lighting built from all three cameras (``all_cameras``: what batch builds).
 2. **Real sample** (``../shared/data/nuscenes-real``): novel-view radiance PSNR / si-PSNR as in the paper:
    the lighting is built from some cameras, the target camera's image is rendered through
    ``envmap_at(target camera centre)`` (256 x 512 map, bilinear) with the contract's camera response at EV 0
@@ -340,6 +341,20 @@ def bundled_section(runs: int, quick: bool) -> tuple[dict, list]:
         for i in ([int(np.argmin(vis_true)), int(np.argmax(vis_true))]):
             row = [gt_lights[i].to_envmap(ENV_H, ENV_W)] + [level_envs[lv][i].to_envmap(ENV_H, ENV_W) for lv in LEVELS]
             tiles.append(np.concatenate([hdr_to_ldr_uint8(e) for e in row], axis=1))
+        # the same points lit by the lighting of all the sample's cameras (what `streetaug batch` builds)
+        for level in (*LEVELS[1:], "auto"):
+            est = estimate_sample_lighting(sample, sorted(sample.cameras), level).for_view(view)
+            e_err, env_err = [], []
+            for p, gl in zip(points, gt_lights):
+                lt = est.light_at(p, ENV_H, ENV_W)
+                e_est, e_gt = luminance(irradiance(lt, NORMALS)), luminance(irradiance(gl, NORMALS))
+                e_err.append(float(np.mean(np.abs(e_est - e_gt) / np.maximum(e_gt, 1e-9))))
+                env_err.append(env_log_error(lt.envmap, gl.envmap))
+            scene_out.setdefault("all_cameras", {})[level] = {
+                "chosen_level": est.level, "irradiance_error_rel_mean": float(np.mean(e_err)),
+                "env_log_mse_mean": float(np.mean(env_err))}
+            print(f"{name} {level:>4} ({est.level}) all cameras: irradiance err {np.mean(e_err):.3f}, "
+                  f"env log-mse {np.mean(env_err):.4f}", flush=True)
         novel, _ = novel_view_table(sample, ("L1", "L3"))
         scene_out["novel_view"] = novel
         results[name] = scene_out

@@ -108,6 +108,21 @@ def test_each_cameras_sky_corrects_the_dome_around_its_own_azimuth():
     assert np.allclose(only[2], only[2, col(0.0)])
 
 
+def test_a_bright_top_edge_does_not_brighten_the_sky_above_it():
+    H, W = 32, 64
+    model = np.full((H, W, 3), 1.0, np.float32)
+    rng = np.random.default_rng(1)
+    az = rng.uniform(-0.4, 0.4, 2000)
+    el = rng.uniform(0.05, 0.5, 2000)  # the image's sky: 3-29 deg
+    dirs = np.stack([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)], 1)
+    rgb = np.full((2000, 3), 1.5)
+    rgb[el > 0.47] = 9.0  # a glare along the image's top edge
+    dome, _ = build_sky_dome(model, [_obs(dirs, rgb, np.ones(2000, bool))])
+    # towards the zenith and opposite the camera: the camera's overall correction (1.5), not the top row's (9)
+    assert dome[1, W // 2 + W // 4, 0] == pytest.approx(1.5, rel=0.05)
+    assert dome[1, 2, 0] == pytest.approx(1.5, rel=0.05)
+
+
 def test_structure_heights_raise_cut_columns_to_the_conditional_median():
     top = np.array([5.0, 6.0, 8.0, 12.0, 20.0, 30.0, 9.0, 11.0, 14.0, 18.0, 22.0, 2.0])
     cam_top = top.copy()

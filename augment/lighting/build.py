@@ -287,13 +287,17 @@ def build_sky_dome(model_world: np.ndarray, observations: list[ViewObservation],
 
 def _row_log_gains(log_ratio: np.ndarray, rows: np.ndarray, H: int) -> np.ndarray:
     """(H, 3) log sky correction per dome row: the median log ratio of the rows with >= 5 sky pixels (upper
-    half), interpolated between them and constant beyond; the overall median without any such row."""
+    half), interpolated between them; beyond the observed rows (towards the zenith, say) the overall median,
+    not the last row's: one row of an image's top edge (a glare, a bright cloud) does not speak for the sky
+    above it."""
+    overall = np.median(log_ratio, axis=0)
     have = np.flatnonzero(np.bincount(rows, minlength=H) >= 5)
     have = have[have < H // 2]
     if not len(have):
-        return np.broadcast_to(np.median(log_ratio, axis=0), (H, 3)).copy()
+        return np.broadcast_to(overall, (H, 3)).copy()
     med = np.array([np.median(log_ratio[rows == r], axis=0) for r in have])
-    return np.stack([np.interp(np.arange(H), have, med[:, c]) for c in range(3)], axis=1)
+    return np.stack([np.interp(np.arange(H), have, med[:, c], left=overall[c], right=overall[c]) for c in range(3)],
+                    axis=1)
 
 
 def model_sky_world(sun_dir_vol: np.ndarray, turbidity: float, cloud_cover: float, ground_albedo: float, scale: float,
