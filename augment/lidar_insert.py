@@ -59,7 +59,7 @@ class SweepInsertion:
 
 def insert_into_sweep(points: np.ndarray, meshes_lidar: Sequence[tuple[np.ndarray, np.ndarray]],
                       labels: np.ndarray | None = None, object_labels: Sequence[int] | None = None,
-                      intensity: float = DEFAULT_CAR_INTENSITY) -> SweepInsertion:
+                      intensity: float = DEFAULT_CAR_INTENSITY, use_empty_beams: bool = True) -> SweepInsertion:
     """Move the returns whose beam meets an object onto that object's surface.
 
     Args:
@@ -68,6 +68,7 @@ def insert_into_sweep(points: np.ndarray, meshes_lidar: Sequence[tuple[np.ndarra
         labels: (N,) lidarseg labels of the sweep, or None.
         object_labels: lidarseg class of each object (default: vehicle.car).
         intensity: intensity given to the moved points (:func:`car_intensity`).
+        use_empty_beams: also let beams without a return hit the objects (:func:`empty_beams`).
     """
     points = np.asarray(points, dtype=np.float32)
     check_shape(points, ("N", 5), "LiDAR points")
@@ -82,7 +83,7 @@ def insert_into_sweep(points: np.ndarray, meshes_lidar: Sequence[tuple[np.ndarra
     directions[ok] = xyz[ok] / range_m[ok, None]
     best_t = np.where(ok, range_m, -np.inf)  # a hit must come before the return (or the other objects)
     origins = np.zeros_like(xyz)
-    empty = empty_beams(points)
+    empty = empty_beams(points) if use_empty_beams else None
     if empty is not None:  # beams without a return: from the sensor's position, as far as the sensor reaches
         ok = ok | empty.mask
         origins[empty.mask] = xyz[empty.mask]
@@ -211,7 +212,7 @@ class SampleSweep:
 
 def insert_placements_into_sweep(points: np.ndarray, labels: np.ndarray | None, T_global_from_lidar: np.ndarray,
                                  placements: Sequence, assets: Sequence, boxes: Sequence,
-                                 class_index: dict[str, int]) -> SampleSweep:
+                                 class_index: dict[str, int], use_empty_beams: bool = True) -> SampleSweep:
     """Put placed assets (``Placement.T_global_from_object``, global frame) into a sweep; recount the boxes.
 
     Args:
@@ -220,6 +221,7 @@ def insert_placements_into_sweep(points: np.ndarray, labels: np.ndarray | None, 
         boxes: the sample's annotated boxes (global frame): cars among them give the moved points'
             intensity (without lidarseg), and they lose the points that now hit a placed object.
         class_index: nuScenes category name -> lidarseg class index (``category.index``).
+        use_empty_beams: see :func:`insert_into_sweep`.
     """
     from streetaug.placement.rules import points_in_box, points_in_boxes
 
@@ -232,7 +234,7 @@ def insert_placements_into_sweep(points: np.ndarray, labels: np.ndarray | None, 
     meshes = [(transform_points(T_lidar_from_global @ p.T_global_from_object, a.vertices), a.faces)
               for p, a in zip(placements, assets)]
     sweep = insert_into_sweep(points, meshes, labels, [class_index.get(a.category, LIDARSEG_CAR) for a in assets],
-                              car_intensity(points, is_car))
+                              car_intensity(points, is_car), use_empty_beams)
     moved = xyz_global[sweep.moved >= 0]
     lost = {b.token: n for b in boxes if b.token and (n := int(np.count_nonzero(points_in_box(moved, b))))}
     new_global = transform_points(T_global_from_lidar, sweep.points[:, :3].astype(np.float64))

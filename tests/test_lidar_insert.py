@@ -129,6 +129,8 @@ def test_an_object_beyond_the_returns_is_hit_by_the_empty_beams():
     assert points_in_box(out.points[hit, :3].astype(np.float64), tight).all()
     np.testing.assert_array_equal(out.points[:, 4], points[:, 4])  # rings kept, count kept
     np.testing.assert_array_equal(out.points[~hit], points[~hit])
+    # without them (the ablation switch) no beam reaches the box: it stands beyond every return
+    assert not (insert_into_sweep(points, [box], use_empty_beams=False).moved >= 0).any()
 
 
 def test_a_sweep_not_in_firing_order_keeps_its_empty_beams_empty():
