@@ -48,7 +48,6 @@ from ..conventions import (
     pixel_rays,
     project_points,
     scale_intrinsics,
-    transform_points,
 )
 from .light import DistantLight
 from .sky import (
@@ -590,7 +589,7 @@ def _l1_view_evidence(view, location: str | None, timing: dict, boxes=None, lida
     R_cam_from_global = np.asarray(view.T_cam_from_global)[:3, :3]
     sun_dir_cam = R_cam_from_global @ sun_pos.direction_global
     sun_dir_cam = sun_dir_cam / np.linalg.norm(sun_dir_cam)
-    lidar_cam = None if lidar is None else transform_points(np.asarray(view.T_cam_from_global), lidar.points_global)
+    lidar_cam = None if lidar is None else lidar.points_in(np.asarray(view.T_cam_from_global))
     work = _prepare(image, view.K, up_cam, lidar_cam)
     timing["prepare"] = time.perf_counter() - t0
     t2 = time.perf_counter()
