@@ -122,16 +122,26 @@ def si_psnr(pred: np.ndarray, gt: np.ndarray) -> float:
     return psnr(np.clip(s * pred, 0.0, 1.0), gt)
 
 
+def view_rays(view, width: int = NOVEL_W) -> tuple[np.ndarray, int]:
+    """Camera-frame rays (h * width, 3) through the pixel centres of the view shrunk to ``width``, and h."""
+    H, W = view.height, view.width
+    h = int(round(H * width / W))
+    u, v = np.meshgrid((np.arange(width) + 0.5) * W / width - 0.5, (np.arange(h) + 0.5) * H / h - 0.5)
+    return pixel_rays(view.K, np.stack([u.ravel(), v.ravel()], 1)), h
+
+
+def sources_mean_ldr(sample, sources: list[str]) -> float:
+    """Mean LDR level (0-1) of the source cameras' images: what an unseen camera's auto-exposure meters to."""
+    return float(np.mean([np.asarray(sample.cameras[c].image).mean() / 255.0 for c in sources]))
+
+
 def render_novel_view(sl, view, ref_view, width: int = NOVEL_W) -> np.ndarray:
     """Linear radiance (h, w, 3) the lighting predicts for a camera, through envmap_at(camera centre).
 
     ``ref_view`` is the lighting's reference camera (L0/L1: its distant light is turned into the target's frame;
     nothing is fitted to the target image).
     """
-    H, W = view.height, view.width
-    h = int(round(H * width / W))
-    u, v = np.meshgrid((np.arange(width) + 0.5) * W / width - 0.5, (np.arange(h) + 0.5) * H / h - 0.5)
-    rays = pixel_rays(view.K, np.stack([u.ravel(), v.ravel()], 1))
+    rays, h = view_rays(view, width)
     if sl.hybrid is None:
         # L0/L1: the reference camera's distant light turned into the target's frame (never fitted to the target)
         ref = sl.per_view[sl.reference]
@@ -151,8 +161,7 @@ def novel_view_scores(sample, sources: list[str], target: str, level: str, grid=
     rad = render_novel_view(sl, view, sample.cameras[sources[0]])
     h, w = rad.shape[:2]
     gt = cv2.resize(np.asarray(view.image), (w, h), interpolation=cv2.INTER_AREA) / 255.0
-    source_mean = float(np.mean([np.asarray(sample.cameras[c].image).mean() / 255.0 for c in sources]))
-    return {"sources": sources, "target": target, "level": sl.level} | scores(rad, gt, source_mean)
+    return {"sources": sources, "target": target, "level": sl.level} | scores(rad, gt, sources_mean_ldr(sample, sources))
 
 
 def scores(rad: np.ndarray, gt: np.ndarray, source_mean_ldr: float) -> dict:
@@ -223,10 +232,7 @@ def forward_view(view, forward_m: float):
 
 def true_view(gts: GroundTruthScene, view, width: int = NOVEL_W) -> np.ndarray:
     """True radiance (h, w, 3) a bundled scene's camera sees (its renderer's shading, no camera effects)."""
-    H, W = view.height, view.width
-    h = int(round(H * width / W))
-    u, v = np.meshgrid((np.arange(width) + 0.5) * W / width - 0.5, (np.arange(h) + 0.5) * H / h - 0.5)
-    rays = pixel_rays(view.K, np.stack([u.ravel(), v.ravel()], 1))
+    rays, h = view_rays(view, width)
     rays_global = rays / np.linalg.norm(rays, axis=1, keepdims=True) @ view.T_global_from_cam[:3, :3].T
     origins = np.tile(view.T_global_from_cam[:3, 3], (len(rays), 1))
     return gts.radiance(origins, rays_global).reshape(h, width, 3)
@@ -248,12 +254,11 @@ def forward_section(levels=("L0", "L1", "L2", "L3", "auto")) -> dict:
         gt = hdr_to_ldr(true_view(gts, target))
         scene: dict = {"oracle": oracle_scores(gt)}
         for setup, sources in (("monocular", ["CAM_FRONT"]), ("multi_view", sorted(sample.cameras))):
+            source_mean = sources_mean_ldr(sample, sources)
             for level in levels:
                 sl = estimate_views_lighting([sample.cameras[c] for c in sources], sample.location, level,
                                              lidar=sample.lidar, boxes=sample.boxes)
-                rad = render_novel_view(sl, target, front)
-                source_mean = float(np.mean([np.asarray(sample.cameras[c].image).mean() / 255.0 for c in sources]))
-                r = scores(rad, gt, source_mean)
+                r = scores(render_novel_view(sl, target, front), gt, source_mean)
                 scene[f"{setup}/{level}"] = {"chosen_level": sl.level} | {
                     k: r[k] for k in ("psnr", "psnr_auto_exposure", "si_psnr")}
         out[name] = scene
