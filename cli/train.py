@@ -71,7 +71,7 @@ def train_light(seed, steps, batch, threads, out, cache_dir, hdri_dir, debug, n_
     """Train the image -> sky-vector predictor (sun direction, visibility, sky latent) on top of the sky model.
 
     \b
-    Example (the shipped weights; ~7 min training after rendering 1200 street views, ~10-25 min):
+    Example (the shipped weights; ~30 min training after rendering 1200 street views, ~5-25 min):
       streetaug train-light --seed 0
     """
     from dataclasses import replace

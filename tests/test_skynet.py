@@ -267,7 +267,11 @@ class TestPredict:
         sunny = [predict_sky(*_sample_image("sample-sunny", ch)[:2], models=models) for ch in ("CAM_FRONT", "CAM_BACK")]
         overcast = [predict_sky(*_sample_image("sample-overcast", ch)[:2], models=models) for ch in ("CAM_FRONT", "CAM_BACK")]
         assert min(p.visibility_raw for p in sunny) > 0.5
-        assert max(p.visibility_raw for p in overcast) < 0.3
+        # overcast: clearly below every sunny camera, and no sun reported (v2 network: 0.32 on one camera,
+        # just above VISIBILITY_MIN; its wide direction cone keeps the sun out)
+        assert max(p.visibility_raw for p in overcast) < min(p.visibility_raw for p in sunny) - 0.2
+        assert max(p.visibility_raw for p in overcast) < 0.4
+        assert not any(p.confident for p in overcast), [p.reason for p in overcast]
         for p, ch in zip(sunny, ("CAM_FRONT", "CAM_BACK")):
             assert set(p.timing_s) >= {"network", "total"}
             err = angle_deg(p.direction_cam, _sample_image("sample-sunny", ch)[2])
@@ -406,6 +410,23 @@ def test_mirrored_view_is_consistent():
     np.testing.assert_allclose(rays_f, rays[:, :, ::-1] * np.array([1.0, -1.0, 1.0])[:, None, None], atol=1e-6)
     np.testing.assert_array_equal(f.dome, v.dome[:, ::-1])
     np.testing.assert_allclose(D.flip_view(f).R_heading_from_cam, v.R_heading_from_cam, atol=1e-12)
+
+
+def test_photometric_jitter_keeps_image_and_dome_on_one_scale():
+    from streetaug.augment.conventions import ldr_uint8_to_hdr
+
+    v = D.synthetic_sky_view(np.random.default_rng(4), (32, 128))
+    j = D.jitter_view(v, np.random.default_rng(1), noise_dn=0.0)
+    gains = j.dome.reshape(-1, 3).sum(0) / v.dome.reshape(-1, 3).sum(0)
+    assert np.all(gains >= 1.0 - 1e-6) and np.ptp(gains) > 1e-4  # brighter, and a white balance
+    # unclipped mid-tones: image HDR ratio == dome ratio per channel (one radiometric scale)
+    ok = np.all((v.ldr > 20) & (v.ldr < 200) & (j.ldr < 250), axis=-1)
+    assert ok.sum() > 100
+    ratio = ldr_uint8_to_hdr(j.ldr)[ok] / ldr_uint8_to_hdr(v.ldr)[ok]
+    np.testing.assert_allclose(np.median(ratio, axis=0), gains, rtol=0.03)
+    assert np.all(j.ldr[v.ldr == 255] == 255)  # a clipped pixel stays clipped
+    np.testing.assert_array_equal(j.K, v.K)
+    assert j.sun_dir_heading is v.sun_dir_heading and j.visibility == v.visibility
 
 
 def test_cli_train_sky_bad_hdri_dir(tmp_path):

@@ -386,6 +386,23 @@ def crop_view_pool(n: int, seed: int, dome_hw: tuple[int, int], hdri_dir: str | 
     return views[0::2], views[1::2]
 
 
+def jitter_view(v: View, rng: np.random.Generator, ev_sigma: float = 0.35, wb_sigma: float = 0.06,
+                noise_dn: float = 1.5) -> View:
+    """A photometric variant of a view (training augmentation): brighter exposure (EV ``|N(0, ev_sigma)|``),
+    white-balance gains (``exp N(0, wb_sigma)`` per channel, the smallest scaled to 1) and Gaussian sensor
+    noise of ``noise_dn`` (0..255 scale).  Gains only go up, so a clipped pixel stays clipped; the dome gets the
+    same gains (it stays on the image's radiometric scale)."""
+    from ...conventions import ldr_uint8_to_hdr
+
+    gains = np.exp(rng.normal(0.0, wb_sigma, 3))
+    gains = gains / gains.min() * 2.0 ** abs(rng.normal(0.0, ev_sigma))
+    hdr = ldr_uint8_to_hdr(v.ldr).astype(np.float64) * gains
+    ldr = hdr_to_ldr(hdr) * 255.0 + rng.normal(0.0, noise_dn, v.ldr.shape)
+    ldr = np.where(v.ldr == 255, 255.0, ldr)  # clipped stays clipped (the response's top is not invertible)
+    return View(np.clip(np.round(ldr), 0, 255).astype(np.uint8), v.K, v.R_heading_from_cam,
+                (v.dome * gains.astype(np.float32)).astype(np.float32), v.visibility, v.sun_dir_heading)
+
+
 def flip_view(v: View) -> View:
     """The mirror image of a view (image columns flipped; heading-frame y, dome longitudes and K's cx follow)."""
     h, w = v.ldr.shape[:2]

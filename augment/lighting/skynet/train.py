@@ -41,6 +41,7 @@ from .data import (
     default_hdri_dir,
     dome_batch,
     flip_view,
+    jitter_view,
     expose_dome,
     load_panoramas,
     panorama_view,
@@ -50,7 +51,7 @@ from .data import (
 )
 from .dome import angle_deg, find_peak, panorama_to_dome
 from .model import LightNet, LightNetConfig, SkyModel, SkyNetConfig, count_parameters
-from .weights import LIGHT_WEIGHTS, SKY_WEIGHTS, packaged_weights, read_weights, load_state, save_weights
+from .weights import LIGHT_VERSION, LIGHT_WEIGHTS, SKY_WEIGHTS, packaged_weights, read_weights, load_state, save_weights
 
 SUNNY_VISIBILITY = 0.2  # views whose sun visibility exceeds this supervise the direction with the L1 loss
 PEAK_LOSS_WEIGHT = 20.0  # extra HDR-loss weight at the sky model's true peak
@@ -82,12 +83,13 @@ class LightTrainConfig:
     """``streetaug train-light`` options."""
 
     seed: int = 0
-    steps: int = 1600
+    steps: int = 8000  # v1 (1600 steps at lr 1e-3) barely left the uniform direction distribution
     batch: int = 16
-    lr: float = 1e-3
+    lr: float = 2e-3
     n_streets: int = 600  # x 2 rendered views
     n_crops: int = 3000  # half real-panorama crops, half synthetic-sky crops
     mix: tuple[float, float, float] = (0.5, 0.25, 0.25)  # street renders, real panorama crops, synthetic sky crops
+    jitter: float = 0.0  # fraction of views given a photometric variant (exposure, white balance, noise)
     threads: int = 1  # more torch threads than free cores make OpenMP spin (5-10x slower on a shared machine)
     ckpt_every: int = 50
     val_every: int = 100
@@ -296,10 +298,12 @@ def soft_direction_targets(target: torch.Tensor, bin_dirs: torch.Tensor, bin_ome
 @dataclass
 class LightBatches:
     """Random batches of views for the image predictor from three pools (street renders, real-panorama
-    crops, synthetic-sky crops) mixed by ``mix``; each view is mirrored with probability 1/2."""
+    crops, synthetic-sky crops) mixed by ``mix``; each view is mirrored with probability 1/2 and given a
+    photometric variant (:func:`.data.jitter_view`) with probability ``jitter``."""
 
     pools: tuple[list, list, list]
     mix: tuple[float, float, float]
+    jitter: float = 0.0
 
     def batch(self, n: int, rng: np.random.Generator) -> dict[str, np.ndarray]:
         p = np.array([m if len(pool) else 0.0 for m, pool in zip(self.mix, self.pools)], dtype=np.float64)
@@ -308,7 +312,8 @@ class LightBatches:
         for _ in range(n):
             pool = self.pools[int(rng.choice(3, p=p))]
             v = pool[int(rng.integers(len(pool)))]
-            views.append(flip_view(v) if rng.uniform() < 0.5 else v)
+            v = flip_view(v) if rng.uniform() < 0.5 else v
+            views.append(jitter_view(v, rng) if rng.uniform() < self.jitter else v)
         return views_batch(views)
 
 
@@ -364,7 +369,7 @@ def train_light(cfg: LightTrainConfig, log=print) -> dict:
     street = street_view_pool(cfg.n_streets, cfg.seed, dome_hw, cache, workers=cfg.threads, log=log) if cfg.mix[0] > 0 else []
     pano_crops, sky_crops = crop_view_pool(cfg.n_crops, cfg.seed, dome_hw, hdri, cache, workers=cfg.threads, log=log)
     t_data = time.perf_counter() - t_data
-    data = LightBatches((street, pano_crops, sky_crops), cfg.mix)
+    data = LightBatches((street, pano_crops, sky_crops), cfg.mix, cfg.jitter)
     net_cfg = LightNetConfig()
     net = LightNet(net_cfg)
     log(f"image predictor: {count_parameters(net)} parameters, {len(street)} street views, {cfg.steps} steps of {cfg.batch}")
@@ -381,7 +386,7 @@ def train_light(cfg: LightTrainConfig, log=print) -> dict:
         "val": light_validation(net, val_panos, dome_hw), "history": history, "torch": torch.__version__,
     }
     out = Path(cfg.out) if cfg.out else packaged_weights(LIGHT_WEIGHTS)
-    save_weights(out, net, "light", 1, net_cfg.to_dict(), {k: report[k] for k in report if k != "history"})
+    save_weights(out, net, "light", LIGHT_VERSION, net_cfg.to_dict(), {k: report[k] for k in report if k != "history"})
     write_json_atomic(cache / f"report_light_{_config_hash(cfg)}.json", report)
     log(f"wrote {out} ({out.stat().st_size / 1e6:.2f} MB) after {train_s / 60:.1f} min")
     return report

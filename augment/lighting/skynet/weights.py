@@ -21,7 +21,8 @@ from ...io import InputError, atomic_path
 
 WEIGHTS_FORMAT = "streetaug.skynet/1"
 SKY_WEIGHTS = "sky_model_v1.pt"
-LIGHT_WEIGHTS = "light_model_v1.pt"
+LIGHT_WEIGHTS = "light_model_v2.pt"
+LIGHT_VERSION = 2  # 2: trained 5x longer on views with the camera pitch sign fixed (see MODEL_CARD.md)
 
 
 def packaged_weights(name: str) -> Path:
