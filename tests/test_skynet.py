@@ -412,6 +412,23 @@ def test_mirrored_view_is_consistent():
     np.testing.assert_allclose(D.flip_view(f).R_heading_from_cam, v.R_heading_from_cam, atol=1e-12)
 
 
+def test_sky_mask_keeps_a_sky_darkening_towards_the_top():
+    """Facing away from a low sun the sky is darkest at the top of the image; it must still count as sky."""
+    from streetaug.augment.lighting.skynet.predict import simple_sky_mask
+
+    h, w = D.VIEW_SIZE
+    K = intrinsics_from_fov(w, h, 70.0)
+    rays_h = D.view_rays(K, heading_from_camera(np.array([0.0, -1.0, 0.0])), h, w).transpose(1, 2, 0).astype(np.float64)
+    el = np.degrees(np.arcsin(rays_h[..., 2]))
+    x = np.arange(w)[None, :] * np.ones((h, 1))
+    # LDR 0.8 at the horizon down to 0.5 at the top row, a mild ripple along it; dark ground
+    lum = np.where(el > 0, 0.5 + 0.3 * np.clip(1 - el / el.max(), 0, 1) + 0.05 * np.sin(x / 9.0), 0.2)
+    ldr = lum[..., None] * np.array([0.85, 0.95, 1.0])
+    mask = simple_sky_mask(ldr, rays_h)
+    assert mask[el > 2.0].mean() > 0.8  # the old 40th-percentile mask kept none of it
+    assert not mask[el < 0].any()
+
+
 def test_photometric_jitter_keeps_image_and_dome_on_one_scale():
     from streetaug.augment.conventions import ldr_uint8_to_hdr
 

@@ -176,12 +176,14 @@ def _diffuse_intensity(dome: np.ndarray, direction: np.ndarray) -> np.ndarray:
 def simple_sky_mask(ldr: np.ndarray, rays_h: np.ndarray) -> np.ndarray:
     """(h, w) bool: bright, smooth pixels at least 2 deg above the horizon in regions touching the top row.
 
+    Bright = LDR luminance >= 0.25 and >= the 10th percentile above the horizon: facing away from a low sun
+    the sky darkens towards the top of the image, and a higher percentile (40 until v2) left no sky to fit.
     ``ldr`` (h, w, 3) float in [0, 1]; ``rays_h`` (h, w, 3) heading-frame unit rays.
     """
     from ..estimate import sky_mask
 
     elevation = np.arcsin(np.clip(rays_h[..., 2], -1.0, 1.0))
-    return sky_mask(ldr, elevation, min_elevation_deg=2.0, min_lum=0.25, bright_percentile=40.0, max_grad=0.15)
+    return sky_mask(ldr, elevation, min_elevation_deg=2.0, min_lum=0.25, bright_percentile=10.0, max_grad=0.15)
 
 
 def _posterior_direction(p: np.ndarray, bins: np.ndarray) -> np.ndarray:
