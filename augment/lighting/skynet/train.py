@@ -313,7 +313,8 @@ class LightBatches:
             pool = self.pools[int(rng.choice(3, p=p))]
             v = pool[int(rng.integers(len(pool)))]
             v = flip_view(v) if rng.uniform() < 0.5 else v
-            views.append(jitter_view(v, rng) if rng.uniform() < self.jitter else v)
+            # no draw without jitter: the batch stream stays that of the shipped v2 training
+            views.append(jitter_view(v, rng) if self.jitter > 0 and rng.uniform() < self.jitter else v)
         return views_batch(views)
 
 
