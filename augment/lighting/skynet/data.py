@@ -23,7 +23,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from ...conventions import hdr_to_ldr, intrinsics_from_fov, luminance, scale_intrinsics
+from ...conventions import hdr_to_ldr, intrinsics_from_fov, ldr_uint8_to_hdr, luminance, scale_intrinsics
 from ...io import InputError, atomic_path
 from .dome import (
     camera_from_angles,
@@ -392,8 +392,6 @@ def jitter_view(v: View, rng: np.random.Generator, ev_sigma: float = 0.35, wb_si
     white-balance gains (``exp N(0, wb_sigma)`` per channel, the smallest scaled to 1) and Gaussian sensor
     noise of ``noise_dn`` (0..255 scale).  Gains only go up, so a clipped pixel stays clipped; the dome gets the
     same gains (it stays on the image's radiometric scale)."""
-    from ...conventions import ldr_uint8_to_hdr
-
     gains = np.exp(rng.normal(0.0, wb_sigma, 3))
     gains = gains / gains.min() * 2.0 ** abs(rng.normal(0.0, ev_sigma))
     hdr = ldr_uint8_to_hdr(v.ldr).astype(np.float64) * gains
