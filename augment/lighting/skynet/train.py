@@ -59,30 +59,35 @@ TARGET_KAPPA = 60.0  # width (~7 deg) of the soft target of the image predictor'
 
 
 @dataclass(frozen=True)
-class SkyTrainConfig:
-    """``streetaug train-sky`` options."""
+class TrainConfig:
+    """Options both trainings share (``streetaug train-sky`` / ``train-light``)."""
 
     seed: int = 0
     steps: int = 1000
     batch: int = 12
     lr: float = 1e-3
-    n_synth: int = 3000
-    real_fraction: float = 0.3
     threads: int = 1  # more torch threads than free cores make OpenMP spin (5-10x slower on a shared machine)
     ckpt_every: int = 50
     val_every: int = 100
-    height: int = 32
-    width: int = 128
     out: str | None = None  # weights file (default: the package's)
     cache_dir: str | None = None
     hdri_dir: str | None = None
 
 
 @dataclass(frozen=True)
-class LightTrainConfig:
+class SkyTrainConfig(TrainConfig):
+    """``streetaug train-sky`` options."""
+
+    n_synth: int = 3000
+    real_fraction: float = 0.3
+    height: int = 32
+    width: int = 128
+
+
+@dataclass(frozen=True)
+class LightTrainConfig(TrainConfig):
     """``streetaug train-light`` options."""
 
-    seed: int = 0
     steps: int = 8000  # v1 (1600 steps at lr 1e-3) barely left the uniform direction distribution
     batch: int = 16
     lr: float = 2e-3
@@ -90,13 +95,7 @@ class LightTrainConfig:
     n_crops: int = 3000  # half real-panorama crops, half synthetic-sky crops
     mix: tuple[float, float, float] = (0.5, 0.25, 0.25)  # street renders, real panorama crops, synthetic sky crops
     jitter: float = 0.0  # fraction of views given a photometric variant (exposure, white balance, noise)
-    threads: int = 1  # more torch threads than free cores make OpenMP spin (5-10x slower on a shared machine)
-    ckpt_every: int = 50
-    val_every: int = 100
-    out: str | None = None
     sky_weights: str | None = None
-    cache_dir: str | None = None
-    hdri_dir: str | None = None
 
 
 def _config_hash(cfg) -> str:
