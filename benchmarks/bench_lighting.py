@@ -105,6 +105,12 @@ def irradiance(light: DistantLight, normals: np.ndarray) -> np.ndarray:
     return e
 
 
+def irradiance_error(light: DistantLight, truth: DistantLight) -> float:
+    """Mean relative error of the luminance irradiance over the six axis normals (``NORMALS``), sun included."""
+    e_est, e_gt = luminance(irradiance(light, NORMALS)), luminance(irradiance(truth, NORMALS))
+    return float(np.mean(np.abs(e_est - e_gt) / np.maximum(e_gt, 1e-9)))
+
+
 def sun_sky_ratio(light: DistantLight, up_cam: np.ndarray) -> float:
     """Horizontal irradiance of the sun over that of the sky (luminance); 0 without a sun."""
     e = irradiance(DistantLight(light.envmap, None), up_cam[None])[0]
@@ -318,8 +324,7 @@ def bundled_section(runs: int, quick: bool) -> tuple[dict, list]:
             lights = [est.light_at(p, ENV_H, ENV_W) for p in points]
             e_err, s_err, env_err = [], [], []
             for lt, gl in zip(lights, gt_lights):
-                e_est, e_gt = luminance(irradiance(lt, NORMALS)), luminance(irradiance(gl, NORMALS))
-                e_err.append(float(np.mean(np.abs(e_est - e_gt) / np.maximum(e_gt, 1e-9))))
+                e_err.append(irradiance_error(lt, gl))
                 if gts.sky.sun_visibility >= 0.5:  # transmittance only means something with a visible sun
                     v_est = 0.0 if lt.sun is None or est.light_cam.sun is None else lt.sun.visibility / max(est.light_cam.sun.visibility, 1e-9)
                     v_gt = 0.0 if gl.sun is None else gl.sun.visibility / gts.sky.sun_visibility
@@ -352,8 +357,7 @@ def bundled_section(runs: int, quick: bool) -> tuple[dict, list]:
             e_err, env_err = [], []
             for p, gl in zip(points, gt_lights):
                 lt = est.light_at(p, ENV_H, ENV_W)
-                e_est, e_gt = luminance(irradiance(lt, NORMALS)), luminance(irradiance(gl, NORMALS))
-                e_err.append(float(np.mean(np.abs(e_est - e_gt) / np.maximum(e_gt, 1e-9))))
+                e_err.append(irradiance_error(lt, gl))
                 env_err.append(env_log_error(lt.envmap, gl.envmap))
             scene_out.setdefault("all_cameras", {})[level] = {
                 "chosen_level": est.level, "irradiance_error_rel_mean": float(np.mean(e_err)),
