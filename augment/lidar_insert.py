@@ -235,8 +235,10 @@ def insert_placements_into_sweep(points: np.ndarray, labels: np.ndarray | None, 
               for p, a in zip(placements, assets)]
     sweep = insert_into_sweep(points, meshes, labels, [class_index.get(a.category, LIDARSEG_CAR) for a in assets],
                               car_intensity(points, is_car), use_empty_beams)
-    moved = xyz_global[sweep.moved >= 0]
+    hit = sweep.moved >= 0
+    moved = xyz_global[hit]  # where the moved points were
     lost = {b.token: n for b in boxes if b.token and (n := int(np.count_nonzero(points_in_box(moved, b))))}
-    new_global = transform_points(T_global_from_lidar, sweep.points[:, :3].astype(np.float64))
+    new_global = xyz_global.copy()  # only the moved points changed
+    new_global[hit] = transform_points(T_global_from_lidar, sweep.points[hit, :3].astype(np.float64))
     counts = [int(np.count_nonzero(points_in_box(new_global, p.box))) for p in placements]
     return SampleSweep(sweep, counts, lost)
