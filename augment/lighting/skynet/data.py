@@ -23,7 +23,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from ...conventions import hdr_to_ldr, intrinsics_from_fov, ldr_uint8_to_hdr, luminance, scale_intrinsics
+from ...conventions import hdr_to_ldr, intrinsics_from_fov, luminance, scale_intrinsics
 from ...io import InputError, atomic_path
 from .dome import (
     camera_from_angles,
@@ -384,21 +384,6 @@ def crop_view_pool(n: int, seed: int, dome_hw: tuple[int, int], hdri_dir: str | 
     chunks = [(seed, a, min(a + 100, n), H, W, str(hdri_dir)) for a in range(0, n, 100)]
     views = _cached_views(cache, _crop_chunk, chunks, workers, log, f"{n} panorama and synthetic-sky crops")
     return views[0::2], views[1::2]
-
-
-def jitter_view(v: View, rng: np.random.Generator, ev_sigma: float = 0.35, wb_sigma: float = 0.06,
-                noise_dn: float = 1.5) -> View:
-    """A photometric variant of a view (training augmentation): brighter exposure (EV ``|N(0, ev_sigma)|``),
-    white-balance gains (``exp N(0, wb_sigma)`` per channel, the smallest scaled to 1) and Gaussian sensor
-    noise of ``noise_dn`` (0..255 scale).  Gains only go up, so a clipped pixel stays clipped; the dome gets the
-    same gains (it stays on the image's radiometric scale)."""
-    gains = np.exp(rng.normal(0.0, wb_sigma, 3))
-    gains = gains / gains.min() * 2.0 ** abs(rng.normal(0.0, ev_sigma))
-    hdr = ldr_uint8_to_hdr(v.ldr).astype(np.float64) * gains
-    ldr = hdr_to_ldr(hdr) * 255.0 + rng.normal(0.0, noise_dn, v.ldr.shape)
-    ldr = np.where(v.ldr == 255, 255.0, ldr)  # clipped stays clipped (the response's top is not invertible)
-    return View(np.clip(np.round(ldr), 0, 255).astype(np.uint8), v.K, v.R_heading_from_cam,
-                (v.dome * gains.astype(np.float32)).astype(np.float32), v.visibility, v.sun_dir_heading)
 
 
 def flip_view(v: View) -> View:

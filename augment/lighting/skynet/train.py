@@ -41,7 +41,6 @@ from .data import (
     default_hdri_dir,
     dome_batch,
     flip_view,
-    jitter_view,
     expose_dome,
     load_panoramas,
     panorama_view,
@@ -94,7 +93,6 @@ class LightTrainConfig(TrainConfig):
     n_streets: int = 600  # x 2 rendered views
     n_crops: int = 3000  # half real-panorama crops, half synthetic-sky crops
     mix: tuple[float, float, float] = (0.5, 0.25, 0.25)  # street renders, real panorama crops, synthetic sky crops
-    jitter: float = 0.0  # fraction of views given a photometric variant (exposure, white balance, noise)
     sky_weights: str | None = None
 
 
@@ -297,12 +295,10 @@ def soft_direction_targets(target: torch.Tensor, bin_dirs: torch.Tensor, bin_ome
 @dataclass
 class LightBatches:
     """Random batches of views for the image predictor from three pools (street renders, real-panorama
-    crops, synthetic-sky crops) mixed by ``mix``; each view is mirrored with probability 1/2 and given a
-    photometric variant (:func:`.data.jitter_view`) with probability ``jitter``."""
+    crops, synthetic-sky crops) mixed by ``mix``; each view is mirrored with probability 1/2."""
 
     pools: tuple[list, list, list]
     mix: tuple[float, float, float]
-    jitter: float = 0.0
 
     def batch(self, n: int, rng: np.random.Generator) -> dict[str, np.ndarray]:
         p = np.array([m if len(pool) else 0.0 for m, pool in zip(self.mix, self.pools)], dtype=np.float64)
@@ -311,9 +307,7 @@ class LightBatches:
         for _ in range(n):
             pool = self.pools[int(rng.choice(3, p=p))]
             v = pool[int(rng.integers(len(pool)))]
-            v = flip_view(v) if rng.uniform() < 0.5 else v
-            # no draw without jitter: the batch stream stays that of the shipped v2 training
-            views.append(jitter_view(v, rng) if self.jitter > 0 and rng.uniform() < self.jitter else v)
+            views.append(flip_view(v) if rng.uniform() < 0.5 else v)
         return views_batch(views)
 
 
@@ -369,7 +363,7 @@ def train_light(cfg: LightTrainConfig, log=print) -> dict:
     street = street_view_pool(cfg.n_streets, cfg.seed, dome_hw, cache, workers=cfg.threads, log=log) if cfg.mix[0] > 0 else []
     pano_crops, sky_crops = crop_view_pool(cfg.n_crops, cfg.seed, dome_hw, hdri, cache, workers=cfg.threads, log=log)
     t_data = time.perf_counter() - t_data
-    data = LightBatches((street, pano_crops, sky_crops), cfg.mix, cfg.jitter)
+    data = LightBatches((street, pano_crops, sky_crops), cfg.mix)
     net_cfg = LightNetConfig()
     net = LightNet(net_cfg)
     log(f"image predictor: {count_parameters(net)} parameters, {len(street)} street views, {cfg.steps} steps of {cfg.batch}")
