@@ -28,13 +28,12 @@ from streetaug.augment.lighting.skynet.dome import (
     peak_centroid,
     render_perspective,
 )
-from streetaug.augment.lighting.skynet.model import SkyModel, SkyNetConfig, mirror_cell_index, positional_encoding
+from streetaug.augment.lighting.skynet.model import SkyModel, SkyNetConfig
 from streetaug.augment.lighting.skynet.predict import (
     SkyVector,
     decode_sky,
     encode_dome,
     get_models,
-    network_outputs,
     predict_sky,
     refine_sky,
     sky_to_light,
@@ -411,27 +410,6 @@ def test_mirrored_view_is_consistent():
     np.testing.assert_allclose(rays_f, rays[:, :, ::-1] * np.array([1.0, -1.0, 1.0])[:, None, None], atol=1e-6)
     np.testing.assert_array_equal(f.dome, v.dome[:, ::-1])
     np.testing.assert_allclose(D.flip_view(f).R_heading_from_cam, v.R_heading_from_cam, atol=1e-12)
-
-
-def test_mirror_cells_are_the_mirrored_directions():
-    bins = positional_encoding(16, 64).flatten(2)[0].T.double().numpy()
-    idx = mirror_cell_index((16, 64))
-    np.testing.assert_array_equal(np.sort(idx), np.arange(16 * 64))  # a permutation ...
-    np.testing.assert_array_equal(idx[idx], np.arange(16 * 64))  # ... that undoes itself
-    np.testing.assert_allclose(bins[idx], bins * np.array([1.0, -1.0, 1.0]), atol=1e-6)
-
-
-def test_network_outputs_of_a_mirrored_image_are_the_mirrored_outputs(models):
-    """The image and its mirror are both run for the direction: mirroring the input must mirror it exactly."""
-    net = models[1]
-    v = D.synthetic_sky_view(np.random.default_rng(7), (32, 128))
-    ldr = torch.from_numpy(np.ascontiguousarray(v.ldr.transpose(2, 0, 1)[None], dtype=np.float32) / 255.0)
-    rays = torch.from_numpy(D.view_rays(v.K, v.R_heading_from_cam, *v.ldr.shape[:2])[None])
-    o = network_outputs(net, ldr, rays)
-    f = network_outputs(net, ldr.flip(-1), rays.flip(-1) * torch.tensor([1.0, -1.0, 1.0])[None, :, None, None])
-    np.testing.assert_allclose(f["dir_logp"], o["dir_logp"][mirror_cell_index(net.cfg.dir_bins)], atol=1e-4)
-    np.testing.assert_allclose(f["dir"], o["dir"] * np.array([1.0, -1.0, 1.0]), atol=1e-5)
-    np.testing.assert_allclose(np.exp(o["dir_logp"]).sum(), 1.0, atol=1e-9)
 
 
 def test_sky_mask_keeps_a_sky_darkening_towards_the_top():

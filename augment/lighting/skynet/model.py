@@ -349,14 +349,6 @@ class LightNet(nn.Module):
         }
 
 
-def mirror_cell_index(dir_bins: tuple[int, int]) -> np.ndarray:
-    """(hb * wb,) int64: the dome cell that each cell of a ``dir_bins`` = (hb, wb) grid maps to under the
-    left-right mirror of the heading frame (y -> -y, i.e. longitude -> -longitude): cell (j, i) -> (j, wb-1-i)."""
-    hb, wb = dir_bins
-    j, i = np.meshgrid(np.arange(hb), np.arange(wb), indexing="ij")
-    return (j * wb + (wb - 1 - i)).ravel().astype(np.int64)
-
-
 def direction_cone_deg(p: np.ndarray, bin_dirs: np.ndarray, direction: np.ndarray, mass: float = 0.68) -> float:
     """Half-angle (deg) of the cone around ``direction`` (3,) holding ``mass`` of a distribution ``p`` (n,)
     over unit ``bin_dirs`` (n, 3)."""

@@ -29,7 +29,7 @@ import numpy as np
 from ...conventions import check_shape, ldr_uint8_to_hdr, luminance, camera_envmap_directions
 from ..light import DistantLight, SunLight
 from .dome import dome_directions, dome_pixel_size_rad, dome_solid_angles, heading_from_camera, sample_dome
-from .model import direction_cone_deg, mirror_cell_index
+from .model import direction_cone_deg
 
 VISIBILITY_MIN = 0.3  # below: no sun is reported (overcast, night, hidden)
 UNCERTAINTY_MAX_DEG = 35.0  # above (68 % cone): the direction is too uncertain to report a sun
@@ -194,35 +194,6 @@ def _posterior_direction(p: np.ndarray, bins: np.ndarray) -> np.ndarray:
     return d / np.linalg.norm(d)
 
 
-def network_outputs(net, ldr, rays) -> dict[str, np.ndarray]:
-    """The image predictor on one image and on its left-right mirror image, combined (test-time augmentation).
-
-    Mirroring the image together with the world (heading-frame y -> -y) is an exact symmetry of the
-    problem, so the mirror pass is a second opinion on the sun's direction: its direction distribution,
-    mapped back cell by cell, is averaged with the first in log space (a renormalised geometric mean), and
-    its direction is mirrored back and averaged (chosen on the development sets: pooled median 11.4 ->
-    10.8 deg with the cues).  Visibility, intensity and latent come from the image itself (averaging the
-    visibility too was not measured on the development sets, and it raised an overcast camera's to 0.41).
-
-    Args:
-        net: the :class:`.model.LightNet`.
-        ldr: (1, 3, h, w) float tensor in [0, 1]; rays: (1, 3, h, w) heading-frame unit rays.
-
-    Returns numpy arrays: ``dir`` (3,), ``dir_logp`` (n_bins,), ``vis_logit`` (), ``log_int`` (3,),
-    ``latent`` (latent_dim,).
-    """
-    torch = _torch()
-    flip = torch.tensor([1.0, -1.0, 1.0], dtype=rays.dtype)[None, :, None, None]
-    with torch.no_grad():
-        o = net(torch.cat([ldr, ldr.flip(-1)]), torch.cat([rays, rays.flip(-1) * flip]))
-    o = {k: v.double().numpy() for k, v in o.items()}
-    logp = 0.5 * (o["dir_logp"][0] + o["dir_logp"][1][mirror_cell_index(net.cfg.dir_bins)])
-    logp -= logp.max() + np.log(np.exp(logp - logp.max()).sum())
-    d = o["dir"][0] + o["dir"][1] * np.array([1.0, -1.0, 1.0])
-    return {"dir": d / max(np.linalg.norm(d), 1e-12), "dir_logp": logp,
-            "vis_logit": o["vis_logit"][0], "log_int": o["log_int"][0], "latent": o["latent"][0]}
-
-
 def predict_sky(image_rgb: np.ndarray, K: np.ndarray, up_cam: np.ndarray | None = None,
                 models=None, use_cues: bool = True) -> SkyPrediction:
     """Sky vector and sun of one LDR image without metadata (or with a known up direction).
@@ -232,8 +203,7 @@ def predict_sky(image_rgb: np.ndarray, K: np.ndarray, up_cam: np.ndarray | None 
         K: (3, 3) intrinsics (pixel centres at integers).
         up_cam: (3,) gravity up in the camera frame; default (0, -1, 0) (a level camera).
         models: (sky model, image predictor), default the shipped ones.
-        use_cues: combine the network (run on the image and its mirror image, :func:`network_outputs`)
-            with the explicit cues of :mod:`.sun_cues`: a sun disc seen in
+        use_cues: combine the network with the explicit cues of :mod:`.sun_cues`: a sun disc seen in
             the image gives the direction directly (its visibility is at least ``DISC_VISIBILITY``);
             otherwise the network's direction distribution (to the power ``CNN_WEIGHT``: a weak prior)
             is multiplied by the clear-sky fit's likelihood and by the "not on bright unclipped pixels
@@ -260,12 +230,13 @@ def predict_sky(image_rgb: np.ndarray, K: np.ndarray, up_cam: np.ndarray | None 
     ldr = torch.from_numpy(np.ascontiguousarray(small.transpose(2, 0, 1)[None], dtype=np.float32) / 255.0)
     rays = torch.from_numpy(view_rays(Ks, R, h, w)[None])
     t1 = time.perf_counter()
-    o = network_outputs(net, ldr, rays)
+    with torch.no_grad():
+        o = net(ldr, rays)
     t2 = time.perf_counter()
-    direction = o["dir"]
-    p = np.exp(o["dir_logp"])
+    direction = o["dir"][0].double().numpy()
+    p = torch.exp(o["dir_logp"][0]).double().numpy()
     bins = net.bin_dirs.double().numpy()
-    vis = float(1.0 / (1.0 + np.exp(-o["vis_logit"])))
+    vis = float(torch.sigmoid(o["vis_logit"][0]))
     vis_used = vis
     cue = "network"
     disc = detect_sun_disc(image_rgb, K, up / np.linalg.norm(up)) if use_cues else None
@@ -299,7 +270,7 @@ def predict_sky(image_rgb: np.ndarray, K: np.ndarray, up_cam: np.ndarray | None 
                 direction[2] >= np.sin(np.radians(GLARE_MIN_ELEVATION_DEG)):
             vis_used = max(vis, GLARE_VISIBILITY)  # the fitted sun sits in a compact clipped glare: seen
     t3 = time.perf_counter()
-    sky = SkyVector(np.expm1(o["log_int"]), direction, o["latent"])
+    sky = SkyVector(np.expm1(o["log_int"][0].double().numpy()), direction, o["latent"][0].double().numpy())
     direction_cam = R.T @ direction
     reasons = []
     if vis_used < VISIBILITY_MIN:
