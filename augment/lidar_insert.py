@@ -26,8 +26,8 @@ import numpy as np
 
 from streetaug.datasets.lidarseg import LIDARSEG_CAR
 
-from .conventions import check_shape, invert_transform, transform_points
-from .raycast import RayScene
+from .core import check_shape, invert_transform, transform_points
+from .core.raycast import RayScene
 
 # Moved points sit this far beyond the surface along their beam: inside the object, so that float32
 # storage cannot put a return on a tight box's face outside the box (LiDAR range noise is ~2 cm).

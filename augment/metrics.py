@@ -26,7 +26,7 @@ def env_log_error(estimated: np.ndarray, true: np.ndarray) -> float:
     true map's size; the sun, when drawn into the maps, counts like any pixel)."""
     import cv2
 
-    from .conventions import equirect_solid_angles
+    from .core import equirect_solid_angles
 
     true = np.asarray(true, np.float32)
     H, W = true.shape[:2]

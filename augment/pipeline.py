@@ -22,12 +22,12 @@ import numpy as np
 from streetaug.datasets.sample import CameraView, Sample
 
 from .assets.asset import Asset
-from .conventions import (
+from .core import (
     pose_camera_to_transform,
     rotate_vectors,
     transform_points,
 )
-from .io import InputError, write_exr, write_image_rgb, write_json_atomic
+from .core import InputError, write_exr, write_image_rgb, write_json_atomic
 from .lighting.light import DistantLight
 
 LABELS_SCHEMA = "streetaug.labels/1"
@@ -101,7 +101,7 @@ def ego_ground_plane_cam(view: CameraView) -> tuple[np.ndarray, float]:
 
 def scene_depth_for_view(sample: Sample, view: CameraView) -> np.ndarray:
     """Dense metric depth (H, W) for a camera: LiDAR densified, the ground plane where LiDAR is missing."""
-    from .render.depth import densify_lidar_depth, ground_plane_depth
+    from .core.depth import densify_lidar_depth, ground_plane_depth
 
     normal, offset = ego_ground_plane_cam(view)
     lidar = sample.lidar
@@ -426,7 +426,7 @@ def _render_objects(image, K, depth_m, lights, assets, T_cam_from_objects, groun
 
 def _ground_normal_from_depth(K: np.ndarray, depth_m: np.ndarray, T_cam_from_object: np.ndarray, asset: Asset) -> np.ndarray:
     """Ground normal under the object from the depth map (least-squares plane), default camera up (-y)."""
-    from .conventions import project_points, unproject_depth
+    from .core import project_points, unproject_depth
 
     up = np.array([0.0, -1.0, 0.0])
     H, W = depth_m.shape

@@ -85,7 +85,7 @@ def affected_region(source: np.ndarray, *composites: np.ndarray, grow_px: int = 
 def make_cases(dataroot, scenes: Sequence[str], seeds: Sequence[int], camera: str = "CAM_FRONT") -> list[Case]:
     """Place one procedural car per (scene, seed) and render its reference (high preset, true local light)."""
     from .assets.select import select_assets
-    from .conventions import rotate_vectors, transform_points
+    from .core import rotate_vectors, transform_points
     from .pipeline import InsertOptions, item_seed, place_in_view, scene_depth_for_view
     from .render.insert import render_insertion
     from .scenegen.ground_truth import GroundTruthScene
@@ -190,7 +190,7 @@ def plot_chart(table: list[dict], path: str | Path, title: str) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from .io import atomic_path
+    from .core import atomic_path
 
     fig, ax = plt.subplots(figsize=(7.5, 4.8))
     colours = {"draft": "tab:blue", "default": "tab:orange", "high": "tab:green"}

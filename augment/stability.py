@@ -28,7 +28,7 @@ from typing import Callable, Sequence
 import cv2
 import numpy as np
 
-from .conventions import hdr_to_ldr_uint8, ldr_uint8_to_hdr, make_transform
+from .core import hdr_to_ldr_uint8, ldr_uint8_to_hdr, make_transform
 from .metrics import psnr_db
 
 PerturbFn = Callable[..., tuple[object, object, Callable[[np.ndarray], np.ndarray]]]
@@ -266,7 +266,7 @@ def plot_report(report: dict, path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from .io import atomic_path
+    from .core import atomic_path
 
     metrics = [("sun_change_deg", "sun change (deg)"), ("image_path_sun_change_deg", "sun change, image only (deg)"),
                ("envmap_change", "env map change (log RMS)"), ("placement_change_m", "placement change (m)"),

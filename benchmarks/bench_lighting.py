@@ -54,7 +54,7 @@ import cv2  # noqa: E402
 import numpy as np  # noqa: E402
 import torch  # noqa: E402
 
-from streetaug.augment.conventions import (  # noqa: E402
+from streetaug.augment.core import (  # noqa: E402
     equirect_solid_angles,
     hdr_to_ldr,
     hdr_to_ldr_uint8,
@@ -93,7 +93,7 @@ ALL_SECTIONS = ("speed", "bundled", "real", "forward", "street_prior", "grid")
 
 def irradiance(light: DistantLight, normals: np.ndarray) -> np.ndarray:
     """(len(normals), 3) irradiance of a distant light on surfaces with camera-frame unit normals."""
-    from streetaug.augment.conventions import camera_envmap_directions
+    from streetaug.augment.core import camera_envmap_directions
 
     H, W = light.envmap.shape[:2]
     d = camera_envmap_directions(H, W).reshape(-1, 3)

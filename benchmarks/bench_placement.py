@@ -56,8 +56,8 @@ from scipy.spatial import cKDTree  # noqa: E402
 
 from streetaug.augment.assets.loader import load_asset  # noqa: E402
 from streetaug.augment.assets.procedural import procedural_car  # noqa: E402
-from streetaug.augment.conventions import quat_to_rotation, transform_points  # noqa: E402
-from streetaug.augment.io import write_image_rgb  # noqa: E402
+from streetaug.augment.core import quat_to_rotation, transform_points  # noqa: E402
+from streetaug.augment.core import write_image_rgb  # noqa: E402
 from streetaug.augment.lighting.light import DistantLight  # noqa: E402
 from streetaug.augment.pipeline import item_seed, scene_depth_for_view  # noqa: E402
 from streetaug.augment.render.insert import render_insertion  # noqa: E402

@@ -39,14 +39,14 @@ sys.path.insert(0, str(ROOT / "tests"))
 from render_fixtures import NUSCENES_K, SHARED_DATA, ground_scene, read_hdri_light, sunny_light  # noqa: E402
 
 from streetaug.augment.assets.procedural import procedural_car  # noqa: E402
-from streetaug.augment.conventions import pose_camera_to_transform  # noqa: E402
+from streetaug.augment.core import pose_camera_to_transform  # noqa: E402
 from streetaug.augment.render.geometry import prepare_asset  # noqa: E402
 from streetaug.augment.render.insert import QUALITY_PRESETS, render_insertion  # noqa: E402
 
 
 def sample_scenes(cars) -> list:
     """(name, image, K, depth, light, ev, [(car, T, ground normal)]) for CAM_FRONT of each bundled scene."""
-    from streetaug.augment.conventions import rotate_vectors
+    from streetaug.augment.core import rotate_vectors
     from streetaug.augment.lighting.estimate import estimate_lighting
     from streetaug.augment.pipeline import InsertOptions, place_in_view, scene_depth_for_view
     from streetaug.datasets.bundled import BUNDLED_VERSION, bundled_dataroot

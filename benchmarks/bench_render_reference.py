@@ -55,12 +55,12 @@ ROOT = Path(__file__).resolve().parents[1]
 SHARED = (ROOT / ".." / "shared" / "data").resolve()
 
 from streetaug.augment.assets.loader import load_asset  # noqa: E402
-from streetaug.augment.conventions import hdr_to_ldr_uint8, luminance, pose_camera_to_transform  # noqa: E402
+from streetaug.augment.core import hdr_to_ldr_uint8, luminance, pose_camera_to_transform  # noqa: E402
 from streetaug.augment.lighting.light import DistantLight  # noqa: E402
 from streetaug.augment.metrics import psnr_db  # noqa: E402
 from streetaug.augment.pipeline import InsertOptions, insert_into_image  # noqa: E402
 from streetaug.augment.render import reference as ref  # noqa: E402
-from streetaug.augment.render.depth import ground_plane_depth  # noqa: E402
+from streetaug.augment.core.depth import ground_plane_depth  # noqa: E402
 from streetaug.augment.render.geometry import prepare_asset  # noqa: E402
 from streetaug.augment.render.settings import QUALITY_PRESETS  # noqa: E402
 from streetaug.augment.render.shade import object_pixel_box  # noqa: E402

@@ -52,7 +52,7 @@ import cv2  # noqa: E402
 import numpy as np  # noqa: E402
 import torch  # noqa: E402
 
-from streetaug.augment.conventions import (  # noqa: E402
+from streetaug.augment.core import (  # noqa: E402
     camera_dir_to_lonlat,
     camera_envmap_directions,
     equirect_pixel_lonlat,
@@ -65,7 +65,7 @@ from streetaug.augment.conventions import (  # noqa: E402
     sample_equirect,
     world_dir_to_lonlat,
 )
-from streetaug.augment.io import write_image_rgb, write_json_atomic  # noqa: E402
+from streetaug.augment.core import write_image_rgb, write_json_atomic  # noqa: E402
 from streetaug.augment.lighting.sky import sky_radiance, sun_irradiance  # noqa: E402
 from streetaug.augment.lighting.skynet import data as D  # noqa: E402
 from streetaug.augment.lighting.skynet.dome import (  # noqa: E402

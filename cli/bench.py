@@ -46,7 +46,7 @@ def bench(scenes, seeds, levels, presets, small, out, debug):
     import os
 
     from streetaug.augment import speed_accuracy as sa
-    from streetaug.augment.io import write_bytes_atomic, write_json_atomic
+    from streetaug.augment.core import write_bytes_atomic, write_json_atomic
     from streetaug.datasets.bundled import bundled_dataroot
 
     if small:

@@ -102,7 +102,7 @@ def _view(sample, camera: str):
 
 
 def _intrinsics(intrinsics: str | None, fov_deg: float | None, width: int, height: int) -> np.ndarray:
-    from streetaug.augment.conventions import intrinsics_from_fov
+    from streetaug.augment.core import intrinsics_from_fov
 
     if intrinsics is not None:
         fx, fy, cx, cy = _parse_floats(intrinsics, 4, "--intrinsics")

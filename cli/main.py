@@ -62,7 +62,7 @@ def predict_light(dataroot, version, scene, sample_token, camera, image, fov_deg
           --scene scene-0061 --camera CAM_FRONT --out out/light-real
       streetaug predict-light --image photo.jpg --fov-deg 70 --out out/light-photo
     """
-    from streetaug.augment.io import read_image_rgb
+    from streetaug.augment.core import read_image_rgb
     from streetaug.augment.lighting.estimate import estimate_lighting, estimate_lighting_from_image
     from streetaug.augment.lighting.outputs import write_lighting_outputs
     from streetaug.augment.pipeline import ego_ground_plane_cam
@@ -138,7 +138,7 @@ def insert(dataroot, version, scene, sample_token, camera, asset, assets_dir, as
         if missing:
             raise click.UsageError(f"the image form of insert also needs {', '.join(missing)}")
         from streetaug.augment.assets.select import load_asset_options
-        from streetaug.augment.io import read_exr, read_image_rgb
+        from streetaug.augment.core import read_exr, read_image_rgb
 
         rgb = read_image_rgb(image)
         K = _intrinsics(intrinsics, None, rgb.shape[1], rgb.shape[0])
@@ -162,7 +162,7 @@ def insert(dataroot, version, scene, sample_token, camera, asset, assets_dir, as
         result = insert_into_view(sample, view, meshes, options)
         suffix = Path(view.image_path).suffix
         if explain:
-            from streetaug.augment.io import write_image_rgb
+            from streetaug.augment.core import write_image_rgb
             from streetaug.placement.explain import draw_placement_bev
 
             write_image_rgb(out / "placement_bev.png", draw_placement_bev(sample, view, result.extras["placement"]))
@@ -175,7 +175,7 @@ def insert(dataroot, version, scene, sample_token, camera, asset, assets_dir, as
 
 
 def _read_depth(path: Path) -> np.ndarray:
-    from streetaug.augment.io import InputError, read_exr
+    from streetaug.augment.core import InputError, read_exr
 
     if path.suffix.lower() == ".npy":
         if not path.is_file():

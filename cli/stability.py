@@ -32,9 +32,9 @@ def stability(dataroot, version, scene, sample_token, camera, families, failure_
       streetaug stability --scene sample-sunny --out out/stability
     """
     from streetaug.augment.assets.select import select_assets
-    from streetaug.augment.io import write_json_atomic
+    from streetaug.augment.core import write_json_atomic
     from streetaug.augment.pipeline import InsertOptions, item_seed
-    from streetaug.augment.io import write_image_rgb
+    from streetaug.augment.core import write_image_rgb
     from streetaug.augment.stability import contact_sheet, plot_report, run_failure_cases, stability_report
 
     reader = _open_dataset(dataroot, version)

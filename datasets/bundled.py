@@ -5,7 +5,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from streetaug.augment.io import InputError
+from streetaug.augment.core import InputError
 
 BUNDLED_VERSION = "v1.0-samples"
 BUNDLED_SUBDIR = Path("examples") / "nuscenes-samples"

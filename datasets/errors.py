@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from streetaug.augment.io import InputError
+from streetaug.augment.core import InputError
 
 
 class DatasetError(InputError):

@@ -30,7 +30,7 @@ from typing import Any
 
 import numpy as np
 
-from streetaug.augment.conventions import ConventionError, make_transform
+from streetaug.augment.core import ConventionError, make_transform
 
 from .errors import DatasetError
 from .lidarseg import read_lidar_points, read_lidarseg_labels

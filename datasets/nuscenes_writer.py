@@ -29,7 +29,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Sequence
 
-from streetaug.augment.io import InputError, atomic_path
+from streetaug.augment.core import InputError, atomic_path
 
 SOURCE_LINK = "source"
 # Source folders the devkit looks for under its dataroot itself (not through a table's filename):

@@ -1,6 +1,6 @@
 """Plain data objects for one dataset sample: cameras, LiDAR, boxes, drivable area.
 
-Conventions (see :mod:`streetaug.augment.conventions`): transforms ``T_a_from_b`` are 4x4 float64;
+Conventions (see :mod:`streetaug.augment.core`): transforms ``T_a_from_b`` are 4x4 float64;
 quaternions ``[w, x, y, z]``; ego frame x forward / y left / z up; global frame = the map of the log's
 location (x east, y north, z up); metres; timestamps in microseconds.
 
@@ -16,7 +16,7 @@ from typing import Callable
 
 import numpy as np
 
-from streetaug.augment.conventions import (
+from streetaug.augment.core import (
     invert_transform,
     make_transform,
     quat_to_rotation,
@@ -101,7 +101,7 @@ class CameraView:
     def image(self) -> np.ndarray:
         """(H, W, 3) uint8 RGB, decoded on first access."""
         if self._load_image is None:
-            from streetaug.augment.io import read_image_rgb
+            from streetaug.augment.core.io import read_image_rgb
 
             return read_image_rgb(self.image_path)
         return self._load_image()

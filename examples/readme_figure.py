@@ -15,7 +15,7 @@ import cv2  # noqa: E402
 import numpy as np  # noqa: E402
 
 from streetaug.augment.assets.select import select_assets  # noqa: E402
-from streetaug.augment.io import write_image_rgb  # noqa: E402
+from streetaug.augment.core import write_image_rgb  # noqa: E402
 from streetaug.augment.pipeline import InsertOptions, insert_into_view, item_seed  # noqa: E402
 from streetaug.datasets.bundled import BUNDLED_VERSION, bundled_dataroot  # noqa: E402
 from streetaug.datasets.nuscenes import NuScenesReader  # noqa: E402

@@ -21,7 +21,7 @@ import cv2
 import numpy as np
 import shapely
 
-from streetaug.augment.conventions import quat_to_rotation, transform_points
+from streetaug.augment.core import quat_to_rotation, transform_points
 from streetaug.datasets.sample import Box, CameraView, Sample
 
 from .config import LIDARSEG_NON_DRIVABLE, PlacementConfig

@@ -25,7 +25,7 @@ import cv2
 import numpy as np
 import shapely
 
-from streetaug.augment.conventions import check_shape, invert_transform, transform_points
+from streetaug.augment.core import check_shape, invert_transform, transform_points
 
 from .config import LIDARSEG_DRIVEABLE, LIDARSEG_EGO, PlacementConfig
 

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from streetaug.augment.conventions import check_shape
+from streetaug.augment.core import check_shape
 
 from .config import LIDARSEG_DRIVEABLE, LIDARSEG_GROUND, PlacementConfig
 

@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from streetaug.augment.conventions import check_shape, rotation_to_quat, transform_to_pose_camera
+from streetaug.augment.core import check_shape, rotation_to_quat, transform_to_pose_camera
 
 from .rules import box_corners_object, projected_inside_fraction
 

@@ -20,8 +20,8 @@ from typing import Sequence
 
 import numpy as np
 
-from streetaug.augment.conventions import rotation_to_quat, transform_points
-from streetaug.augment.io import InputError
+from streetaug.augment.core import rotation_to_quat, transform_points
+from streetaug.augment.core import InputError
 from streetaug.datasets.sample import Box, CameraView, Sample
 
 from .config import LIDARSEG_NON_DRIVABLE, PlacementConfig

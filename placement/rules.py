@@ -14,7 +14,7 @@ import numpy as np
 import shapely
 from scipy.spatial import cKDTree
 
-from streetaug.augment.conventions import check_shape, invert_transform, transform_points
+from streetaug.augment.core import check_shape, invert_transform, transform_points
 
 # The 12 edges of a box whose corners are ordered as in box_corners_object.
 _BOX_EDGES = np.array(

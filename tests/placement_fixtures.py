@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 import shapely
 
-from streetaug.augment.conventions import make_transform, transform_points, yaw_to_quat
+from streetaug.augment.core import make_transform, transform_points, yaw_to_quat
 from streetaug.datasets.sample import Box, CameraView, LidarSweep, Sample
 
 EGO_YAW_RAD = np.radians(30.0)

@@ -9,13 +9,13 @@ import numpy as np
 import trimesh
 
 from streetaug.augment.assets.asset import Asset, Material
-from streetaug.augment.conventions import (
+from streetaug.augment.core import (
     camera_envmap_directions,
     hdr_to_ldr_uint8,
     pixel_rays,
 )
 from streetaug.augment.lighting.light import DistantLight, SunLight
-from streetaug.augment.render.depth import ground_plane_depth
+from streetaug.augment.core.depth import ground_plane_depth
 
 SHARED_DATA = (Path(__file__).parents[1] / ".." / "shared" / "data").resolve()
 NUSCENES_K = np.array([[1266.4, 0.0, 816.3], [0.0, 1266.4, 491.5], [0.0, 0.0, 1.0]])

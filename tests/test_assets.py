@@ -16,8 +16,8 @@ from streetaug.augment.assets.loader import axis_rotation, list_assets, load_ass
 from streetaug.augment.assets.procedural import paint_palette, procedural_car, procedural_car_variants
 from streetaug.augment.assets.select import select_assets
 from streetaug.augment.assets.validate import validate_asset, validate_asset_report
-from streetaug.augment.io import InputError
-from streetaug.augment.raycast import RayScene
+from streetaug.augment.core import InputError
+from streetaug.augment.core.raycast import RayScene
 
 DATA = (Path(__file__).parents[1] / ".." / "shared" / "data").resolve()
 CARS = DATA / "cars"

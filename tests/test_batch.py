@@ -24,7 +24,7 @@ from click.testing import CliRunner
 
 from conftest import devkit
 from streetaug.augment.batch import BatchConfig, RunOptions, merge, read_log, run_batch
-from streetaug.augment.io import InputError
+from streetaug.augment.core import InputError
 from streetaug.datasets.bundled import BUNDLED_VERSION, bundled_dataroot
 from streetaug.datasets.nuscenes import NuScenesReader
 from streetaug.datasets.nuscenes_writer import new_token

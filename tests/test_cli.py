@@ -18,8 +18,8 @@ import pytest
 import trimesh
 from click.testing import CliRunner, Result
 
-from streetaug.augment.conventions import project_points
-from streetaug.augment.io import read_exr, write_exr
+from streetaug.augment.core import project_points
+from streetaug.augment.core import read_exr, write_exr
 from streetaug.cli.main import main
 
 REAL = Path(__file__).resolve().parents[2] / "shared" / "data" / "nuscenes-real"
@@ -171,7 +171,7 @@ def _box_asset(path: Path, wlh=(1.8, 4.4, 1.5)) -> Path:
 @pytest.fixture(scope="module")
 def image_form_inputs(tmp_path_factory):
     """A 320x180 grey image, the ground plane's depth 1.5 m below the camera, a sky + sun env map, a box asset."""
-    from streetaug.augment.render.depth import ground_plane_depth
+    from streetaug.augment.core.depth import ground_plane_depth
 
     root = tmp_path_factory.mktemp("imageform")
     W, H, f = 320, 180, 200.0

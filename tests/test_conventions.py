@@ -1,11 +1,11 @@
-"""Every convention of augment/conventions.py has a test (frames, quaternions, equirect, response)."""
+"""Every convention of augment/core has a test (frames, quaternions, equirect, response)."""
 
 import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from streetaug.augment import conventions as cv
+from streetaug.augment import core as cv
 
 
 def random_rotation(rng: np.random.Generator) -> np.ndarray:

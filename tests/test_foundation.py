@@ -4,10 +4,10 @@ import numpy as np
 import pytest
 import trimesh
 
-from streetaug.augment import io
-from streetaug.augment.conventions import camera_envmap_directions, equirect_solid_angles, luminance
+from streetaug.augment.core import io
+from streetaug.augment.core import camera_envmap_directions, equirect_solid_angles, luminance
 from streetaug.augment.lighting.light import DistantLight, SunLight
-from streetaug.augment.raycast import RayScene
+from streetaug.augment.core.raycast import RayScene
 
 
 class TestAtomicIO:

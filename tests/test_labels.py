@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from placement_fixtures import HEIGHT, K, WIDTH, camera_view
-from streetaug.augment.conventions import (
+from streetaug.augment.core import (
     invert_transform,
     pose_camera_to_transform,
     quat_to_rotation,

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from streetaug.augment.conventions import (
+from streetaug.augment.core import (
     camera_dir_to_lonlat,
     camera_envmap_directions,
     equirect_pixel_lonlat,
@@ -22,7 +22,7 @@ from streetaug.augment.conventions import (
     pixel_rays,
     yaw_to_quat,
 )
-from streetaug.augment.io import read_exr
+from streetaug.augment.core import read_exr
 from streetaug.augment.lighting.estimate import (
     GROUND_ALBEDO,
     estimate_lighting,
@@ -253,7 +253,7 @@ def test_without_location_falls_back_to_diffuse():
 def test_l0_is_constant_dome_of_image_mean():
     view, _, _ = _synthetic(0.0, 0.004, stripes=True)
     est = estimate_lighting(view, "singapore-onenorth", level="L0")
-    from streetaug.augment.conventions import ldr_uint8_to_hdr
+    from streetaug.augment.core import ldr_uint8_to_hdr
 
     mean = ldr_uint8_to_hdr(view.image).reshape(-1, 3).mean(axis=0)
     assert est.level == "L0" and est.light_cam.sun is None
@@ -300,7 +300,7 @@ def test_outputs_schema_exr_round_trip_and_sun_pixel(tmp_path):
     px = 2 * np.pi / 256
     dlon = (lon_px[j, i] - lon_sun + np.pi) % (2 * np.pi) - np.pi
     assert abs(dlon) <= px and abs(lat_px[j, i] - lat_sun) <= px
-    from streetaug.augment.io import read_image_rgb
+    from streetaug.augment.core import read_image_rgb
 
     preview = read_image_rgb(tmp_path / "preview.png")
     assert preview.shape[0] == 192 and preview.shape[1] > 3 * 192

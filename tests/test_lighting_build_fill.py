@@ -8,7 +8,7 @@ import torch
 from streetaug.augment.lighting.build import DistantSun, ViewObservation, _ego_forward, build_volume
 from streetaug.augment.lighting.fill import lateral_offsets_m, street_axis_xy, street_extrusion
 from streetaug.augment.lighting.volume import HybridLighting, LogGrid
-from streetaug.augment.conventions import make_transform, yaw_to_quat
+from streetaug.augment.core import make_transform, yaw_to_quat
 
 RED, BLUE = np.array([0.30, 0.02, 0.02]), np.array([0.02, 0.02, 0.30])
 GRID = LogGrid(shape=(48, 48, 16), half_extent_xy_m=40.0, z_min_m=-4.0, z_max_m=20.0)

@@ -9,7 +9,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from streetaug.augment.conventions import (
+from streetaug.augment.core import (
     camera_envmap_directions,
     hdr_to_ldr_uint8,
     intrinsics_from_fov,
@@ -20,7 +20,7 @@ from streetaug.augment.conventions import (
     world_dir_to_lonlat,
     yaw_to_quat,
 )
-from streetaug.augment.io import InputError, read_exr
+from streetaug.augment.core import InputError, read_exr
 from streetaug.augment.lighting.build import (
     ViewObservation,
     build_sky_dome,

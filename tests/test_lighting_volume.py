@@ -6,14 +6,14 @@ import numpy as np
 import pytest
 import torch
 
-from streetaug.augment.conventions import (
+from streetaug.augment.core import (
     camera_envmap_directions,
     equirect_pixel_lonlat,
     lonlat_to_world_dir,
     sample_equirect,
     world_dir_to_lonlat,
 )
-from streetaug.augment.io import InputError
+from streetaug.augment.core import InputError
 from streetaug.augment.lighting.volume import (
     CH_ALPHA,
     N_CHANNELS,

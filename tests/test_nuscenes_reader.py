@@ -16,15 +16,15 @@ import pytest
 from conftest import devkit
 import shapely
 
-import streetaug.augment.io as sio
-from streetaug.augment.conventions import (
+import streetaug.augment.core.io as sio
+from streetaug.augment.core import (
     invert_transform,
     make_transform,
     project_points,
     transform_points,
     yaw_to_quat,
 )
-from streetaug.augment.io import InputError
+from streetaug.augment.core import InputError
 from streetaug.datasets import nuscenes as nus
 from streetaug.datasets.nuscenes import DatasetError, NuScenesReader
 from streetaug.datasets.lidarseg import read_lidar_points, read_lidarseg_labels

@@ -25,8 +25,8 @@ from placement_fixtures import (
     lidar_sweep,
     make_sample,
 )
-from streetaug.augment.conventions import quat_to_rotation, quat_to_yaw, transform_points
-from streetaug.augment.io import InputError
+from streetaug.augment.core import quat_to_rotation, quat_to_yaw, transform_points
+from streetaug.augment.core import InputError
 from streetaug.placement.config import PlacementConfig
 from streetaug.placement.drivable import DrivableArea, drivable_area_for_sample, drivable_from_map
 from streetaug.placement.ground import LocalGroundFitter, ego_ground_plane
@@ -459,7 +459,7 @@ def test_real_sample_label_matches_placement(real_sample):
 def test_lidarseg_fixture_drivable_and_ground():
     from streetaug.datasets.lidarseg import read_lidar_points, read_lidarseg_labels
     from streetaug.datasets.sample import LidarSweep
-    from streetaug.augment.conventions import make_transform
+    from streetaug.augment.core import make_transform
 
     root = (Path(__file__).parents[1] / ".." / "shared" / "data" / "nuscenes-fixtures").resolve()
     if not root.is_dir():

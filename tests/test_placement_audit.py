@@ -18,7 +18,7 @@ from placement_fixtures import (
     lidar_sweep,
     make_sample,
 )
-from streetaug.augment.conventions import quat_to_rotation, rotation_to_quat, transform_points
+from streetaug.augment.core import quat_to_rotation, rotation_to_quat, transform_points
 from streetaug.datasets.sample import Box
 from streetaug.placement.audit import AUDITED_RULES, audit_placements, box_hull_xy
 from streetaug.placement.config import PlacementConfig
@@ -191,7 +191,7 @@ def test_lidar_depth_fills_between_wall_beams_but_not_between_ground_rings():
 
 def test_visible_fraction_estimate_counts_image_and_occluders():
     from placement_fixtures import HEIGHT, K, WIDTH
-    from streetaug.augment.conventions import pose_camera_to_transform
+    from streetaug.augment.core import pose_camera_to_transform
     from streetaug.placement.rules import lidar_depth_image, visible_fraction_estimate
 
     T = pose_camera_to_transform(0.0, 1.5, 20.0, 90.0)[None]  # a car side-on, 20 m ahead

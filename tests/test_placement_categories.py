@@ -6,7 +6,7 @@ import json
 
 import pytest
 
-from streetaug.augment.io import InputError
+from streetaug.augment.core import InputError
 from streetaug.placement.categories import NUSCENES_OBJECT_CATEGORIES, category_for_asset
 
 

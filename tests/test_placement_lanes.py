@@ -21,7 +21,7 @@ from placement_fixtures import (
     lidar_sweep,
     make_sample,
 )
-from streetaug.augment.conventions import project_points, transform_points
+from streetaug.augment.core import project_points, transform_points
 from streetaug.datasets.errors import DatasetError
 from streetaug.datasets.nuscenes_map import discretize_arcline_path, read_lanes
 from streetaug.placement.config import PlacementConfig

@@ -7,7 +7,7 @@ import numpy as np
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
-from streetaug.augment import conventions as cv
+from streetaug.augment import core as cv
 
 finite = st.floats(-1e3, 1e3, allow_nan=False, allow_infinity=False)
 angle = st.floats(-np.pi, np.pi, allow_nan=False)
@@ -151,7 +151,7 @@ def test_shadow_ratio_finite_and_bounded_for_any_light(sky, sun, elevation, azim
     """Zero, tiny and huge sky/sun irradiance: the ratio map's denominators never produce NaN/Inf or negatives."""
     from streetaug.augment.assets.procedural import procedural_car
     from streetaug.augment.lighting.light import DistantLight, SunLight
-    from streetaug.augment.render.depth import ground_plane_depth
+    from streetaug.augment.core.depth import ground_plane_depth
     from streetaug.augment.render.insert import render_insertion
 
     W, H, f = 96, 64, 60.0

@@ -5,7 +5,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from streetaug.augment.conventions import equirect_solid_angles
+from streetaug.augment.core import equirect_solid_angles
 from streetaug.augment.render.brdf import (
     BRDFParams,
     brdf_pdf,

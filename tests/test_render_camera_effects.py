@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from render_fixtures import degrade, sharp_polygons
-from streetaug.augment.io import InputError
+from streetaug.augment.core import InputError
 from streetaug.augment.render.camera_effects import (
     CameraEffects,
     add_object_noise,
@@ -88,7 +88,7 @@ def test_object_noise_only_where_covered():
 def test_match_camera_in_render_insertion():
     """With matching on, the object gets the image's noise and blur; off, the image is untouched elsewhere."""
     from render_fixtures import primitive_car, sunny_light
-    from streetaug.augment.conventions import intrinsics_from_fov, pose_camera_to_transform
+    from streetaug.augment.core import intrinsics_from_fov, pose_camera_to_transform
     from streetaug.augment.render.insert import QUALITY_PRESETS, render_insertion
 
     W, H = 320, 180

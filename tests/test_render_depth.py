@@ -4,8 +4,8 @@ import time
 import numpy as np
 import pytest
 
-from streetaug.augment.conventions import intrinsics_from_fov, unproject_depth
-from streetaug.augment.render.depth import densify_lidar_depth, ground_plane_depth, sparse_depth
+from streetaug.augment.core import intrinsics_from_fov, unproject_depth
+from streetaug.augment.core.depth import densify_lidar_depth, ground_plane_depth, sparse_depth
 
 W, H = 1600, 900
 K = intrinsics_from_fov(W, H, 70.0)

@@ -6,8 +6,8 @@ import pytest
 
 from render_fixtures import primitive_car, sphere_asset, sunny_light, ground_scene
 from streetaug.augment.assets.asset import Asset, Material
-from streetaug.augment.conventions import intrinsics_from_fov, pose_camera_to_transform
-from streetaug.augment.io import InputError
+from streetaug.augment.core import intrinsics_from_fov, pose_camera_to_transform
+from streetaug.augment.core import InputError
 from streetaug.augment.lighting.light import DistantLight
 from streetaug.augment.render.composite import composite, depth_visibility
 from streetaug.augment.render.insert import QUALITY_PRESETS, RenderSettings, render_insertion
@@ -61,7 +61,7 @@ def test_shadow_ratio_one_far_and_below_one_under(result, car, scene):
     assert (y1 - y0) < 0.5 * H  # the ratio map is only computed near the object
     # Ground points under the car's body (object frame |x| < 1.5 m, |y| < 0.6 m) that the camera sees
     # between the wheels: the body hides the sun and most of the sky from them.
-    from streetaug.augment.conventions import invert_transform, unproject_depth
+    from streetaug.augment.core import invert_transform, unproject_depth
 
     ys, xs = np.nonzero((result.coverage == 0) & np.isfinite(scene[2]))
     p_cam = unproject_depth(K, np.stack([xs, ys], 1).astype(float), scene[2][ys, xs])
@@ -132,7 +132,7 @@ def test_partial_occlusion_soft_edge():
 def test_composite_formula():
     rng = np.random.default_rng(0)
     img = rng.integers(0, 256, (4, 5, 3)).astype(np.uint8)
-    from streetaug.augment.conventions import hdr_to_ldr_uint8, ldr_uint8_to_hdr
+    from streetaug.augment.core import hdr_to_ldr_uint8, ldr_uint8_to_hdr
 
     rad = np.full((4, 5, 3), 0.3, np.float32)
     cov = np.zeros((4, 5), np.float32)

@@ -15,7 +15,7 @@ pytestmark = pytest.mark.skipif(not OK, reason=f"Mitsuba reference unavailable: 
 
 def _spot_env(spots, height=256, width=512):
     """A black map with 2 x 2-pixel spots; returns the map and each spot's exact camera-frame direction."""
-    from streetaug.augment.conventions import lonlat_to_camera_dir
+    from streetaug.augment.core import lonlat_to_camera_dir
 
     env = np.zeros((height, width, 3), np.float32)
     dirs = []
@@ -31,7 +31,7 @@ def _spot_env(spots, height=256, width=512):
 @pytest.mark.parametrize("principal", ["centred", "off-centre"])
 def test_camera_and_envmap_conventions_single_bright_direction(principal):
     """A bright direction of the camera-frame map lands where our projection puts it (to 0.15 px)."""
-    from streetaug.augment.conventions import project_points
+    from streetaug.augment.core import project_points
 
     W, H = 160, 90
     cx, cy = ((W - 1) / 2, (H - 1) / 2) if principal == "centred" else (100.0, 55.0)
@@ -78,9 +78,9 @@ def test_insertion_matches_mitsuba():
     import cv2
 
     from render_fixtures import sunny_light
-    from streetaug.augment.conventions import hdr_to_ldr_uint8, intrinsics_from_fov, luminance, pose_camera_to_transform
+    from streetaug.augment.core import hdr_to_ldr_uint8, intrinsics_from_fov, luminance, pose_camera_to_transform
     from streetaug.augment.lighting.light import DistantLight
-    from streetaug.augment.render.depth import ground_plane_depth
+    from streetaug.augment.core.depth import ground_plane_depth
     from streetaug.augment.render.insert import render_insertion
 
     W, H = 200, 112

@@ -3,10 +3,10 @@
 import numpy as np
 
 from render_fixtures import primitive_car, sunny_light
-from streetaug.augment.conventions import intrinsics_from_fov, pose_camera_to_transform
+from streetaug.augment.core import intrinsics_from_fov, pose_camera_to_transform
 from streetaug.augment.lighting.light import DistantLight
 from streetaug.augment.render.bounce import BounceLight, ground_radiance_below
-from streetaug.augment.render.depth import ground_plane_depth
+from streetaug.augment.core.depth import ground_plane_depth
 from streetaug.augment.render.geometry import prepare_asset
 from streetaug.augment.render.settings import RenderSettings
 from streetaug.augment.render.shadow import GroundShadow, render_shadow
@@ -17,7 +17,7 @@ UP = np.array([0.0, -1.0, 0.0])
 
 
 def _uniform_sky(level=1.0, ground=0.2):
-    from streetaug.augment.conventions import camera_envmap_directions
+    from streetaug.augment.core import camera_envmap_directions
 
     d = camera_envmap_directions(32, 64)
     env = np.where((d @ UP > 0)[..., None], level, ground).astype(np.float32) * np.ones(3, np.float32)

@@ -9,14 +9,14 @@ import numpy as np
 import pytest
 from conftest import devkit
 
-from streetaug.augment.conventions import (
+from streetaug.augment.core import (
     invert_transform,
     luminance,
     make_transform,
     rotate_vectors,
     transform_points,
 )
-from streetaug.augment.io import read_exr, read_image_rgb
+from streetaug.augment.core import read_exr, read_image_rgb
 from streetaug.augment.lighting.sun import sun_direction_global
 from streetaug.augment.scenegen.lidar import points_in_box
 from streetaug.augment.scenegen.make import CAMERA_RIGS, SAMPLE_SCENES, choose_exposure, make_sample_scenes
@@ -214,7 +214,7 @@ def test_shadowed_road_is_darker_than_lit_road_in_the_sunny_image(dataroot: Path
     sd = _by_token(t["sample_data"])[gt["cameras"]["CAM_FRONT"]["sample_data_token"]]
     image = read_image_rgb(dataroot / sd["filename"]).astype(np.float64) / 255
     # re-trace the same view to find which road pixels the sun reaches
-    from streetaug.augment.conventions import yaw_to_quat
+    from streetaug.augment.core import yaw_to_quat
 
     T = make_transform(yaw_to_quat(np.radians(spec.heading_deg)), [*spec.origin_xy, 0.0])
     scene = build_street(StreetParams(seed=spec.street_seed, drive_on_left=spec.drive_on_left), T)
@@ -304,7 +304,7 @@ def test_map_drivable_area_covers_the_road_points_and_the_ego(dataroot: Path) ->
 
 
 def test_ground_truth_light_in_the_camera_frame(dataroot: Path) -> None:
-    from streetaug.augment.conventions import camera_dir_to_lonlat, sample_equirect
+    from streetaug.augment.core import camera_dir_to_lonlat, sample_equirect
     from streetaug.augment.scenegen.ground_truth import ground_truth_light
 
     gt = json.loads((dataroot / "ground_truth" / "sample-sunny" / "lighting.json").read_text())

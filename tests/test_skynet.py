@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 import torch
 
-from streetaug.augment.conventions import hdr_to_ldr, intrinsics_from_fov, luminance
-from streetaug.augment.io import InputError
+from streetaug.augment.core import hdr_to_ldr, intrinsics_from_fov, luminance
+from streetaug.augment.core import InputError
 from streetaug.augment.lighting.skynet import data as D
 from streetaug.augment.lighting.skynet.dome import (
     angle_deg,

@@ -14,7 +14,7 @@ import pytest
 from click.testing import CliRunner
 
 from streetaug.augment.assets.procedural import procedural_car
-from streetaug.augment.io import InputError
+from streetaug.augment.core import InputError
 from streetaug.augment.pipeline import InsertOptions, insert_into_view
 from streetaug.augment.stability import FAMILIES, failure_cases, measure, run_once
 from streetaug.datasets.bundled import BUNDLED_VERSION, bundled_dataroot

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from streetaug.augment.conventions import hdr_to_ldr, intrinsics_from_fov, luminance
+from streetaug.augment.core import hdr_to_ldr, intrinsics_from_fov, luminance
 from streetaug.augment.lighting import sky as S
 from streetaug.augment.lighting.skynet.dome import angle_deg, camera_from_angles, dome_directions, heading_from_camera
 from streetaug.augment.lighting.skynet.sun_cues import (

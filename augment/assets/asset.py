@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..conventions import check_shape
+from ..core import check_shape
 
 
 @dataclass(frozen=True)

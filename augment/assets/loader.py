@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..io import InputError
+from ..core import InputError
 from .asset import Asset, Material
 from .procedural import srgb_to_linear
 from .validate import smooth_vertex_normals, validate_asset

@@ -1,7 +1,7 @@
 """Mesh checks for assets: reject broken meshes with a clear error, repair what is safe to repair.
 
 :func:`validate_asset` is called by the loader and by the procedural generator.  It raises
-:class:`~streetaug.augment.io.InputError` (naming the asset) for meshes that cannot be rendered and
+:class:`~streetaug.augment.core.InputError` (naming the asset) for meshes that cannot be rendered and
 returns a cleaned copy otherwise: zero-area / repeated-index triangles dropped, missing or zero
 vertex normals recomputed.
 """
@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..io import InputError
+from ..core import InputError
 from .asset import Asset
 
 log = logging.getLogger(__name__)

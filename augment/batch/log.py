@@ -13,7 +13,7 @@ import os
 from pathlib import Path
 from typing import Callable, Iterable
 
-from ..io import write_bytes_atomic
+from ..core import write_bytes_atomic
 
 DONE_STATUSES = ("ok", "skipped")
 

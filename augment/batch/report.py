@@ -10,7 +10,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from ..io import read_image_rgb, write_image_rgb
+from ..core import read_image_rgb, write_image_rgb
 
 SUMMARY_SCHEMA = "streetaug.batch_summary/1"
 PERCENTILES = (50, 90, 99)

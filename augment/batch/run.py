@@ -28,7 +28,7 @@ from tqdm import tqdm
 from streetaug.datasets.nuscenes import NuScenesReader
 from streetaug.datasets.nuscenes_writer import InsertedObject, link_source, write_augmented_tables
 
-from ..io import InputError, write_json_atomic
+from ..core import InputError, write_json_atomic
 from .config import BatchConfig, RunOptions, check_and_save_config, load_config
 from .execute import run_dask, run_inline, run_processes
 from .log import append_rows, compact_log, done_samples, latest_rows, read_log, write_log

@@ -22,7 +22,7 @@ import numpy as np
 
 from streetaug.datasets.nuscenes import NuScenesReader
 
-from ..io import write_image_rgb, write_json_atomic
+from ..core import write_image_rgb, write_json_atomic
 from .config import BatchConfig
 
 _READERS: dict[tuple[str, str], NuScenesReader] = {}
@@ -159,7 +159,7 @@ def _write_lidar(out_dir: Path, reader: NuScenesReader, sample, result, version:
     """
     from streetaug.datasets.lidarseg import read_lidar_points, read_lidarseg_labels
 
-    from ..io import write_bytes_atomic
+    from ..core import write_bytes_atomic
     from ..lidar_insert import insert_placements_into_sweep
 
     sd = reader.lidar_sample_data(sample.token)

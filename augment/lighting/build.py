@@ -46,7 +46,7 @@ import numpy as np
 import torch
 from scipy import ndimage
 
-from ..conventions import check_shape, ldr_uint8_to_hdr, luminance, transform_points
+from ..core import check_shape, ldr_uint8_to_hdr, luminance, transform_points
 from .fill import lateral_offsets_m, street_axis_xy, street_extrusion
 from .volume import CH_ALPHA, CH_AXIS, CH_COLOR, CH_SIGMA, N_CHANNELS, HybridLighting, LogGrid, world_envmap_directions
 
@@ -150,7 +150,7 @@ def observe_view(view, T_vol_from_cam: np.ndarray, exposure_ratio: float, lidar_
         ground_plane_cam: (normal (3,), offset d) of the ground ``n . p + d = 0`` in the camera frame.
         work: the L1 fit's prepared image of this view (reused for the sky mask), or None.
     """
-    from ..render.depth import densify_lidar_depth
+    from ..core.depth import densify_lidar_depth
     from .estimate import _prepare, _sky_mask, downscale_image
 
     image = np.asarray(view.image)

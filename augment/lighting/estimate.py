@@ -41,7 +41,7 @@ from dataclasses import dataclass, field, replace
 import cv2
 import numpy as np
 
-from ..conventions import (
+from ..core import (
     check_shape,
     ldr_uint8_to_hdr,
     luminance,
@@ -760,7 +760,7 @@ def image_only_view(image_rgb: np.ndarray, K: np.ndarray, camera_height_m: float
     looking along ego +x, at the global origin, no timestamp (0)."""
     from streetaug.datasets.sample import CameraView
 
-    from ..conventions import make_transform
+    from ..core import make_transform
 
     H, W = image_rgb.shape[:2]
     T_ego_from_cam = make_transform(np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]]),

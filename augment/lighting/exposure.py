@@ -18,7 +18,7 @@ from typing import Sequence
 
 import numpy as np
 
-from ..conventions import hdr_to_ldr, ldr_uint8_to_hdr, luminance, project_points, transform_points
+from ..core import hdr_to_ldr, ldr_uint8_to_hdr, luminance, project_points, transform_points
 
 MIN_SHARED_POINTS = 40  # fewer shared points than this do not calibrate a pair
 Z_BUFFER_CELL_PX = 8  # visibility test: nearest LiDAR return within cells of this size

@@ -2,7 +2,7 @@
 
 Convention: everything here lives in ONE frame, the frame of the rays the renderer casts (the camera
 frame in practice); radiance is linear HDR on the image's radiometric scale (so that rendering then
-applying the camera response of :mod:`conventions` matches the image's exposure).
+applying the camera response of :mod:`streetaug.augment.core.response` matches the image's exposure).
 
 The sun is kept out of the environment map and described analytically (direction, irradiance,
 angular radius), so renderers can sample it explicitly, trace its visibility and get penumbrae
@@ -17,7 +17,7 @@ from typing import Protocol
 import numpy as np
 from scipy import ndimage
 
-from ..conventions import (
+from ..core import (
     camera_dir_to_lonlat,
     camera_envmap_directions,
     check_shape,

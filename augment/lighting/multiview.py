@@ -19,7 +19,7 @@ from typing import Sequence
 import numpy as np
 import torch
 
-from ..conventions import (
+from ..core import (
     equirect_solid_angles,
     invert_transform,
     ldr_uint8_to_hdr,
@@ -235,7 +235,7 @@ def estimate_sample_lighting(sample, cameras: Sequence[str], level: str) -> "Sam
         cameras: camera channels to use, e.g. ``["CAM_FRONT", "CAM_FRONT_LEFT"]``.
         level: "L0" | "L1" | "L2" | "L3" | "auto".
     """
-    from ..io import InputError
+    from ..core import InputError
 
     cams = list(cameras)
     if not cams:

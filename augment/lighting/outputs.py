@@ -8,14 +8,14 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from ..conventions import (
+from ..core import (
     camera_envmap_directions,
     check_shape,
     equirect_solid_angles,
     hdr_to_ldr_uint8,
     luminance,
 )
-from ..io import write_exr, write_image_rgb, write_json_atomic
+from ..core import write_exr, write_image_rgb, write_json_atomic
 from .estimate import LightingEstimate
 
 LIGHTING_SCHEMA = "streetaug.lighting/1"
@@ -45,7 +45,7 @@ def diffuse_sphere(env: np.ndarray, size: int, albedo: float = 0.8) -> np.ndarra
 
 def mirror_sphere(env: np.ndarray, size: int) -> np.ndarray:
     """Mirror sphere (size, size, 3) radiance: reflection of the view ray (+z) about the normal."""
-    from ..conventions import camera_dir_to_lonlat, sample_equirect
+    from ..core import camera_dir_to_lonlat, sample_equirect
 
     normals, inside = _sphere_normals(size)
     view = np.array([0.0, 0.0, 1.0])  # ray from the camera into the scene

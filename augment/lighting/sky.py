@@ -30,7 +30,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..conventions import ConventionError, camera_envmap_directions, check_shape, luminance
+from ..core import ConventionError, camera_envmap_directions, check_shape, luminance
 from .light import DistantLight, SunLight
 
 SOLAR_CONSTANT_W_M2 = 1361.0

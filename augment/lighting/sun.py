@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..conventions import check_shape, rotate_vectors
+from ..core import check_shape, rotate_vectors
 
 # Map origins (lat, lon in degrees) of the nuScenes map expansion (public devkit constants).
 LOCATION_LATLON: dict[str, tuple[float, float]] = {

@@ -6,7 +6,7 @@ Radiance is linear RGB on one radiometric scale (the reference image's); torch f
 respect to the sky dome, the sun irradiance and the volume parameters.
 
 * **Sky dome** ``sky_world``: (H, W, 3) equirect map in the world (z-up) convention of
-  :mod:`streetaug.augment.conventions` (``lon = atan2(dy, dx)``, ``lat = asin(dz)``), sun disc excluded; the
+  :mod:`streetaug.augment.core` (``lon = atan2(dy, dx)``, ``lat = asin(dz)``), sun disc excluded; the
   sun is analytic (direction, irradiance, angular radius) and added by the radiance query where a ray
   falls inside its disc.
 * **VSG volume** ``params``: (X, Y, Z, 8) channels-last tensor, per voxel ``[c_r, c_g, c_b, mu_x, mu_y, mu_z,
@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from ..conventions import (
+from ..core import (
     camera_envmap_directions,
     check_shape,
     equirect_pixel_lonlat,
@@ -410,7 +410,7 @@ class HybridLighting:
 
         Empty voxels (alpha 0) do not affect the radiance; they load back as :func:`empty_params` voxels.
         """
-        from ..io import write_bytes_atomic, write_exr, write_json_atomic
+        from ..core import write_bytes_atomic, write_exr, write_json_atomic
 
         out = Path(out_dir)
         write_exr(out / "sky_world.exr", self.sky_world.detach().numpy().astype(np.float32))
@@ -447,7 +447,7 @@ class HybridLighting:
     @staticmethod
     def load(in_dir: str | Path) -> "HybridLighting":
         """Read what :meth:`save` wrote (raises ``InputError`` naming the file and field on bad input)."""
-        from ..io import InputError, read_exr, read_json
+        from ..core import InputError, read_exr, read_json
 
         d = Path(in_dir)
         doc = read_json(d / "hybrid.json")

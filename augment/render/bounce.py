@@ -26,7 +26,7 @@ from functools import cached_property
 
 import numpy as np
 
-from ..conventions import camera_envmap_directions, equirect_solid_angles
+from ..core import camera_envmap_directions, equirect_solid_angles
 from ..lighting.light import DistantLight
 from .brdf import specular_albedo, to_world
 from .geometry import PreparedAsset

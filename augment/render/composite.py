@@ -9,7 +9,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from ..conventions import hdr_to_ldr_uint8, ldr_uint8_to_hdr
+from ..core import hdr_to_ldr_uint8, ldr_uint8_to_hdr
 
 OCCLUSION_SOFT_M = 0.10  # width of the soft depth test at 0 m ...
 OCCLUSION_SOFT_PER_M = 0.01  # ... growing 1 cm per metre of depth (LiDAR / completion error grows)

@@ -13,8 +13,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..assets.asset import Asset, Material
-from ..io import InputError
-from ..raycast import RayScene
+from ..core import InputError
+from ..core.raycast import RayScene
 
 _CACHE: "OrderedDict[int, tuple[Asset, PreparedAsset]]" = OrderedDict()
 _CACHE_SIZE = 16

@@ -14,8 +14,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..assets.asset import Asset
-from ..conventions import check_shape
-from ..io import InputError
+from ..core import check_shape
+from ..core import InputError
 from ..lighting.light import DistantLight
 from .camera_effects import add_object_noise, blur_object_layer, estimate_camera_effects
 from .composite import composite, depth_visibility

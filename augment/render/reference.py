@@ -6,7 +6,7 @@ use this module (``pip install mitsuba``; the ``scalar_rgb`` variant needs no LL
 The scene is what the contract's image form assumes, rendered with full global illumination:
 a distant environment (sun included, as pixels of the map), an infinite-looking Lambertian ground
 plane, and optionally the object.  Everything is expressed in the OpenCV camera frame of
-:mod:`streetaug.augment.conventions` (x right, y down, z forward, metres)::
+:mod:`streetaug.augment.core` (x right, y down, z forward, metres)::
 
     Mitsuba camera / envmap local frame      OpenCV camera frame (= Mitsuba world here)
         y up, x left, z forward         --diag(-1,-1,1)-->     y down, x right, z forward
@@ -41,7 +41,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..assets.asset import Asset, Material
-from ..conventions import camera_envmap_directions, check_shape, equirect_solid_angles
+from ..core import camera_envmap_directions, check_shape, equirect_solid_angles
 from .brdf import MIN_ROUGHNESS
 
 FLIP = np.diag([-1.0, -1.0, 1.0, 1.0])  # Mitsuba local (x left, y up) <-> OpenCV (x right, y down)

@@ -2,7 +2,7 @@
 
 Directions are unit (N, 3) float64 vectors; pdfs are per steradian.  Local hemisphere samples are
 z-up (rotate them with :func:`streetaug.augment.render.brdf.to_world`).  Environment maps use the
-camera-frame equirectangular convention of :mod:`streetaug.augment.conventions`.
+camera-frame equirectangular convention of :mod:`streetaug.augment.core`.
 """
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..conventions import (
+from ..core import (
     camera_dir_to_lonlat,
     check_shape,
     equirect_solid_angles,
@@ -136,7 +136,7 @@ def env_sampler_for(envmap: np.ndarray) -> EnvSampler:
 
 def hemisphere_irradiance(envmap: np.ndarray, normal: np.ndarray) -> np.ndarray:
     """Irradiance (3,) on a surface with unit ``normal`` (3,) from an unoccluded camera-frame envmap."""
-    from ..conventions import camera_envmap_directions
+    from ..core import camera_envmap_directions
 
     H, W = envmap.shape[:2]
     cos = np.clip(np.einsum("hwk,k->hw", camera_envmap_directions(H, W), np.asarray(normal, dtype=np.float64)), 0.0, None)
@@ -180,7 +180,7 @@ def irradiance_map(envmap: np.ndarray, height: int = 32, width: int = 64) -> np.
         return hit[1]
     import cv2
 
-    from ..conventions import camera_envmap_directions
+    from ..core import camera_envmap_directions
 
     H, W = envmap.shape[:2]
     # Power per small texel (radiance x solid angle summed exactly), and the texel's mean direction

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from ..io import InputError
+from ..core import InputError
 
 
 @dataclass(frozen=True)

@@ -31,7 +31,7 @@ from typing import TYPE_CHECKING
 import cv2
 import numpy as np
 
-from ..conventions import invert_transform, project_points
+from ..core import invert_transform, project_points
 from ..lighting.light import DistantLight
 from .bounce import BounceLight
 from .brdf import BRDFParams, brdf_pdf, eval_brdf, row_norm, sample_brdf, schlick_weight, specular_albedo
@@ -114,7 +114,7 @@ def env_radiance(light: DistantLight, dirs_cam: np.ndarray) -> np.ndarray:
 def lookup_equirect(env: np.ndarray, dirs_cam: np.ndarray) -> np.ndarray:
     """Bilinear lookup (N, C) of a camera-frame equirect map (H, W, C) at unit directions (N, 3).
 
-    Same as :func:`streetaug.augment.conventions.sample_equirect` (wrapping in longitude, clamped
+    Same as :func:`streetaug.augment.core.sample_equirect` (wrapping in longitude, clamped
     in latitude), written with flat gathers for speed.
     """
     H, W = env.shape[:2]

@@ -31,7 +31,7 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
-from ..conventions import luminance, project_points
+from ..core import luminance, project_points
 from ..lighting.light import DistantLight
 from .bounce import BounceLight
 from .brdf import row_norm, to_world

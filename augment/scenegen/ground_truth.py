@@ -16,8 +16,8 @@ from pathlib import Path
 
 import numpy as np
 
-from streetaug.augment.conventions import camera_envmap_directions, make_transform, transform_points, yaw_to_quat
-from streetaug.augment.io import InputError, read_json
+from streetaug.augment.core import camera_envmap_directions, make_transform, transform_points, yaw_to_quat
+from streetaug.augment.core import InputError, read_json
 from streetaug.augment.lighting.light import DistantLight, SunLight
 from streetaug.augment.lighting.sky import make_sky_light
 from streetaug.augment.lighting.sun import sun_direction_global

@@ -14,8 +14,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from streetaug.augment.conventions import check_shape, invert_transform, make_transform, transform_points, yaw_to_quat
-from streetaug.augment.raycast import RayScene
+from streetaug.augment.core import check_shape, invert_transform, make_transform, transform_points, yaw_to_quat
+from streetaug.augment.core.raycast import RayScene
 from streetaug.datasets.sample import Box
 
 from .street import StreetScene

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from streetaug.augment.conventions import (
+from streetaug.augment.core import (
     GAMMA,
     hdr_to_ldr_uint8,
     luminance,
@@ -24,9 +24,9 @@ from streetaug.augment.conventions import (
     transform_points,
     yaw_to_quat,
 )
-from streetaug.augment.io import encode_image_rgb, write_bytes_atomic, write_exr
+from streetaug.augment.core import encode_image_rgb, write_bytes_atomic, write_exr
 from streetaug.augment.lighting.sun import sun_direction_global
-from streetaug.augment.raycast import RayScene
+from streetaug.augment.core.raycast import RayScene
 
 from .lidar import T_ego_from_lidar, points_in_box, simulate_lidar
 from .nuscenes_tables import NuScenesTables, dumps, token, visibility_token

@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from streetaug.augment.io import write_bytes_atomic
+from streetaug.augment.core import write_bytes_atomic
 
 # nuScenes-lidarseg class index -> category name (the devkit's category table order).
 CATEGORY_NAMES = (
@@ -131,7 +131,7 @@ class NuScenesTables:
                         filename: str, width: int, height: int, T_ego_from_sensor: np.ndarray,
                         T_global_from_ego: np.ndarray, K: np.ndarray | None) -> str:
         """Adds sample_data + its ego_pose (same token, as in nuScenes) + calibrated_sensor; returns the token."""
-        from streetaug.augment.conventions import rotation_to_quat
+        from streetaug.augment.core import rotation_to_quat
 
         sd_tok = token("sample_data", scene_name, channel)
         cs_tok = token("calibrated_sensor", scene_name, channel)

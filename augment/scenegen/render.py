@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from streetaug.augment.conventions import (
+from streetaug.augment.core import (
     check_shape,
     equirect_pixel_lonlat,
     equirect_solid_angles,
@@ -30,7 +30,7 @@ from streetaug.augment.conventions import (
     world_dir_to_lonlat,
 )
 from streetaug.augment.lighting.sky import sky_radiance, sun_irradiance, sun_visibility
-from streetaug.augment.raycast import RayScene
+from streetaug.augment.core.raycast import RayScene
 
 from .patterns import surface_albedo
 from .street import StreetScene

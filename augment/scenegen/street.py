@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from streetaug.augment.conventions import make_transform, rotation_to_quat, transform_points, yaw_to_quat
+from streetaug.augment.core import make_transform, rotation_to_quat, transform_points, yaw_to_quat
 from streetaug.datasets.sample import Box
 
 # nuScenes-lidarseg class indices (category table ``index``).

@@ -23,8 +23,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from ...conventions import hdr_to_ldr, intrinsics_from_fov, luminance, scale_intrinsics
-from ...io import InputError, atomic_path
+from ...core import hdr_to_ldr, intrinsics_from_fov, luminance, scale_intrinsics
+from ...core import InputError, atomic_path
 from .dome import (
     camera_from_angles,
     dome_directions,
@@ -294,7 +294,7 @@ def synthetic_sky_view(rng: np.random.Generator, dome_hw: tuple[int, int]) -> Vi
 
 def _street_chunk(args: tuple[int, int, int, int, int]) -> list[View]:
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-    from streetaug.augment.conventions import make_transform
+    from streetaug.augment.core import make_transform
     from streetaug.augment.scenegen.make import choose_exposure
     from streetaug.augment.scenegen.render import StreetRenderer
     from streetaug.augment.scenegen.street import StreetParams, build_street

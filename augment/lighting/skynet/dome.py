@@ -5,7 +5,7 @@ Frames:
 * **heading frame** (z-up): z = gravity up, x = the camera's optical axis projected onto the
   horizontal plane ("ahead"), y = left.  Sky domes and sky vectors live in this frame, so a sky
   vector predicted from an image is relative to where the camera looks (no compass needed).
-* **world panorama frame** of an HDRI: z up, world equirect convention of :mod:`conventions`
+* **world panorama frame** of an HDRI: z up, world equirect convention of :mod:`streetaug.augment.core.envmap`
   (``lon = atan2(dy, dx)``, ``lat = asin(dz)``).  Poly Haven / ``shared/data/hdri`` files store
   the compass azimuth increasing to the right (``azimuth = 360 u / W - 180``); seen from inside the
   sphere that is clockwise, so :func:`load_hdri` flips the columns and ``lon = -azimuth``.
@@ -28,8 +28,8 @@ import cv2
 import numpy as np
 from scipy import ndimage
 
-from ...conventions import check_shape, lonlat_to_world_dir, luminance, world_dir_to_lonlat
-from ...io import InputError
+from ...core import check_shape, lonlat_to_world_dir, luminance, world_dir_to_lonlat
+from ...core import InputError
 
 PEAK_PERCENTILE = 98.0  # the peak region: luminance >= this percentile (as shared/data/hdri/index.json)
 
@@ -167,7 +167,7 @@ def render_perspective(pano_world: np.ndarray, K: np.ndarray, R_world_from_cam: 
 
     K (3, 3): pixel centres at integers; R_world_from_cam (3, 3): OpenCV camera to world.
     """
-    from ...conventions import sample_equirect
+    from ...core import sample_equirect
 
     s = max(int(supersample), 1)
     off = (np.arange(s) + 0.5) / s - 0.5

@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ...conventions import check_shape, ldr_uint8_to_hdr, luminance, camera_envmap_directions
+from ...core import check_shape, ldr_uint8_to_hdr, luminance, camera_envmap_directions
 from ..light import DistantLight, SunLight
 from .dome import dome_directions, dome_pixel_size_rad, dome_solid_angles, heading_from_camera, sample_dome
 from .model import direction_cone_deg
@@ -350,7 +350,7 @@ def refine_sky(sky: SkyVector, image_rgb: np.ndarray, K: np.ndarray, sky_mask: n
     if len(jj) > REFINE_MAX_PIXELS:  # deterministic subsample
         sel = np.linspace(0, len(jj) - 1, REFINE_MAX_PIXELS).astype(np.int64)
         jj, ii = jj[sel], ii[sel]
-    from ...conventions import pixel_rays
+    from ...core import pixel_rays
 
     rays_h = pixel_rays(np.asarray(K, dtype=np.float64), np.stack([ii, jj], 1).astype(np.float64)) @ R.T
     above = rays_h[:, 2] > 0.0

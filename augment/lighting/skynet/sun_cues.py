@@ -2,7 +2,7 @@
 
 Frames: image rays are unit vectors in the camera frame (OpenCV) or in a **heading frame** (z up, see
 :mod:`.dome`); every direction returned is a unit vector towards the sun.  Images are uint8 RGB with the
-contract's camera response; radiance is recovered with :func:`...conventions.ldr_uint8_to_hdr` (up to an
+contract's camera response; radiance is recovered with :func:`streetaug.augment.core.ldr_uint8_to_hdr` (up to an
 unknown exposure and white balance, which every fit here is invariant to).
 
 * :func:`detect_sun_disc` — the sun in view: a round clipped blob above the horizon, bounded by glare
@@ -27,7 +27,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from ...conventions import ldr_uint8_to_hdr, luminance, pixel_rays, scale_intrinsics
+from ...core import ldr_uint8_to_hdr, luminance, pixel_rays, scale_intrinsics
 from .. import sky as _sky
 
 DISC_WIDTH_PX = 400  # the disc detector works on the image resized to this width

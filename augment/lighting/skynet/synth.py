@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.special import ndtri
 
-from ...conventions import luminance
+from ...core import luminance
 from ..sky import sky_horizontal_irradiance, sky_radiance, sun_irradiance
 from .dome import dome_directions, dome_solid_angles
 
@@ -130,7 +130,7 @@ class SynthSky:
 
     def envmap_world(self, height: int, width: int) -> np.ndarray:
         """Radiance (height, width, 3) float32 in the world equirect convention, sun excluded."""
-        from ...conventions import equirect_pixel_lonlat, lonlat_to_world_dir
+        from ...core import equirect_pixel_lonlat, lonlat_to_world_dir
 
         d = lonlat_to_world_dir(*equirect_pixel_lonlat(height, width)).reshape(-1, 3)
         return self.radiance(d).reshape(height, width, 3).astype(np.float32)

@@ -30,7 +30,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from ...io import atomic_path, write_json_atomic
+from ...core import atomic_path, write_json_atomic
 from .data import (
     PANORAMA_SUN_VISIBILITY,
     TRAIN_PANORAMAS,

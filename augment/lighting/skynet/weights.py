@@ -17,7 +17,7 @@ from pathlib import Path
 import torch
 import torch.nn as nn
 
-from ...io import InputError, atomic_path
+from ...core import InputError, atomic_path
 
 WEIGHTS_FORMAT = "streetaug.skynet/1"
 SKY_WEIGHTS = "sky_model_v1.pt"

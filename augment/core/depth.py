@@ -14,7 +14,8 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from ..conventions import check_shape, project_points
+from .camera import project_points
+from .errors import check_shape
 
 MIN_DEPTH_M = 0.5
 

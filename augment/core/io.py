@@ -16,15 +16,11 @@ from typing import Any, Iterator
 import cv2
 import numpy as np
 
-from .conventions import check_shape
+from .errors import InputError, check_shape
 
 
 _UMASK = os.umask(0)
 os.umask(_UMASK)
-
-
-class InputError(ValueError):
-    """Bad user input: names the file, the field and what was expected."""
 
 
 @contextlib.contextmanager

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .conventions import check_shape
+from .errors import check_shape
 
 
 @dataclass(frozen=True)

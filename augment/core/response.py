@@ -1,0 +1,53 @@
+"""The camera response (LDR <-> linear HDR) and luminance.
+
+``LDR = softclip(clamp(HDR * 2^EV, 0)^(1/2.2))`` with the paper's soft clip, tau = 0.95.  LDR values are
+floats in [0, 1] (divide uint8 by 255).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+GAMMA = 2.2
+SOFTCLIP_TAU = 0.95
+
+
+def softclip(x: np.ndarray, tau: float = SOFTCLIP_TAU) -> np.ndarray:
+    """The paper's soft clip: identity up to tau, then an exponential shoulder towards 1."""
+    x = np.asarray(x, dtype=np.float64)
+    shoulder = 1.0 - (1.0 - tau) * np.exp(-(np.maximum(x, tau) - tau) / (1.0 - tau))
+    return np.where(x <= tau, x, shoulder)
+
+
+def inverse_softclip(y: np.ndarray, tau: float = SOFTCLIP_TAU) -> np.ndarray:
+    """Inverse of :func:`softclip` on [0, 1); values >= 1 map to a large finite number."""
+    y = np.clip(np.asarray(y, dtype=np.float64), 0.0, 1.0 - 1e-6)
+    inv = tau - (1.0 - tau) * np.log(np.maximum((1.0 - y) / (1.0 - tau), 1e-12))
+    return np.where(y <= tau, y, inv)
+
+
+def hdr_to_ldr(hdr: np.ndarray, ev: float = 0.0) -> np.ndarray:
+    """Linear HDR radiance -> LDR floats in [0, 1] with the camera response of the contract."""
+    x = np.clip(np.asarray(hdr, dtype=np.float64) * 2.0**ev, 0.0, None)
+    return softclip(x ** (1.0 / GAMMA))
+
+
+def ldr_to_hdr(ldr: np.ndarray, ev: float = 0.0) -> np.ndarray:
+    """LDR floats in [0, 1] -> linear HDR radiance (inverse camera response of the contract)."""
+    return inverse_softclip(ldr) ** GAMMA / 2.0**ev
+
+
+def ldr_uint8_to_hdr(image: np.ndarray, ev: float = 0.0) -> np.ndarray:
+    """uint8 (H, W, 3) image -> float32 linear HDR (H, W, 3)."""
+    return ldr_to_hdr(np.asarray(image, dtype=np.float64) / 255.0, ev).astype(np.float32)
+
+
+def hdr_to_ldr_uint8(hdr: np.ndarray, ev: float = 0.0) -> np.ndarray:
+    """Linear HDR (H, W, 3) -> uint8 image with the contract's camera response (rounded)."""
+    return np.clip(np.round(hdr_to_ldr(hdr, ev) * 255.0), 0, 255).astype(np.uint8)
+
+
+def luminance(rgb: np.ndarray) -> np.ndarray:
+    """Rec. 709 luminance of linear RGB (..., 3) -> (...)."""
+    rgb = np.asarray(rgb)
+    return 0.2126 * rgb[..., 0] + 0.7152 * rgb[..., 1] + 0.0722 * rgb[..., 2]
