@@ -14,7 +14,7 @@ from streetaug.augment.lighting.multiview import estimate_views_lighting
 from streetaug.datasets.bundled import BUNDLED_VERSION, bundled_dataroot
 from streetaug.datasets.nuscenes import NuScenesReader
 
-REAL = Path(__file__).resolve().parents[2] / "shared" / "data" / "nuscenes-real"
+REAL = Path(__file__).resolve().parents[3] / "shared" / "data" / "nuscenes-real"
 CAMERAS = ("CAM_FRONT", "CAM_FRONT_LEFT", "CAM_BACK")
 
 

@@ -108,7 +108,7 @@ def test_read_lanes_none_and_errors(tmp_path):
         read_lanes(tmp_path / "missing.json")
 
 
-REAL = (Path(__file__).parents[1] / ".." / "shared" / "data" / "nuscenes-real").resolve()
+REAL = (Path(__file__).parents[2] / ".." / "shared" / "data" / "nuscenes-real").resolve()
 
 
 def test_bundled_maps_have_lanes_the_real_excerpt_has_none():

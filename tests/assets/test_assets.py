@@ -19,7 +19,7 @@ from streetaug.augment.assets.validate import validate_asset, validate_asset_rep
 from streetaug.augment.core import InputError
 from streetaug.augment.core.raycast import RayScene
 
-DATA = (Path(__file__).parents[1] / ".." / "shared" / "data").resolve()
+DATA = (Path(__file__).parents[2] / ".." / "shared" / "data").resolve()
 CARS = DATA / "cars"
 
 # body -> target (length, width, height) in metres

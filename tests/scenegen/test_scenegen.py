@@ -323,7 +323,7 @@ def test_ground_truth_light_in_the_camera_frame(dataroot: Path) -> None:
 
 
 def test_committed_sample_scenes_match_their_specs() -> None:
-    root = Path(__file__).resolve().parents[1] / "examples" / "nuscenes-samples"
+    root = Path(__file__).resolve().parents[2] / "examples" / "nuscenes-samples"
     if not (root / VERSION).is_dir():
         pytest.skip(f"{root} not generated (python -m streetaug.augment.scenegen.make {root})")
     t = _tables(root)

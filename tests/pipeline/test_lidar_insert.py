@@ -141,7 +141,7 @@ def test_a_sweep_not_in_firing_order_keeps_its_empty_beams_empty():
     assert not (out.moved >= 0).any()
 
 
-REAL_SWEEP = (Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "nuscenes-real" / "samples" / "LIDAR_TOP"
+REAL_SWEEP = (Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "nuscenes-real" / "samples" / "LIDAR_TOP"
               / "n015-2018-07-24-11-22-45+0800__LIDAR_TOP__1532402927647951.pcd.bin").resolve()
 
 

@@ -374,7 +374,7 @@ def test_place_objects_with_lidarseg_only():
 
 # ---------------------------------------------------------------------- the real nuScenes sample
 
-REAL = (Path(__file__).parents[1] / ".." / "shared" / "data" / "nuscenes-real").resolve()
+REAL = (Path(__file__).parents[2] / ".." / "shared" / "data" / "nuscenes-real").resolve()
 REAL_TOKEN = "ca9a282c9e77460f8360f564131a8af5"
 
 
@@ -461,7 +461,7 @@ def test_lidarseg_fixture_drivable_and_ground():
     from streetaug.datasets.sample import LidarSweep
     from streetaug.augment.core import make_transform
 
-    root = (Path(__file__).parents[1] / ".." / "shared" / "data" / "nuscenes-fixtures").resolve()
+    root = (Path(__file__).parents[2] / ".." / "shared" / "data" / "nuscenes-fixtures").resolve()
     if not root.is_dir():
         pytest.skip(f"lidarseg fixture not found at {root}")
     pts = read_lidar_points(next((root / "samples" / "LIDAR_TOP").glob("*.pcd.bin")))[:, :3].astype(np.float64)

@@ -40,7 +40,7 @@ from streetaug.augment.lighting.sky import (
 from streetaug.augment.lighting.sun import sun_direction_camera, sun_direction_global
 from streetaug.datasets.sample import CameraView
 
-DATA = (Path(__file__).parents[1] / ".." / "shared" / "data").resolve()
+DATA = (Path(__file__).parents[2] / ".." / "shared" / "data").resolve()
 REAL = DATA / "nuscenes-real"
 REAL_SAMPLE = "ca9a282c9e77460f8360f564131a8af5"
 

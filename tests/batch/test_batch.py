@@ -30,7 +30,7 @@ from streetaug.datasets.nuscenes import NuScenesReader
 from streetaug.datasets.nuscenes_writer import new_token
 from streetaug.cli.main import main
 
-REAL = Path(__file__).resolve().parents[2] / "shared" / "data" / "nuscenes-real"
+REAL = Path(__file__).resolve().parents[3] / "shared" / "data" / "nuscenes-real"
 CAMERAS = ("CAM_FRONT", "CAM_BACK")
 N_SAMPLES = 2  # of the 3 bundled scenes: enough for 2 workers and shards, fast
 VOLATILE = ("timing_s", "seconds", "cpu_s", "worker", "peak_rss_mb")

@@ -22,7 +22,7 @@ from streetaug.augment.core import project_points
 from streetaug.augment.core import read_exr, write_exr
 from streetaug.cli.main import main
 
-REAL = Path(__file__).resolve().parents[2] / "shared" / "data" / "nuscenes-real"
+REAL = Path(__file__).resolve().parents[3] / "shared" / "data" / "nuscenes-real"
 
 
 def run(*args: str) -> Result:

@@ -48,9 +48,9 @@ from streetaug.augment.lighting.skynet.weights import (
     save_weights,
 )
 
-HDRI = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "hdri"
+HDRI = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "hdri"
 needs_hdri = pytest.mark.skipif(not (HDRI / "index.json").is_file(), reason=f"{HDRI} (real HDR panoramas) not present")
-SAMPLES = Path(__file__).resolve().parents[1] / "examples" / "nuscenes-samples"
+SAMPLES = Path(__file__).resolve().parents[2] / "examples" / "nuscenes-samples"
 
 
 class _Foreign:

@@ -30,7 +30,7 @@ from streetaug.datasets.nuscenes import DatasetError, NuScenesReader
 from streetaug.datasets.lidarseg import read_lidar_points, read_lidarseg_labels
 from streetaug.datasets.nuscenes_map import read_drivable_area
 
-DATA = (Path(__file__).parents[1] / ".." / "shared" / "data").resolve()
+DATA = (Path(__file__).parents[2] / ".." / "shared" / "data").resolve()
 REAL = DATA / "nuscenes-real"
 FIXTURES = DATA / "nuscenes-fixtures"
 REAL_SAMPLE = "ca9a282c9e77460f8360f564131a8af5"

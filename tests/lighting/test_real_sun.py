@@ -15,7 +15,7 @@ import pytest
 
 from streetaug.augment.lighting.sun import sun_direction_camera, sun_direction_global
 
-REAL = Path(__file__).resolve().parents[2] / "shared" / "data" / "nuscenes-real"
+REAL = Path(__file__).resolve().parents[3] / "shared" / "data" / "nuscenes-real"
 REAL_SAMPLE = "ca9a282c9e77460f8360f564131a8af5"
 
 
