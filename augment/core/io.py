@@ -17,6 +17,7 @@ import cv2
 import numpy as np
 
 from .errors import InputError, check_shape
+from .limits import ResourceLimits, check_image_pixels, image_size_from_header
 
 
 _UMASK = os.umask(0)
@@ -40,12 +41,22 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
         raise
 
 
+def _write_error(path: Path, e: OSError) -> InputError:
+    return InputError(f"{path}: cannot write ({e.strerror or e}, errno {e.errno}); "
+                      "free some space or choose another output folder")
+
+
 def write_bytes_atomic(path: str | Path, data: bytes) -> None:
-    with atomic_path(path) as tmp:
-        with open(tmp, "wb") as f:
-            f.write(data)
-            f.flush()
-            os.fsync(f.fileno())
+    """Write ``data`` to ``path`` atomically (temp file, fsync, rename); a failed write names the file."""
+    path = Path(path)
+    try:
+        with atomic_path(path) as tmp:
+            with open(tmp, "wb") as f:
+                f.write(data)
+                f.flush()
+                os.fsync(f.fileno())
+    except OSError as e:
+        raise _write_error(path, e) from None
 
 
 def write_json_atomic(path: str | Path, obj: Any) -> None:
@@ -71,13 +82,24 @@ def read_json(path: str | Path) -> Any:
         return json.loads(path.read_text())
     except json.JSONDecodeError as e:
         raise InputError(f"{path}: not valid JSON ({e})") from None
+    except UnicodeDecodeError as e:
+        raise InputError(f"{path}: not UTF-8 text ({e.reason} at byte {e.start})") from None
+    except RecursionError:
+        raise InputError(f"{path}: JSON nested too deeply to read") from None
 
 
-def read_image_rgb(path: str | Path) -> np.ndarray:
-    """Read an 8-bit image as (H, W, 3) uint8 RGB; clear error if missing or undecodable."""
+def read_image_rgb(path: str | Path, limits: ResourceLimits | None = None) -> np.ndarray:
+    """Read an 8-bit image as (H, W, 3) uint8 RGB; clear error if missing, undecodable or too large.
+
+    The size is checked from the header against ``limits`` (default: :meth:`ResourceLimits.from_env`)
+    before anything is decoded.
+    """
     path = Path(path)
     if not path.is_file():
         raise InputError(f"{path}: image file not found")
+    size = image_size_from_header(path)
+    if size is not None:
+        check_image_pixels(size, str(path), limits or ResourceLimits.from_env())
     data = np.fromfile(path, dtype=np.uint8)
     image = cv2.imdecode(data, cv2.IMREAD_COLOR) if data.size else None
     if image is None:
@@ -110,6 +132,9 @@ def read_exr(path: str | Path) -> np.ndarray:
     path = Path(path)
     if not path.is_file():
         raise InputError(f"{path}: EXR file not found")
+    size = image_size_from_header(path) if path.stat().st_size >= 4 else None
+    if size is not None:
+        check_image_pixels(size, str(path), ResourceLimits.from_env())
     try:
         with OpenEXR.File(str(path)) as f:
             channels = {name: np.array(ch.pixels, dtype=np.float32) for name, ch in f.channels().items()}
@@ -138,6 +163,10 @@ def write_exr(path: str | Path, image: np.ndarray) -> None:
         check_shape(image, ("H", "W", 3), "EXR image")
         channels = {"RGB": image}
     header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
-    with atomic_path(path) as tmp:
-        with OpenEXR.File(header, channels) as f:
-            f.write(str(tmp))
+    path = Path(path)
+    try:
+        with atomic_path(path) as tmp:
+            with OpenEXR.File(header, channels) as f:
+                f.write(str(tmp))
+    except OSError as e:
+        raise _write_error(path, e) from None

@@ -1,0 +1,54 @@
+"""Paths read from untrusted places (dataset tables, asset files) stay inside their root; outputs stay out of sources.
+
+A table's ``filename`` or an asset's URI is joined to its root and resolved, symlinks included; anything that
+lands outside the root is refused with an :class:`InputError` that names where the path came from.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from .errors import InputError
+
+
+def is_inside(path: str | Path, root: str | Path) -> bool:
+    """True if ``path`` (resolved, symlinks followed) is ``root`` or lies below it."""
+    return Path(path).resolve().is_relative_to(Path(root).resolve())
+
+
+def resolve_inside(root: str | Path, relative: str, where: str) -> Path:
+    """``root / relative``, resolved, refused unless it stays inside ``root``.
+
+    Args:
+        root: the folder the path must stay in (a dataroot, an asset folder).
+        relative: the path as written in the source (a table's ``filename``, a glTF ``uri``).
+        where: where it was read, for the message (e.g. ``"sample_data.json row 12 (token ab12) field 'filename'"``).
+
+    Raises:
+        InputError: absolute paths, ``..`` escapes and symlinks leading outside ``root``.
+    """
+    if not isinstance(relative, str) or not relative.strip():
+        raise InputError(f"{where}: expected a relative path inside {root}, got {relative!r}")
+    if "\x00" in relative:
+        raise InputError(f"{where}: the path {relative!r} contains a NUL byte")
+    if Path(relative).is_absolute():
+        raise InputError(f"{where}: {relative!r} is an absolute path; paths must be relative to {root}")
+    root_resolved = Path(root).resolve()
+    path = (root_resolved / relative).resolve()
+    if not path.is_relative_to(root_resolved):
+        raise InputError(f"{where}: {relative!r} resolves to {path}, outside {root_resolved}; "
+                         "paths in tables and assets must stay inside their root (symlinks included)")
+    return path
+
+
+def refuse_output_inside(out: str | Path, source_root: str | Path, what: str = "the source dataset") -> None:
+    """Raise unless the output folder ``out`` is neither inside ``source_root`` nor contains it.
+
+    Writing into a source (its root, its table folder, ``samples/CAM_FRONT``) would modify the input; an output
+    that contains the source would make a later ``rm -r OUT`` delete it.
+    """
+    out_r, src_r = Path(out).resolve(), Path(source_root).resolve()
+    if out_r.is_relative_to(src_r):
+        raise InputError(f"--out {out} is inside {what} ({src_r}); write the outputs somewhere else")
+    if src_r.is_relative_to(out_r):
+        raise InputError(f"--out {out} contains {what} ({src_r}); write the outputs somewhere else")
