@@ -4,7 +4,7 @@ Usage: ``python benchmarks/bench_lidar_insert.py [--seeds 16] [--out benchmarks/
 
 For each sample (the bundled scenes, and the real keyframe in ``../shared/data/nuscenes-real`` when present)
 and each seed, one procedural car is placed per camera as ``streetaug batch`` would (same seeds, same
-rules), then put into the keyframe sweep with :func:`augment.lidar_insert.insert_placements_into_sweep`,
+rules), then put into the keyframe sweep with :func:`augment.pipeline.lidar.insert_placements_into_sweep`,
 with and without the beams that returned nothing (``use_empty_beams``). Reported per distance bin (LiDAR to
 box centre): the median number of points in an inserted car's box both ways, the annotated cars' own
 ``num_lidar_pts`` in the same bins (the real sample: 8 cars; the bundled scenes: the generator's parked
@@ -26,7 +26,7 @@ from pathlib import Path  # noqa: E402
 import numpy as np  # noqa: E402
 
 from streetaug.augment.assets.select import select_assets  # noqa: E402
-from streetaug.augment.lidar_insert import insert_placements_into_sweep  # noqa: E402
+from streetaug.augment.pipeline.lidar import insert_placements_into_sweep  # noqa: E402
 from streetaug.augment.pipeline import InsertOptions, item_seed, place_in_sample  # noqa: E402
 from streetaug.datasets.bundled import BUNDLED_VERSION, bundled_dataroot  # noqa: E402
 from streetaug.datasets.lidarseg import read_lidar_points, read_lidarseg_labels  # noqa: E402

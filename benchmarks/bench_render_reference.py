@@ -11,7 +11,7 @@ from ``../shared/data/hdri`` rotated about the vertical so that its sun sits at 
 Kenney car from ``../shared/data/cars`` scaled to 4.5 m with its glTF materials at a given pose.
 
 * Mitsuba (``scalar_rgb``, path tracer, max depth 8, multijitter sampler, box pixel filter) renders the
-  scene with and without the car (see :mod:`streetaug.augment.render.reference` for the verified
+  scene with and without the car (see :mod:`streetaug.augment.evaluation.reference` for the verified
   camera / environment / material conventions).  The environment map is the panorama with everything
   below the horizon replaced by the unshadowed ground's radiance, i.e. the local light a perfect
   estimate gives; Mitsuba sees the sun as pixels of that map.
@@ -57,9 +57,9 @@ SHARED = (ROOT / ".." / "shared" / "data").resolve()
 from streetaug.augment.assets.loader import load_asset  # noqa: E402
 from streetaug.augment.core import hdr_to_ldr_uint8, luminance, pose_camera_to_transform  # noqa: E402
 from streetaug.augment.lighting.light import DistantLight  # noqa: E402
-from streetaug.augment.metrics import psnr_db  # noqa: E402
+from streetaug.augment.evaluation.metrics import psnr_db  # noqa: E402
 from streetaug.augment.pipeline import InsertOptions, insert_into_image  # noqa: E402
-from streetaug.augment.render import reference as ref  # noqa: E402
+from streetaug.augment.evaluation import reference as ref  # noqa: E402
 from streetaug.augment.core.depth import ground_plane_depth  # noqa: E402
 from streetaug.augment.render.geometry import prepare_asset  # noqa: E402
 from streetaug.augment.render.settings import QUALITY_PRESETS  # noqa: E402

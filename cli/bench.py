@@ -1,4 +1,4 @@
-"""``streetaug bench``: the speed/accuracy chart (see :mod:`streetaug.augment.speed_accuracy`)."""
+"""``streetaug bench``: the speed/accuracy chart (see :mod:`streetaug.augment.evaluation.speed_accuracy`)."""
 
 from __future__ import annotations
 
@@ -45,7 +45,7 @@ def bench(scenes, seeds, levels, presets, small, out, debug):
     """
     import os
 
-    from streetaug.augment import speed_accuracy as sa
+    from streetaug.augment.evaluation import speed_accuracy as sa
     from streetaug.augment.core import write_bytes_atomic, write_json_atomic
     from streetaug.datasets.bundled import bundled_dataroot
 

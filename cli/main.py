@@ -165,7 +165,7 @@ def insert(dataroot, version, scene, sample_token, camera, asset, assets_dir, as
             from streetaug.augment.core import write_image_rgb
             from streetaug.placement.explain import draw_placement_bev
 
-            write_image_rgb(out / "placement_bev.png", draw_placement_bev(sample, view, result.extras["placement"]))
+            write_image_rgb(out / "placement_bev.png", draw_placement_bev(sample, view, result.placement))
     path = write_insert_outputs(result, out, suffix, debug=debug)
     if result.skipped_reason:
         click.echo(f"no object inserted: {result.skipped_reason} (image copied unchanged to {path})")

@@ -1,4 +1,4 @@
-"""``streetaug stability``: how much the outputs move under perturbed inputs (see :mod:`streetaug.augment.stability`)."""
+"""``streetaug stability``: how much the outputs move under perturbed inputs (see :mod:`streetaug.augment.evaluation.stability`)."""
 
 from __future__ import annotations
 
@@ -35,7 +35,7 @@ def stability(dataroot, version, scene, sample_token, camera, families, failure_
     from streetaug.augment.core import write_json_atomic
     from streetaug.augment.pipeline import InsertOptions, item_seed
     from streetaug.augment.core import write_image_rgb
-    from streetaug.augment.stability import contact_sheet, plot_report, run_failure_cases, stability_report
+    from streetaug.augment.evaluation.stability import contact_sheet, plot_report, run_failure_cases, stability_report
 
     reader = _open_dataset(dataroot, version)
     sample = reader.sample(_resolve_sample(reader, scene, sample_token))

@@ -160,7 +160,7 @@ def _write_lidar(out_dir: Path, reader: NuScenesReader, sample, result, version:
     from streetaug.datasets.lidarseg import read_lidar_points, read_lidarseg_labels
 
     from ..core import write_bytes_atomic
-    from ..lidar_insert import insert_placements_into_sweep
+    from ..pipeline.lidar import insert_placements_into_sweep
 
     sd = reader.lidar_sample_data(sample.token)
     if sd is None or not result.placements:

@@ -7,7 +7,7 @@ orientation) are checked with a single bright direction, then a small insertion 
 import numpy as np
 import pytest
 
-from streetaug.augment.render import reference as ref
+from streetaug.augment.evaluation import reference as ref
 
 OK, WHY = ref.mitsuba_available()
 pytestmark = pytest.mark.skipif(not OK, reason=f"Mitsuba reference unavailable: {WHY}")

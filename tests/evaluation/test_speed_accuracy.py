@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from streetaug.augment import speed_accuracy as sa
+from streetaug.augment.evaluation import speed_accuracy as sa
 
 
 def test_ssim_is_one_for_identical_images_and_drops_with_noise():

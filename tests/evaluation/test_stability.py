@@ -16,7 +16,7 @@ from click.testing import CliRunner
 from streetaug.augment.assets.procedural import procedural_car
 from streetaug.augment.core import InputError
 from streetaug.augment.pipeline import InsertOptions, insert_into_view
-from streetaug.augment.stability import FAMILIES, failure_cases, measure, run_once
+from streetaug.augment.evaluation.stability import FAMILIES, failure_cases, measure, run_once
 from streetaug.datasets.bundled import BUNDLED_VERSION, bundled_dataroot
 from streetaug.datasets.nuscenes import NuScenesReader
 
@@ -168,14 +168,14 @@ def test_overcast_scene_has_a_weak_sun(reader, car):
 def test_no_lidar_falls_back_to_the_map_and_ego_plane(cases, car):
     result, view = _run(cases, "no_lidar", car)
     assert result.objects, result.skipped_reason
-    (p,) = result.extras["placement"].placements
+    (p,) = result.placement.placements
     assert p.ground_source == "ego-plane"
     assert abs(p.T_global_from_object[2, 3] - view.T_global_from_ego[2, 3]) < 0.05  # on the ego's ground
 
 
 def test_no_map_and_no_lidarseg_is_lower_confidence_or_a_reason(cases, car):
     result, _ = _run(cases, "no_map_no_lidarseg", car)
-    placement = result.extras["placement"]
+    placement = result.placement
     if placement.placements:
         assert placement.placements[0].drivable_source == "lidar-ground"
         assert placement.placements[0].drivable_confidence in ("low", "medium")

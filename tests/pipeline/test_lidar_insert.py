@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from streetaug.augment.lidar_insert import DEFAULT_CAR_INTENSITY, car_intensity, empty_beams, insert_into_sweep
+from streetaug.augment.pipeline.lidar import DEFAULT_CAR_INTENSITY, car_intensity, empty_beams, insert_into_sweep
 from streetaug.datasets.sample import Box
 from streetaug.placement.rules import points_in_box
 

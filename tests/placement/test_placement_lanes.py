@@ -131,7 +131,7 @@ def test_bundled_scenes_place_along_their_lanes():
     reader = NuScenesReader(bundled_dataroot(), BUNDLED_VERSION)
     sample = reader.sample(reader.sample_tokens("sample-sunny")[0])
     result = insert_into_view(sample, sample.cameras["CAM_FRONT"], [procedural_car(1)], InsertOptions(quality="draft"))
-    (p,) = result.extras["placement"].placements
+    (p,) = result.placement.placements
     assert p.yaw_source == "lane"
 
 

@@ -141,7 +141,7 @@ def test_lidar_road_points_lie_on_the_ground(dataroot: Path) -> None:
 
 
 def test_lidar_stores_every_beam_in_firing_order_as_nuscenes_does(dataroot: Path) -> None:
-    from streetaug.augment.lidar_insert import empty_beams
+    from streetaug.augment.pipeline.lidar import empty_beams
     from streetaug.augment.scenegen.lidar import N_AZIMUTH, N_RINGS, beam_directions_sensor
 
     t = _tables(dataroot)

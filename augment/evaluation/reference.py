@@ -42,7 +42,7 @@ import numpy as np
 
 from ..assets.asset import Asset, Material
 from ..core import camera_envmap_directions, check_shape, equirect_solid_angles
-from .brdf import MIN_ROUGHNESS
+from ..render.brdf import MIN_ROUGHNESS
 
 FLIP = np.diag([-1.0, -1.0, 1.0, 1.0])  # Mitsuba local (x left, y up) <-> OpenCV (x right, y down)
 GROUND_HALF_SIZE_M = 20_000.0

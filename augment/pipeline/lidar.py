@@ -24,10 +24,14 @@ from typing import Sequence
 
 import numpy as np
 
+from streetaug.datasets.sample import Box
 from streetaug.datasets.lidarseg import LIDARSEG_CAR
+from streetaug.placement.place import Placement
+from streetaug.placement.rules import points_in_box, points_in_boxes
 
-from .core import check_shape, invert_transform, transform_points
-from .core.raycast import RayScene
+from ..assets.asset import Asset
+from ..core import check_shape, invert_transform, transform_points
+from ..core.raycast import RayScene
 
 # Moved points sit this far beyond the surface along their beam: inside the object, so that float32
 # storage cannot put a return on a tight box's face outside the box (LiDAR range noise is ~2 cm).
@@ -211,7 +215,7 @@ class SampleSweep:
 
 
 def insert_placements_into_sweep(points: np.ndarray, labels: np.ndarray | None, T_global_from_lidar: np.ndarray,
-                                 placements: Sequence, assets: Sequence, boxes: Sequence,
+                                 placements: Sequence[Placement], assets: Sequence[Asset], boxes: Sequence[Box],
                                  class_index: dict[str, int], use_empty_beams: bool = True) -> SampleSweep:
     """Put placed assets (``Placement.T_global_from_object``, global frame) into a sweep; recount the boxes.
 
@@ -223,8 +227,6 @@ def insert_placements_into_sweep(points: np.ndarray, labels: np.ndarray | None, 
         class_index: nuScenes category name -> lidarseg class index (``category.index``).
         use_empty_beams: see :func:`insert_into_sweep`.
     """
-    from streetaug.placement.rules import points_in_box, points_in_boxes
-
     T_lidar_from_global = invert_transform(T_global_from_lidar)
     xyz_global = transform_points(T_global_from_lidar, np.asarray(points, np.float64)[:, :3])
     if labels is not None:

@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
+
+from ..core import equirect_solid_angles
 
 
 def psnr_db(a: np.ndarray, b: np.ndarray, where: np.ndarray | None = None, peak: float = 255.0) -> float:
@@ -24,10 +27,6 @@ def env_log_error(estimated: np.ndarray, true: np.ndarray) -> float:
     """Environment-map error: solid-angle-weighted mean over the sphere and the channels of
     (log(1 + L_est) - log(1 + L_true))^2, for equirectangular (H, W, 3) maps (the estimate is resized to the
     true map's size; the sun, when drawn into the maps, counts like any pixel)."""
-    import cv2
-
-    from .core import equirect_solid_angles
-
     true = np.asarray(true, np.float32)
     H, W = true.shape[:2]
     estimated = np.asarray(estimated, np.float32)

@@ -28,7 +28,10 @@ from typing import Callable, Sequence
 import cv2
 import numpy as np
 
-from .core import hdr_to_ldr_uint8, ldr_uint8_to_hdr, make_transform
+from ..core import atomic_path, hdr_to_ldr_uint8, ldr_uint8_to_hdr, make_transform
+from ..lighting.estimate import estimate_lighting_from_image
+from ..lighting.sun import sun_direction_global
+from ..pipeline import insert_into_view
 from .metrics import psnr_db
 
 PerturbFn = Callable[..., tuple[object, object, Callable[[np.ndarray], np.ndarray]]]
@@ -182,7 +185,7 @@ def _affected(result, source: np.ndarray) -> np.ndarray:
 
 
 def _first_box(result):
-    placement = result.extras.get("placement")
+    placement = result.placement
     if placement is None or not placement.placements:
         return None
     return placement.placements[0]
@@ -193,9 +196,6 @@ def _first_box(result):
 
 def measure(sample, view, assets, options, family: Family, strength: float, baseline=None, seed: int = 0) -> dict:
     """One perturbation at one strength vs the unperturbed run (``baseline`` = (result, image_lighting))."""
-    from .lighting.estimate import estimate_lighting_from_image
-    from .pipeline import insert_into_view
-
     if baseline is None:
         baseline = run_once(sample, view, assets, options)
     base, base_image_light = baseline
@@ -230,9 +230,6 @@ def measure(sample, view, assets, options, family: Family, strength: float, base
 
 def run_once(sample, view, assets, options):
     """The unperturbed insertion and single-image lighting (the report's baseline)."""
-    from .lighting.estimate import estimate_lighting_from_image
-    from .pipeline import insert_into_view
-
     return insert_into_view(sample, view, assets, options), estimate_lighting_from_image(view.image, view.K)
 
 
@@ -265,8 +262,6 @@ def plot_report(report: dict, path) -> None:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-
-    from .core import atomic_path
 
     metrics = [("sun_change_deg", "sun change (deg)"), ("image_path_sun_change_deg", "sun change, image only (deg)"),
                ("envmap_change", "env map change (log RMS)"), ("placement_change_m", "placement change (m)"),
@@ -310,8 +305,6 @@ def at_time(sample, view, when_utc: dt.datetime, location: str | None = None):
 
 
 def _elevation(location: str, when: dt.datetime) -> float:
-    from .lighting.sun import sun_direction_global
-
     return sun_direction_global(location, int(when.replace(tzinfo=dt.timezone.utc).timestamp() * 1e6)).elevation_deg
 
 
@@ -361,8 +354,6 @@ def wet_road(sample, view):
 
 def sun_behind_camera(sample, view, elevation_deg: float = 30.0):
     """Afternoon sun at ``elevation_deg``; the ego turned round if needed so that the sun is behind the camera."""
-    from .lighting.sun import sun_direction_global
-
     day = dt.datetime.fromtimestamp(sample.timestamp_us / 1e6, dt.timezone.utc).date()
     s, v = at_time(sample, view, time_with_sun_elevation(sample.location, day, elevation_deg))
     d = v.T_cam_from_global[:3, :3] @ sun_direction_global(s.location, v.timestamp_us).direction_global
@@ -404,8 +395,6 @@ def failure_cases(sample, view) -> dict[str, tuple[object, object, str]]:
 
 def run_failure_cases(sample, view, assets, options) -> tuple[list[dict], dict[str, np.ndarray]]:
     """Insert into every failure case; returns (one outcome row per case, case name -> composited image)."""
-    from .pipeline import insert_into_view
-
     rows, images = [], {}
     for name, (s, v, what) in failure_cases(sample, view).items():
         try:

@@ -30,6 +30,15 @@ from typing import Sequence
 import cv2
 import numpy as np
 
+from streetaug.datasets.bundled import BUNDLED_VERSION
+from streetaug.datasets.nuscenes import NuScenesReader
+
+from ..assets.select import select_assets
+from ..core import atomic_path, rotate_vectors, transform_points
+from ..lighting.estimate import estimate_lighting
+from ..pipeline import InsertOptions, item_seed, place_in_view, scene_depth_for_view
+from ..render.insert import render_insertion
+from ..scenegen.ground_truth import GroundTruthScene
 from .metrics import env_log_error, psnr_db
 
 LEVELS = ("L0", "L1", "L2", "L3", "auto")
@@ -84,14 +93,6 @@ def affected_region(source: np.ndarray, *composites: np.ndarray, grow_px: int = 
 
 def make_cases(dataroot, scenes: Sequence[str], seeds: Sequence[int], camera: str = "CAM_FRONT") -> list[Case]:
     """Place one procedural car per (scene, seed) and render its reference (high preset, true local light)."""
-    from .assets.select import select_assets
-    from .core import rotate_vectors, transform_points
-    from .pipeline import InsertOptions, item_seed, place_in_view, scene_depth_for_view
-    from .render.insert import render_insertion
-    from .scenegen.ground_truth import GroundTruthScene
-    from streetaug.datasets.bundled import BUNDLED_VERSION
-    from streetaug.datasets.nuscenes import NuScenesReader
-
     reader = NuScenesReader(dataroot, BUNDLED_VERSION)
     cases = []
     for scene in scenes:
@@ -100,8 +101,6 @@ def make_cases(dataroot, scenes: Sequence[str], seeds: Sequence[int], camera: st
         view = sample.cameras[camera]
         depth_m = scene_depth_for_view(sample, view)
         # Warm-up outside the timings: first-use imports (torch for the volume levels) and the JPEG decode.
-        from .lighting.estimate import estimate_lighting
-
         estimate_lighting(view, sample.location, "L2", lidar=sample.lidar, boxes=sample.boxes)
         for seed in seeds:
             (asset,) = select_assets(item_seed(seed, "asset", sample.token, camera), 1)
@@ -121,9 +120,6 @@ def make_cases(dataroot, scenes: Sequence[str], seeds: Sequence[int], camera: st
 
 def run_configuration(case: Case, level: str, preset: str) -> dict:
     """Estimate at ``level``, render at ``preset``; errors against the case's reference."""
-    from .lighting.estimate import estimate_lighting
-    from .render.insert import render_insertion
-
     t0 = time.perf_counter()
     est = estimate_lighting(case.view, case.sample.location, level, lidar=case.sample.lidar, boxes=case.sample.boxes,
                             query_point_cam=case.center_cam)
@@ -189,8 +185,6 @@ def plot_chart(table: list[dict], path: str | Path, title: str) -> None:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-
-    from .core import atomic_path
 
     fig, ax = plt.subplots(figsize=(7.5, 4.8))
     colours = {"draft": "tab:blue", "default": "tab:orange", "high": "tab:green"}

@@ -1,0 +1,93 @@
+"""Rendering several objects into one image, one after the other (each occluded by the earlier ones)."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+
+from ..assets.asset import Asset
+from ..lighting.light import DistantLight
+from ..render.surface import prepare_asset
+from ..render.insert import Insertion, render_insertion
+from ..render.settings import QUALITY_PRESETS
+from ..render.shade import object_pixel_box
+from ..render.shadow import shadow_pixel_box
+from .options import InsertOptions, render_settings
+
+
+@dataclass(frozen=True)
+class RenderedObject:
+    """One object rendered into an image.
+
+    Attributes:
+        T_cam_from_object: (4, 4) its pose in the camera frame.
+        asset: the object.
+        insertion: the renderer's result for it (mask, coverage, shadow, timings).
+    """
+
+    T_cam_from_object: np.ndarray
+    asset: Asset
+    insertion: Insertion
+
+
+@dataclass(frozen=True)
+class RenderedImage:
+    """Objects rendered into one image (:func:`render_objects`).
+
+    Attributes:
+        image: (H, W, 3) uint8 the composite with every object.
+        mask: (H, W) float32 union of the objects' alpha.
+        shadow_ratio: (H, W) float32 product of the objects' shadow ratio maps.
+        objects: the objects in render order.
+    """
+
+    image: np.ndarray
+    mask: np.ndarray
+    shadow_ratio: np.ndarray
+    objects: list[RenderedObject]
+
+
+def render_objects(image: np.ndarray, K: np.ndarray, depth_m: np.ndarray, lights: Sequence[DistantLight],
+                   assets: Sequence[Asset], T_cam_from_objects: Sequence[np.ndarray],
+                   ground_normals_cam: Sequence[np.ndarray], options: InsertOptions, rng: np.random.Generator,
+                   timing: dict[str, float]) -> RenderedImage:
+    """Render objects one after the other (each with its light); each later one is occluded by the earlier ones.
+
+    Args:
+        image: (H, W, 3) uint8; K: (3, 3) intrinsics; depth_m: (H, W) scene camera-z depth, metres.
+        lights, assets, T_cam_from_objects, ground_normals_cam: one per object (camera frame).
+        rng: draws one render seed per object, in order.
+        timing: receives ``render`` and the renderer's stages summed over the objects (``render.<stage>``).
+    """
+    mask_union = np.zeros(image.shape[:2], np.float32)
+    shadow = np.ones(image.shape[:2], np.float32)
+    rendered = []
+    settings = render_settings(options)
+    t = time.perf_counter()
+    for light, asset, T_cam_from_object, normal in zip(lights, assets, T_cam_from_objects, ground_normals_cam):
+        ins = render_insertion(
+            image, K, depth_m, light, asset, T_cam_from_object, ground_normal_cam=normal,
+            quality=settings, ev=options.ev, seed=int(rng.integers(2**31)),
+        )
+        for stage, seconds in ins.timing_s.items():
+            if stage != "total":
+                timing[f"render.{stage}"] = timing.get(f"render.{stage}", 0.0) + seconds
+        image = ins.image
+        depth_m = np.where(ins.mask > 0.5, np.minimum(depth_m, ins.object_depth_m), depth_m)
+        mask_union = np.maximum(mask_union, ins.mask)
+        shadow = shadow * ins.shadow_ratio
+        rendered.append(RenderedObject(T_cam_from_object, asset, ins))
+    timing["render"] = time.perf_counter() - t
+    return RenderedImage(image, mask_union, shadow, rendered)
+
+
+def reaches_view(K: np.ndarray, width: int, height: int, asset: Asset, T_cam_from_object: np.ndarray,
+                 light: DistantLight, quality: str) -> bool:
+    """Whether the object or its shadow can touch any pixel of a ``width`` x ``height`` image (the
+    renderer's own pixel boxes)."""
+    prep = prepare_asset(asset)
+    return (object_pixel_box(K, width, height, T_cam_from_object, prep.box_corners_object) is not None
+            or shadow_pixel_box(K, width, height, T_cam_from_object, prep, light, QUALITY_PRESETS[quality]) is not None)

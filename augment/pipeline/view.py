@@ -1,0 +1,99 @@
+"""One camera of a sample: render every object placed in the sample (or its shadow) that reaches it."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from streetaug.placement.labels import object_label
+from streetaug.placement.place import PlacementResult
+
+from ..core import rotate_vectors
+from ..lighting.estimate import LightingEstimate
+from .context import ViewContext, object_light
+from .objects import reaches_view, render_objects
+from .options import InsertOptions, item_seed
+from .place import SamplePlacement
+from .results import InsertResult
+
+
+@dataclass(frozen=True)
+class ViewInsertion:
+    """What rendering a sample's objects into one camera produced.
+
+    Attributes:
+        result: the camera's augmented image and labels.
+        visible_px, coverage_px: (n_objects,) float64 visible / unoccluded pixels of each object of the
+            sample in this camera (0 for the objects it does not see).
+    """
+
+    result: InsertResult
+    visible_px: np.ndarray
+    coverage_px: np.ndarray
+
+
+def skip_reason(placement: PlacementResult | None, n_placed: int) -> str:
+    """Why a camera shows none of the sample's ``n_placed`` objects nor their shadows."""
+    own = placement.reason if placement is not None else None
+    if own and n_placed:
+        return f"{own}; no other camera's object or shadow in view"
+    if own or placement is not None:
+        return own or "no valid placement"
+    return "no inserted object or shadow in view" if n_placed else "no object placed in this sample"
+
+
+def render_into_view(context: ViewContext, token: str, placed: SamplePlacement, estimate: LightingEstimate,
+                     options: InsertOptions, timing: dict[str, float]) -> ViewInsertion:
+    """Render every placed object (or its shadow) that reaches the camera of ``context``.
+
+    Args:
+        token: the sample token (seeds the render).
+        estimate: the sample's lighting in this camera's frame.
+        timing: the sample-level seconds of this camera (``lighting``, ``placement``); completed here.
+    """
+    view = context.view
+    placements, assets = placed.placements, placed.assets
+    placement = placed.results.get(view.channel)
+    n = len(placements)
+    visible_px, coverage_px = np.zeros(n), np.zeros(n)
+    t0 = time.perf_counter()
+    image = view.image
+    T_cam_from_global = view.T_cam_from_global
+    poses = [T_cam_from_global @ p.T_global_from_object for p in placements]
+    t = time.perf_counter()
+    lights = [object_light(estimate, T[:3, 3] + 0.5 * p.wlh[2] * T[:3, 2]) for T, p in zip(poses, placements)]
+    timing["local_light"] = time.perf_counter() - t  # each object's environment at its centre (L2/L3: Eq. 1)
+    shown = [i for i in range(n)
+             if reaches_view(view.K, view.width, view.height, assets[i], poses[i], lights[i], options.quality)]
+    if not shown:
+        timing["total"] = timing["lighting"] + timing["placement"] + time.perf_counter() - t0
+        result = InsertResult(image=image, objects=[], mask=np.zeros(image.shape[:2], np.float32),
+                              shadow_ratio=np.ones(image.shape[:2], np.float32), timing_s=timing, lighting=estimate,
+                              placement=placement, skipped_reason=skip_reason(placement, n))
+        return ViewInsertion(result, visible_px, coverage_px)
+    t = time.perf_counter()
+    depth_m = context.depth_m
+    timing["depth"] = time.perf_counter() - t
+    rng = item_seed(options.seed, "render", token, view.channel)
+    normals = [rotate_vectors(T_cam_from_global, placements[i].ground_normal_global[None])[0] for i in shown]
+    rendered = render_objects(image, view.K, depth_m, [lights[i] for i in shown], [assets[i] for i in shown],
+                              [poses[i] for i in shown], normals, options, rng, timing)
+    objects = []
+    for i, obj in zip(shown, rendered.objects):
+        ins = obj.insertion
+        coverage = float(ins.coverage.sum())
+        visible_px[i] = float(ins.mask.sum())
+        coverage_px[i] = coverage
+        if coverage <= 0:  # only its shadow reaches this camera
+            continue
+        label = object_label(obj.T_cam_from_object, obj.asset.wlh, obj.asset.category, view.K, view.width,
+                             view.height, ins.mask, ins.coverage, T_global_from_cam=view.T_global_from_cam,
+                             attribute=placements[i].attribute)
+        label.update(object_index=i, placed_for=placed.placed_for[i])
+        objects.append(label)
+    timing["total"] = timing["lighting"] + timing["placement"] + time.perf_counter() - t0
+    result = InsertResult(image=rendered.image, objects=objects, mask=rendered.mask,
+                          shadow_ratio=rendered.shadow_ratio, timing_s=timing, lighting=estimate, placement=placement)
+    return ViewInsertion(result, visible_px, coverage_px)
