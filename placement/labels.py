@@ -16,7 +16,7 @@ Conventions chosen here:
 * ``box_global`` follows ``sample_annotation``: ``translation`` = box centre (not the bottom), ``size`` =
   [w, l, h], ``rotation`` = [w, x, y, z] box -> global. On tilted ground the rotation carries the
   ground's roll/pitch (the box is exactly the rendered object's box), so it is not yaw-only.
-* ``category`` comes from the asset (:mod:`streetaug.placement.categories` maps file names).
+* ``category`` comes from the asset (:mod:`streetaug.augment.assets.categories` maps file names).
 * ``attribute`` = the caller's choice; :func:`streetaug.placement.place.place_objects` records
   ``vehicle.parked`` for footprints within ``kerb_distance_m`` of the drivable edge, else ``vehicle.moving``.
   Default here: ``vehicle.moving``.

@@ -30,6 +30,7 @@ import numpy as np
 
 from ..core import InputError
 from .asset import Asset, Material
+from .categories import category_for_asset
 from .procedural import srgb_to_linear
 from .validate import smooth_vertex_normals, validate_asset
 
@@ -102,7 +103,7 @@ def load_asset(
         up_axis: the file's up axis (glTF: ``+y``).
         scale: multiply file units by this to get metres (default 1).
         length_m: instead of ``scale``, rescale so the extent along the front axis is this length.
-        category: nuScenes category (default: from the file name, see :mod:`streetaug.placement.categories`).
+        category: nuScenes category (default: from the file name, see :mod:`streetaug.augment.assets.categories`).
         use_cache: reuse an earlier result for the same file (path, mtime, size) and options.
 
     Returns:
@@ -141,8 +142,6 @@ def load_asset(
     else:
         parts = _load_ply_parts(path)
     if category is None:
-        from streetaug.placement.categories import category_for_asset  # the asset-name -> category mapping file
-
         category = category_for_asset(path)
     asset = _assemble(path, parts, R, scale, length_m, category)
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import base64
+import dataclasses
 import json
 import struct
 from pathlib import Path
@@ -459,7 +460,7 @@ def test_validate_errors_name_the_asset():
     with pytest.raises(InputError, match="'flat'.*zero area"):
         validate_asset(_asset([[0, 0, 0], [1, 0, 0], [2, 0, 0]], [[0, 1, 2]], name="flat"))
     bad_mat = _asset(tri, [[0, 1, 2]], name="mat")
-    bad_mat = Asset(**{**bad_mat.__dict__, "face_material": np.array([3])})
+    bad_mat = dataclasses.replace(bad_mat, face_material=np.array([3]))
     with pytest.raises(InputError, match="'mat'.*face_material"):
         validate_asset(bad_mat)
 

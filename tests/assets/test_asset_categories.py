@@ -7,7 +7,7 @@ import json
 import pytest
 
 from streetaug.augment.core import InputError
-from streetaug.placement.categories import NUSCENES_OBJECT_CATEGORIES, category_for_asset
+from streetaug.augment.assets.categories import NUSCENES_OBJECT_CATEGORIES, category_for_asset
 
 
 @pytest.mark.parametrize("name,category", [
@@ -53,7 +53,7 @@ def test_bad_mapping_file_is_a_clear_error(tmp_path, doc, match):
 
 
 def test_builtin_categories_are_nuscenes_names():
-    from streetaug.placement.categories import BUILTIN_MAPPING_PATH
+    from streetaug.augment.assets.categories import BUILTIN_MAPPING_PATH
 
     doc = json.loads(BUILTIN_MAPPING_PATH.read_text())
     assert all(r["category"] in NUSCENES_OBJECT_CATEGORIES for r in doc["rules"])

@@ -13,7 +13,7 @@ import json
 from functools import lru_cache
 from pathlib import Path
 
-from streetaug.augment.core import InputError
+from ..core import InputError
 
 BUILTIN_MAPPING_PATH = Path(__file__).with_name("asset_categories.json")
 FOLDER_MAPPING_NAME = "categories.json"
