@@ -40,8 +40,7 @@ from render_fixtures import NUSCENES_K, SHARED_DATA, ground_scene, read_hdri_lig
 
 from streetaug.augment.assets.procedural import procedural_car  # noqa: E402
 from streetaug.augment.core import pose_camera_to_transform  # noqa: E402
-from streetaug.augment.render.geometry import prepare_asset  # noqa: E402
-from streetaug.augment.render.insert import QUALITY_PRESETS, render_insertion  # noqa: E402
+from streetaug.augment.render import QUALITY_PRESETS, prepare_asset, render_insertion  # noqa: E402
 
 
 def sample_scenes(cars) -> list:

@@ -41,7 +41,7 @@ from streetaug.augment.assets.procedural import procedural_car  # noqa: E402
 from streetaug.augment.core import pose_camera_to_transform  # noqa: E402
 from streetaug.augment.render.camera_effects import estimate_blur_sigma, estimate_camera_effects, estimate_noise_sigma  # noqa: E402
 from streetaug.augment.core.depth import ground_plane_depth  # noqa: E402
-from streetaug.augment.render.insert import QUALITY_PRESETS, render_insertion  # noqa: E402
+from streetaug.augment.render import QUALITY_PRESETS, render_insertion  # noqa: E402
 
 BLURS = (0.0, 0.5, 1.0, 1.5, 2.0, 3.0)
 NOISES = (0.0, 1.0, 2.0, 4.0, 8.0)  # levels of 255

@@ -55,16 +55,14 @@ ROOT = Path(__file__).resolve().parents[1]
 SHARED = (ROOT / ".." / "shared" / "data").resolve()
 
 from streetaug.augment.assets.loader import load_asset  # noqa: E402
-from streetaug.augment.core import hdr_to_ldr_uint8, luminance, pose_camera_to_transform  # noqa: E402
+from streetaug.augment.core import PinholeCamera, hdr_to_ldr_uint8, luminance, pose_camera_to_transform  # noqa: E402
 from streetaug.augment.lighting.light import DistantLight  # noqa: E402
 from streetaug.augment.evaluation.metrics import psnr_db  # noqa: E402
 from streetaug.augment.pipeline import InsertOptions, insert_into_image  # noqa: E402
 from streetaug.augment.evaluation import reference as ref  # noqa: E402
 from streetaug.augment.core.depth import ground_plane_depth  # noqa: E402
-from streetaug.augment.render.geometry import prepare_asset  # noqa: E402
-from streetaug.augment.render.settings import QUALITY_PRESETS  # noqa: E402
-from streetaug.augment.render.shade import object_pixel_box  # noqa: E402
-from streetaug.augment.render.shadow import shadow_pixel_box  # noqa: E402
+from streetaug.augment.render import QUALITY_PRESETS, footprint, prepare_asset  # noqa: E402
+from streetaug.augment.render.footprint import object_pixel_box  # noqa: E402
 
 W, H = 960, 540
 K = np.array([[1266.4 * 0.6, 0.0, 816.3 * 0.6], [0.0, 1266.4 * 0.6, 491.5 * 0.6], [0.0, 0.0, 1.0]])
@@ -110,13 +108,9 @@ class Cache:
 
 def crop_box(asset, T, env) -> tuple[int, int, int, int]:
     """Where the car can change the image: its box and its (high-preset) shadow box, padded by 8 px."""
-    prep = prepare_asset(asset)
     light = DistantLight.from_envmap(env)
-    boxes = [b for b in (object_pixel_box(K, W, H, T, prep.box_corners_object),
-                         shadow_pixel_box(K, W, H, T, prep, light, QUALITY_PRESETS["high"])) if b is not None]
-    x0, y0 = min(b[0] for b in boxes) - 8, min(b[1] for b in boxes) - 8
-    x1, y1 = max(b[2] for b in boxes) + 8, max(b[3] for b in boxes) + 8
-    return max(x0, 0), max(y0, 0), min(x1, W), min(y1, H)
+    box = footprint(PinholeCamera(K, W, H), asset, T, light, QUALITY_PRESETS["high"]).box.grown(8, PinholeCamera(K, W, H))
+    return box.x0, box.y0, box.x1, box.y1
 
 
 PILOT_SPP = 16
@@ -256,19 +250,18 @@ def run_scene(hdri: str, car: str, args, cache: Cache, log, curve: bool = True, 
 
 def _coverage(prep, T, n: int = 4) -> np.ndarray:
     """(H, W) fraction of n x n sub-pixel camera rays that hit the car (geometry only)."""
-    from streetaug.augment.render.shade import camera_rays
-
-    box = object_pixel_box(K, W, H, T, prep.box_corners_object)
+    camera = PinholeCamera(K, W, H)
+    box = object_pixel_box(camera, T, prep.box_corners_object)
     cov = np.zeros((H, W), np.float32)
     if box is None:
         return cov
-    x0, y0, x1, y1 = box
+    x0, y0, x1, y1 = box.x0, box.y0, box.x1, box.y1
     ys, xs = np.mgrid[y0:y1, x0:x1]
     g = (np.arange(n) + 0.5) / n - 0.5
     gx, gy = np.meshgrid(g, g)
     uv = np.stack([(xs.ravel()[:, None] + gx.ravel()).ravel(), (ys.ravel()[:, None] + gy.ravel()).ravel()], axis=1)
     R, t = T[:3, :3], T[:3, 3]
-    d = camera_rays(K, uv) @ R
+    d = camera.rays(uv) @ R
     o = np.broadcast_to(-R.T @ t, d.shape)
     hit = prep.scene.intersect(np.ascontiguousarray(o), d).hit
     cov[y0:y1, x0:x1] = hit.reshape(-1, n * n).mean(axis=1).reshape(y1 - y0, x1 - x0)

@@ -10,12 +10,16 @@ import trimesh
 
 from streetaug.augment.assets.asset import Asset, Material
 from streetaug.augment.core import (
+    PinholeCamera,
+    camera_dir_to_lonlat,
     camera_envmap_directions,
     hdr_to_ldr_uint8,
-    pixel_rays,
+    luminance,
+    sample_equirect,
 )
-from streetaug.augment.lighting.light import DistantLight, SunLight
 from streetaug.augment.core.depth import ground_plane_depth
+from streetaug.augment.lighting.light import DistantLight, SunLight
+from streetaug.augment.render.sampling import hemisphere_irradiance
 
 SHARED_DATA = (Path(__file__).parents[1] / ".." / "shared" / "data").resolve()
 NUSCENES_K = np.array([[1266.4, 0.0, 816.3], [0.0, 1266.4, 491.5], [0.0, 0.0, 1.0]])
@@ -106,9 +110,6 @@ def ground_scene(light: DistantLight, K=NUSCENES_K, width: int = 1600, height: i
 
     Returns (image uint8 (H, W, 3), depth_m (H, W), ev): ``ev`` puts the ground at about 0.45 LDR.
     """
-    from streetaug.augment.render.sampling import hemisphere_irradiance
-    from streetaug.augment.render.shade import env_radiance
-
     n = np.array([0.0, -1.0, 0.0])
     depth = ground_plane_depth(K, width, height, n, cam_height_m)
     E = hemisphere_irradiance(light.envmap, n)
@@ -116,10 +117,9 @@ def ground_scene(light: DistantLight, K=NUSCENES_K, width: int = 1600, height: i
         E = E + np.asarray(light.sun.irradiance_rgb) * max(float(light.sun.direction @ n), 0.0)
     ground_rgb = albedo * E / np.pi
     if ev is None:
-        ev = float(np.log2(0.45**2.2 / (0.2126 * ground_rgb[0] + 0.7152 * ground_rgb[1] + 0.0722 * ground_rgb[2])))
-    ys, xs = np.mgrid[0:height, 0:width]
-    dirs = pixel_rays(K, np.stack([xs.ravel(), ys.ravel()], 1).astype(np.float64))
-    sky = env_radiance(light, dirs).reshape(height, width, 3)
+        ev = float(np.log2(0.45**2.2 / luminance(ground_rgb)))
+    dirs = PinholeCamera(K, width, height).rays()
+    sky = sample_equirect(light.envmap, *camera_dir_to_lonlat(dirs))
     hdr = np.where(np.isfinite(depth)[..., None], ground_rgb[None, None], sky)
     return hdr_to_ldr_uint8(hdr, ev), depth, ev
 

@@ -8,6 +8,7 @@ z in [0, h]).  ``wlh`` = (extent along y, along x, along z).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any, Callable
 
 import numpy as np
 
@@ -66,6 +67,23 @@ class Asset:
     vertex_normals: np.ndarray
     uv: np.ndarray | None = None
     category: str = "vehicle.car"
+    # Values later stages derive from this (immutable) asset, e.g. the renderer's BVH: see :meth:`derived`.
+    _derived: dict[str, Any] = field(default_factory=dict, init=False, repr=False, compare=False)
+
+    def derived(self, key: str, build: Callable[["Asset"], Any]) -> Any:
+        """``build(self)``, computed on the first call for ``key`` and kept with this asset afterwards.
+
+        For data a later stage derives from the asset (the renderer keys its prepared ray-tracing copy
+        ``"render.prepared.<backend>"``): it lives exactly as long as the asset and is never pickled.
+        """
+        if key not in self._derived:
+            self._derived[key] = build(self)
+        return self._derived[key]
+
+    def __getstate__(self) -> dict[str, Any]:
+        state = dict(self.__dict__)
+        state["_derived"] = {}  # derived data (BVHs) is rebuilt where it is needed, not shipped
+        return state
 
     def __post_init__(self) -> None:
         check_shape(self.vertices, ("V", 3), f"asset {self.name}: vertices")

@@ -10,11 +10,8 @@ import numpy as np
 
 from ..assets.asset import Asset
 from ..lighting.light import DistantLight
-from ..render.surface import prepare_asset
-from ..render.insert import Insertion, render_insertion
-from ..render.settings import QUALITY_PRESETS
-from ..render.shade import object_pixel_box
-from ..render.shadow import shadow_pixel_box
+from ..core import PinholeCamera
+from ..render import QUALITY_PRESETS, Insertion, footprint, render_insertion
 from .options import InsertOptions, render_settings
 
 
@@ -88,6 +85,5 @@ def reaches_view(K: np.ndarray, width: int, height: int, asset: Asset, T_cam_fro
                  light: DistantLight, quality: str) -> bool:
     """Whether the object or its shadow can touch any pixel of a ``width`` x ``height`` image (the
     renderer's own pixel boxes)."""
-    prep = prepare_asset(asset)
-    return (object_pixel_box(K, width, height, T_cam_from_object, prep.box_corners_object) is not None
-            or shadow_pixel_box(K, width, height, T_cam_from_object, prep, light, QUALITY_PRESETS[quality]) is not None)
+    where = footprint(PinholeCamera(K, width, height), asset, T_cam_from_object, light, QUALITY_PRESETS[quality])
+    return where.reaches_image

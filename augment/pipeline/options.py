@@ -7,7 +7,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..render.settings import RenderSettings, resolve_settings
+from ..render import RenderSettings, resolve_settings
 
 
 @dataclass(frozen=True)

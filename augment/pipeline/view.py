@@ -83,10 +83,9 @@ def render_into_view(context: ViewContext, token: str, placed: SamplePlacement, 
     objects = []
     for i, obj in zip(shown, rendered.objects):
         ins = obj.insertion
-        coverage = float(ins.coverage.sum())
-        visible_px[i] = float(ins.mask.sum())
-        coverage_px[i] = coverage
-        if coverage <= 0:  # only its shadow reaches this camera
+        visible_px[i] = ins.visible_px
+        coverage_px[i] = ins.coverage_px
+        if ins.coverage_px <= 0:  # only its shadow reaches this camera
             continue
         label = object_label(obj.T_cam_from_object, obj.asset.wlh, obj.asset.category, view.K, view.width,
                              view.height, ins.mask, ins.coverage, T_global_from_cam=view.T_global_from_cam,

@@ -29,7 +29,7 @@ import numpy as np
 from ..core import camera_envmap_directions, equirect_solid_angles
 from ..lighting.light import DistantLight
 from .brdf import specular_albedo, to_world
-from .geometry import PreparedAsset
+from .surface import PreparedAsset, surface_at_hits
 from .sampling import env_pyramid, irradiance_map, lookup_irradiance
 
 RAY_EPS_M = 1e-3
@@ -112,12 +112,11 @@ class BounceLight:
         return self._tables["A"][face], self._tables["B"][face]
 
     def _compute_radiance(self, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        from .shade import surface_at_hits  # shade imports this module's users; keep the import local
-
         prep = self.prep
         F = len(faces)
         n_g = prep.face_normal[faces]
-        n_s, _, _, params, _, emission = surface_at_hits(prep, faces, np.full((F, 2), 1.0 / 3.0), -n_g)
+        surface = surface_at_hits(prep, faces, np.full((F, 2), 1.0 / 3.0), -n_g)
+        n_s, params, emission = surface.normal, surface.params, surface.emission
         albedo = params.c_diff + specular_albedo(np.full(F, VIEW_COS), params)
         E = lookup_irradiance(irradiance_map(self.light.envmap), n_s @ self.R_cam_from_obj.T)
         n_up = n_s @ self.up_obj

@@ -1,15 +1,26 @@
 """Occlusion by scene depth and the composite ``I_edit = M I_obj + (1 - M) I S`` in linear HDR.
 
+The last stage of the chain: the box-local layers of the foreground (object radiance, coverage,
+depth) and of the shadow (ratio map) are placed into image-size :class:`ObjectLayers`, occluded by the
+scene depth, optionally blurred and noised like the photo (:mod:`.camera_effects`), and composited.
 Only pixels where ``M > 0`` or ``S < 1`` are converted and rewritten; every other byte of the
 input image is returned unchanged.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import cv2
 import numpy as np
 
-from ..core import hdr_to_ldr_uint8, ldr_uint8_to_hdr
+from ..core import PinholeCamera, hdr_to_ldr_uint8, ldr_uint8_to_hdr, luminance
+from .camera_effects import CameraEffects, add_object_noise, blur_object_layer, estimate_camera_effects
+from .footprint import PixelBox
+from .foreground import Foreground
+from .shadow import ShadowMap
+
+CAMERA_EFFECTS_MARGIN_PX = 96  # blur and noise are measured on the affected box grown by this much
 
 OCCLUSION_SOFT_M = 0.10  # width of the soft depth test at 0 m ...
 OCCLUSION_SOFT_PER_M = 0.01  # ... growing 1 cm per metre of depth (LiDAR / completion error grows)
@@ -61,3 +72,102 @@ def composite(image_rgb: np.ndarray, radiance_premult: np.ndarray, mask: np.ndar
     edit = obj + (1.0 - M) * I * ratio_rgb[ys, xs]
     out[ys, xs] = hdr_to_ldr_uint8(edit, ev)
     return out
+
+
+@dataclass(frozen=True)
+class ObjectLayers:
+    """The object and its shadow as image-size layers (H, W), before compositing.
+
+    Attributes:
+        coverage: (H, W) float32 object coverage before occlusion, 0..1.
+        visibility: (H, W) float32 soft depth test of the object against the scene (0 outside the object box).
+        mask: (H, W) float32 final object alpha ``coverage x visibility``.
+        depth_m: (H, W) float32 camera-z of the object, inf where none.
+        radiance_premult: (H, W, 3) float32 linear object radiance x coverage.
+        ratio_rgb: (H, W, 3) float32 per-channel shadow ratio S, 1 = unchanged.
+        box: the union of the object's and the shadow's boxes (everything outside is untouched), or None.
+    """
+
+    coverage: np.ndarray
+    visibility: np.ndarray
+    mask: np.ndarray
+    depth_m: np.ndarray
+    radiance_premult: np.ndarray
+    ratio_rgb: np.ndarray
+    box: PixelBox | None
+
+
+def object_layers(fg: Foreground | None, sh: ShadowMap | None, scene_depth_m: np.ndarray) -> ObjectLayers:
+    """Place the box-local foreground and shadow into image-size layers; occlude the object by ``scene_depth_m`` (H, W)."""
+    H, W = scene_depth_m.shape
+    coverage = np.zeros((H, W), np.float32)
+    mask = np.zeros((H, W), np.float32)
+    obj_depth = np.full((H, W), np.inf, np.float32)
+    rad_premult = np.zeros((H, W, 3), np.float32)
+    vis_full = np.zeros((H, W), np.float32)
+    ratio = np.ones((H, W, 3), np.float32)
+    box = None
+    if fg is not None:
+        h, w = fg.alpha.shape
+        box = PixelBox(fg.x0, fg.y0, fg.x0 + w, fg.y0 + h)
+        sl = box.slices
+        vis = depth_visibility(fg.depth_m, scene_depth_m[sl])
+        coverage[sl] = fg.alpha
+        mask[sl] = fg.alpha * vis
+        vis_full[sl] = vis
+        obj_depth[sl] = fg.depth_m
+        rad_premult[sl] = fg.radiance_premult
+    if sh is not None:
+        h, w = sh.ratio_rgb.shape[:2]
+        shadow_box = PixelBox(sh.x0, sh.y0, sh.x0 + w, sh.y0 + h)
+        ratio[shadow_box.slices] = sh.ratio_rgb
+        box = shadow_box if box is None else box.union(shadow_box)
+    return ObjectLayers(coverage, vis_full, mask, obj_depth, rad_premult, ratio, box)
+
+
+@dataclass(frozen=True)
+class Composited:
+    """Result of :func:`composite_layers`.
+
+    Attributes:
+        image: (H, W, 3) uint8 the composite (byte-identical to the input outside ``box``).
+        object_radiance: (H, W, 3) float32 un-premultiplied linear object radiance (0 where no coverage).
+        shadow_ratio: (H, W) float32 luminance of the per-channel ratio, 1 = unchanged.
+        effects: the blur and noise matched to the image, or None.
+    """
+
+    image: np.ndarray
+    object_radiance: np.ndarray
+    shadow_ratio: np.ndarray
+    effects: CameraEffects | None
+
+
+def composite_layers(image_rgb: np.ndarray, layers: ObjectLayers, camera: PinholeCamera, match_camera: bool,
+                     ev: float, rng: np.random.Generator) -> Composited:
+    """Composite the layers into ``image_rgb`` (H, W, 3) uint8 (with ``match_camera``, blurred and noised
+    like the image around the object, measured locally: blur and noise vary over an image)."""
+    H, W = image_rgb.shape[:2]
+    image = image_rgb.copy()
+    obj_rad = np.zeros((H, W, 3), np.float32)
+    ratio_lum = np.ones((H, W), np.float32)
+    if layers.box is None:
+        return Composited(image, obj_rad, ratio_lum, None)
+    box, effects = layers.box, None
+    if match_camera:
+        g = CAMERA_EFFECTS_MARGIN_PX
+        effects = estimate_camera_effects(image_rgb[max(box.y0 - g, 0) : box.y1 + g, max(box.x0 - g, 0) : box.x1 + g])
+        box = box.grown(int(np.ceil(3 * effects.blur_sigma_px)), camera)  # room for the blurred object's rim
+    ub = box.slices
+    L = layers
+    if effects is None:
+        image[ub] = composite(image_rgb[ub], L.radiance_premult[ub], L.mask[ub], L.visibility[ub], L.ratio_rgb[ub], ev)
+    else:  # blur the visible object layer like the image, composite, then add the image's noise
+        obj_b, mask_b = blur_object_layer(L.radiance_premult[ub] * L.visibility[ub][..., None], L.mask[ub],
+                                          effects.blur_sigma_px)
+        image[ub] = composite(image_rgb[ub], obj_b, mask_b, np.ones_like(mask_b), L.ratio_rgb[ub], ev)
+        image[ub] = add_object_noise(image[ub], mask_b, effects.noise_sigma, rng)
+    cov = L.coverage[ub][..., None]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        obj_rad[ub] = np.where(cov > 0, L.radiance_premult[ub] / cov, 0.0)
+    ratio_lum[ub] = luminance(L.ratio_rgb[ub])
+    return Composited(image, obj_rad, ratio_lum, effects)

@@ -10,15 +10,18 @@ from __future__ import annotations
 from collections import OrderedDict
 from dataclasses import dataclass
 
+import cv2
 import numpy as np
 
 from ..core import (
     camera_dir_to_lonlat,
+    camera_envmap_directions,
     check_shape,
     equirect_solid_angles,
     lonlat_to_camera_dir,
     luminance,
 )
+from .brdf import to_world
 
 GOLDEN_ANGLE = np.pi * (3.0 - np.sqrt(5.0))
 
@@ -44,8 +47,6 @@ def cosine_hemisphere(u1: np.ndarray, u2: np.ndarray) -> tuple[np.ndarray, np.nd
 
 def sample_cone(axis: np.ndarray, half_angle_rad: float, u1: np.ndarray, u2: np.ndarray) -> np.ndarray:
     """Directions (N, 3) uniform in solid angle inside the cone around unit ``axis`` (3,) (e.g. the sun disc)."""
-    from .brdf import to_world
-
     cos_max = np.cos(half_angle_rad)
     z = 1.0 - u1 * (1.0 - cos_max)
     r = np.sqrt(np.clip(1.0 - z * z, 0.0, 1.0))
@@ -136,8 +137,6 @@ def env_sampler_for(envmap: np.ndarray) -> EnvSampler:
 
 def hemisphere_irradiance(envmap: np.ndarray, normal: np.ndarray) -> np.ndarray:
     """Irradiance (3,) on a surface with unit ``normal`` (3,) from an unoccluded camera-frame envmap."""
-    from ..core import camera_envmap_directions
-
     H, W = envmap.shape[:2]
     cos = np.clip(np.einsum("hwk,k->hw", camera_envmap_directions(H, W), np.asarray(normal, dtype=np.float64)), 0.0, None)
     w = cos * equirect_solid_angles(H, W)
@@ -178,10 +177,6 @@ def irradiance_map(envmap: np.ndarray, height: int = 32, width: int = 64) -> np.
     hit = _IRRADIANCE_CACHE.get(key)
     if hit is not None and hit[0] is envmap:
         return hit[1]
-    import cv2
-
-    from ..core import camera_envmap_directions
-
     H, W = envmap.shape[:2]
     # Power per small texel (radiance x solid angle summed exactly), and the texel's mean direction
     # vector m = int d dw: int_texel L max(0, n.d) dw ~ (power / solid angle) max(0, n.m) is exact for
@@ -240,8 +235,6 @@ def env_pyramid(envmap: np.ndarray, min_width: int = 8) -> list[np.ndarray]:
     hit = _PYRAMID_CACHE.get(key)
     if hit is not None and hit[0] is envmap:
         return hit[1]
-    import cv2
-
     levels = [np.asarray(envmap, dtype=np.float32)]
     while levels[-1].shape[1] // 2 >= min_width and levels[-1].shape[0] >= 2:
         h, w = levels[-1].shape[:2]

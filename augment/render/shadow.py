@@ -31,16 +31,15 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
-from ..core import luminance, project_points
+from ..core import PinholeCamera, camera_dir_to_lonlat, luminance, sample_equirect
 from ..lighting.light import DistantLight
 from .bounce import BounceLight
 from .brdf import row_norm, to_world
-from .geometry import PreparedAsset
+from .footprint import PixelBox
 from .sampling import GOLDEN_ANGLE, sample_cone, sky_irradiance
 from .settings import RenderSettings
-from .shade import lookup_equirect
+from .surface import PreparedAsset
 
-SKY_RADIUS_PER_HEIGHT = 2.0  # sky occlusion beyond ~2 object heights is below a few per cent
 RAY_EPS_M = 0.01
 SHADOW_CHUNK_RAYS = 1_000_000  # rays per batch: bounds memory
 
@@ -50,7 +49,7 @@ class ShadowMap:
     """Ratio map over a pixel box.
 
     Attributes:
-        x0, y0: top-left pixel of the box.
+        x0, y0: top-left pixel of the box (its :func:`streetaug.augment.render.footprint.shadow_pixel_box`).
         ratio_rgb: (h, w, 3) float32 per-channel ratio S in [0, 1], 1 = unchanged.
         stats: rays cast, pixels evaluated.
         foot_ratio: (3,) mean ratio on the ground under the object (used by the bounce model).
@@ -69,12 +68,12 @@ class GroundShadow:
 
     Attributes:
         shadow: the ratio map.
-        K: (3, 3) intrinsics; T_cam_from_object: (4, 4) pose.
+        camera: the camera of the image; T_cam_from_object: (4, 4) pose.
         up_obj: (3,) unit ground normal in the object frame (the ground plane passes through the origin).
     """
 
     shadow: ShadowMap
-    K: np.ndarray
+    camera: PinholeCamera
     T_cam_from_object: np.ndarray
     up_obj: np.ndarray
 
@@ -90,7 +89,7 @@ class GroundShadow:
         R, t = self.T_cam_from_object[:3, :3], self.T_cam_from_object[:3, 3]
         g_cam = g @ R.T + t
         front = g_cam[:, 2] > 1e-3
-        uvw = g_cam @ self.K.T
+        uvw = g_cam @ self.camera.K.T
         with np.errstate(divide="ignore", invalid="ignore"):
             u = uvw[:, 0] / uvw[:, 2] - self.shadow.x0
             v = uvw[:, 1] / uvw[:, 2] - self.shadow.y0
@@ -120,72 +119,70 @@ def car_ambient_radiance(light: DistantLight, mean_albedo: float, up_cam: np.nda
     return mean_albedo * sky_irradiance(light.envmap, up_cam) / (2.0 * np.pi)
 
 
-def shadow_pixel_box(K: np.ndarray, width: int, height: int, T_cam_from_object: np.ndarray, prep: PreparedAsset,
-                     light: DistantLight, settings: RenderSettings) -> tuple[int, int, int, int] | None:
-    """End-exclusive pixel box (x0, y0, x1, y1) where the ratio map can differ from 1, or None."""
-    V = prep.asset.vertices
-    lo, hi = V.min(axis=0), V.max(axis=0)
-    h_obj = float(max(hi[2], 0.0))
-    r = SKY_RADIUS_PER_HEIGHT * h_obj + 0.3
-    ground = np.array([[x, y, 0.0] for x in (lo[0] - r, hi[0] + r) for y in (lo[1] - r, hi[1] + r)])
-    pts = [ground]
-    if light.sun is not None:
-        s = T_cam_from_object[:3, :3].T @ np.asarray(light.sun.direction, dtype=np.float64)
-        if s[2] > 1e-3:
-            horiz = -s[:2] / s[2] * h_obj
-            length = np.linalg.norm(horiz)
-            if length > settings.shadow_max_length_m:
-                horiz *= settings.shadow_max_length_m / length
-            m = 0.3 + h_obj * np.tan(light.sun.half_angle_rad) * length / max(h_obj, 1e-6)
-            pts.append(np.array([[x + horiz[0] + dx, y + horiz[1] + dy, 0.0]
-                                 for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for dx in (-m, m) for dy in (-m, m)]))
-    pts = np.concatenate(pts)
-    pts_cam = pts @ T_cam_from_object[:3, :3].T + T_cam_from_object[:3, 3]
-    front = pts_cam[:, 2] > 0.3
-    if not front.any():
-        return None
-    uv, _ = project_points(K, pts_cam[front])
-    x0, y0 = np.floor(uv.min(axis=0)).astype(int) - 2
-    x1, y1 = np.ceil(uv.max(axis=0)).astype(int) + 3
-    if not front.all():  # the region reaches behind the camera: extend to the bottom and the sides
-        x0, x1, y1 = 0, width, height
-    x0, y0, x1, y1 = max(x0, 0), max(y0, 0), min(x1, width), min(y1, height)
-    if x1 <= x0 or y1 <= y0:
-        return None
-    return int(x0), int(y0), int(x1), int(y1)
-
-
-def render_shadow(K: np.ndarray, width: int, height: int, depth_m: np.ndarray, light: DistantLight, prep: PreparedAsset,
-                  T_cam_from_object: np.ndarray, ground_normal_cam: np.ndarray, settings: RenderSettings,
-                  rng: np.random.Generator, bounce: BounceLight) -> ShadowMap | None:
-    """The ratio map S over :func:`shadow_pixel_box` (see module docstring); None if there is nothing to do.
+def render_shadow(camera: PinholeCamera, box: PixelBox | None, depth_m: np.ndarray, light: DistantLight,
+                  prep: PreparedAsset, T_cam_from_object: np.ndarray, ground_normal_cam: np.ndarray,
+                  settings: RenderSettings, rng: np.random.Generator, bounce: BounceLight) -> ShadowMap | None:
+    """The ratio map S over ``box`` (see module docstring); None if there is nothing to do.
 
     Args:
+        camera: the camera of the image; box: its :func:`~streetaug.augment.render.footprint.shadow_pixel_box`.
         depth_m: (H, W) scene camera-z depth in metres, inf/nan/<= 0 where unknown.
         ground_normal_cam: (3,) unit normal of the ground (pointing up), camera frame; the ground plane
             passes through the object's origin.
         bounce: radiance model of the object's surfaces along blocked rays.
     """
-    box = shadow_pixel_box(K, width, height, T_cam_from_object, prep, light, settings)
     if box is None:
         return None
-    x0, y0, x1, y1 = box
     n_cam = np.asarray(ground_normal_cam, dtype=np.float64)
     n_cam = n_cam / np.linalg.norm(n_cam)
-    geo = _Ground(K, np.asarray(depth_m), n_cam, T_cam_from_object)
+    geo = _Ground(camera, np.asarray(depth_m), n_cam, T_cam_from_object)
     E_sky = sky_irradiance(light.envmap, n_cam)
     sun = light.sun
     cos_sun = 0.0 if sun is None else float(max(np.dot(sun.direction, n_cam), 0.0))
     E_sun = np.zeros(3) if sun is None else np.asarray(sun.irradiance_rgb, dtype=np.float64) * cos_sun
     E = E_sky + E_sun
-    stats: dict = {"rays": {}, "box": [x0, y0, x1, y1]}
-    h, w = y1 - y0, x1 - x0
+    stats: dict = {"rays": {}, "box": box.as_list()}
     if luminance(E) <= 0:
-        return ShadowMap(x0=x0, y0=y0, ratio_rgb=np.ones((h, w, 3), np.float32), stats=stats)
+        return ShadowMap(x0=box.x0, y0=box.y0, ratio_rgb=np.ones((box.height, box.width, 3), np.float32), stats=stats)
     E_safe = np.where(E > 0, E, np.inf)
+    sky = _sky_occlusion(geo, box, light, prep, bounce, settings, rng, stats, E_safe)
+    # -- sun: full resolution where the object's shadow can fall, refined at the shadow's edges.
+    sun_def = np.zeros((box.height, box.width, 3), np.float32)
+    if cos_sun > 0:
+        blocked = _sun_blocked(geo, box, light, prep, settings, rng, stats)
+        sun_def = (blocked[..., None] * (E_sun / E_safe)[None, None]).astype(np.float32)
+    s_foot = _foot_ratio(geo, box, prep, sky, sun_def, E_safe)
+    stats["foot_ratio"] = s_foot.tolist()
+    ratio = np.clip(1.0 - sky.deficit - sun_def + sky.bounce_gain * s_foot.astype(np.float32)[None, None], 0.0, 1.0)
+    ratio = np.where(ratio > 1.0 - 1e-4, 1.0, ratio).astype(np.float32)
+    return ShadowMap(x0=box.x0, y0=box.y0, ratio_rgb=ratio, stats=stats, foot_ratio=s_foot)
 
-    # -- sky: every shadow_factor pixels, smoothed and upsampled.
+
+@dataclass(frozen=True)
+class SkyOcclusion:
+    """The sky part of the ratio map (:func:`_sky_occlusion`).
+
+    Attributes:
+        uv: (C, 2) float64 pixel positions of the coarse cells (every ``shadow_factor`` pixels).
+        valid: (C,) bool cells with a ground point.
+        D0, C: (C, 3) float64 per-cell sky deficit ``D0 - C S_foot`` (irradiance units).
+        deficit, bounce_gain: (h, w, 3) float32 ``D0 / E`` and ``C / E`` over the box, upsampled and
+            refined at full resolution where the occlusion changes fast.
+    """
+
+    uv: np.ndarray
+    valid: np.ndarray
+    D0: np.ndarray
+    C: np.ndarray
+    deficit: np.ndarray
+    bounce_gain: np.ndarray
+
+
+def _sky_occlusion(geo: "_Ground", box: PixelBox, light: DistantLight, prep: PreparedAsset, bounce: BounceLight,
+                   settings: RenderSettings, rng: np.random.Generator, stats: dict, E_safe: np.ndarray) -> SkyOcclusion:
+    """Sky light the object takes: every ``shadow_factor`` pixels, smoothed and upsampled, then refined."""
     f = settings.shadow_factor
+    x0, y0, h, w = box.x0, box.y0, box.height, box.width
     wl, hl = -(-w // f), -(-h // f)
     gx = x0 + f * np.arange(wl) + (f - 1) / 2.0
     gy = y0 + f * np.arange(hl) + (f - 1) / 2.0
@@ -194,8 +191,7 @@ def render_shadow(K: np.ndarray, width: int, height: int, depth_m: np.ndarray, l
     p_obj, valid = geo.points_obj(uv)
     D0 = np.zeros((len(uv), 3))
     C = np.zeros((len(uv), 3))
-    per_cell = settings.shadow_sky_dirs
-    chunk = max(1, SHADOW_CHUNK_RAYS // per_cell)
+    chunk = max(1, SHADOW_CHUNK_RAYS // settings.shadow_sky_dirs)
     cells = np.flatnonzero(valid)
     for a in range(0, len(cells), chunk):
         sel = cells[a : a + chunk]
@@ -210,48 +206,51 @@ def render_shadow(K: np.ndarray, width: int, height: int, depth_m: np.ndarray, l
         return cv2.resize(low, (wl * f, hl * f), interpolation=cv2.INTER_LINEAR)[:h, :w]
 
     sky_def, bounce_gain = upsample(D0), upsample(C)
-
-    # Where the sky occlusion changes fast between cells (the edge of the ground under the object),
-    # the upsampled map is too soft: evaluate those cells' pixels at full resolution.
     if f > 1:
-        lum = (D0 / E_safe) @ np.array([0.2126, 0.7152, 0.0722])
-        low = np.where(valid, lum, 0.0).reshape(hl, wl).astype(np.float32)
-        k3 = np.ones((3, 3), np.uint8)
-        jump = cv2.dilate(low, k3) - cv2.erode(low, k3, borderType=cv2.BORDER_REPLICATE)
-        sharp = np.repeat(np.repeat(jump > SKY_REFINE_JUMP, f, axis=0), f, axis=1)[:h, :w]
-        ys, xs = np.nonzero(sharp)
-        if len(ys):
-            uv_f = np.stack([xs + x0, ys + y0], axis=1).astype(np.float64)
-            p_f, valid_f = geo.points_obj(uv_f)
-            sel = np.flatnonzero(valid_f)
-            for a in range(0, len(sel), chunk):
-                part = sel[a : a + chunk]
-                d0, c = _sky_deficit(p_f[part], geo.n_obj, light, prep, bounce, per_cell, geo.R, rng, stats)
-                sky_def[ys[part], xs[part]] = d0 / E_safe
-                bounce_gain[ys[part], xs[part]] = c / E_safe
-            for a in (sky_def, bounce_gain):  # per-pixel noise -> a light blur inside the refined band
-                a[sharp] = cv2.GaussianBlur(a, (5, 5), 1.2, borderType=cv2.BORDER_REPLICATE)[sharp]
-            stats["sky_refined_pixels"] = int(len(sel))
+        low = np.where(valid, luminance(D0 / E_safe), 0.0).reshape(hl, wl).astype(np.float32)
+        _refine_sky_edges(geo, box, low, light, prep, bounce, settings, rng, stats, E_safe, sky_def, bounce_gain)
+    return SkyOcclusion(uv, valid, D0, C, sky_def, bounce_gain)
 
-    # -- sun: full resolution where the object's shadow can fall, refined at the shadow's edges.
-    sun_def = np.zeros((h, w, 3), np.float32)
-    if cos_sun > 0:
-        blocked = _sun_blocked(geo, box, light, prep, settings, rng, stats)
-        sun_def = (blocked[..., None] * (E_sun / E_safe)[None, None]).astype(np.float32)
 
-    # -- the ground under the object: its mean ratio closes the loop of the bounce model.
-    foot = geo.footprint(uv, valid, prep)
-    if foot.any():
-        cells_yx = (np.clip(np.round(uv[foot, 1] - y0).astype(int), 0, h - 1), np.clip(np.round(uv[foot, 0] - x0).astype(int), 0, w - 1))
-        s0 = 1.0 - (D0[foot] / E_safe).mean(axis=0) - sun_def[cells_yx].mean(axis=0)
-        c = (C[foot] / E_safe).mean(axis=0)
-        s_foot = np.clip(s0 / np.maximum(1.0 - c, 1e-3), 0.0, 1.0)
-    else:
-        s_foot = np.full(3, FOOT_RATIO_FALLBACK)
-    stats["foot_ratio"] = s_foot.tolist()
-    ratio = np.clip(1.0 - sky_def - sun_def + bounce_gain * s_foot.astype(np.float32)[None, None], 0.0, 1.0)
-    ratio = np.where(ratio > 1.0 - 1e-4, 1.0, ratio).astype(np.float32)
-    return ShadowMap(x0=x0, y0=y0, ratio_rgb=ratio, stats=stats, foot_ratio=s_foot)
+def _refine_sky_edges(geo: "_Ground", box: PixelBox, low: np.ndarray, light: DistantLight, prep: PreparedAsset,
+                      bounce: BounceLight, settings: RenderSettings, rng: np.random.Generator, stats: dict,
+                      E_safe: np.ndarray, sky_def: np.ndarray, bounce_gain: np.ndarray) -> None:
+    """Where the sky occlusion ``low`` (hl, wl) changes fast between cells (the edge of the ground under
+    the object) the upsampled map is too soft: evaluate those pixels at full resolution, in place."""
+    f, per_cell = settings.shadow_factor, settings.shadow_sky_dirs
+    h, w = box.height, box.width
+    k3 = np.ones((3, 3), np.uint8)
+    jump = cv2.dilate(low, k3) - cv2.erode(low, k3, borderType=cv2.BORDER_REPLICATE)
+    sharp = np.repeat(np.repeat(jump > SKY_REFINE_JUMP, f, axis=0), f, axis=1)[:h, :w]
+    ys, xs = np.nonzero(sharp)
+    if not len(ys):
+        return
+    uv_f = np.stack([xs + box.x0, ys + box.y0], axis=1).astype(np.float64)
+    p_f, valid_f = geo.points_obj(uv_f)
+    sel = np.flatnonzero(valid_f)
+    chunk = max(1, SHADOW_CHUNK_RAYS // per_cell)
+    for a in range(0, len(sel), chunk):
+        part = sel[a : a + chunk]
+        d0, c = _sky_deficit(p_f[part], geo.n_obj, light, prep, bounce, per_cell, geo.R, rng, stats)
+        sky_def[ys[part], xs[part]] = d0 / E_safe
+        bounce_gain[ys[part], xs[part]] = c / E_safe
+    for a in (sky_def, bounce_gain):  # per-pixel noise -> a light blur inside the refined band
+        a[sharp] = cv2.GaussianBlur(a, (5, 5), 1.2, borderType=cv2.BORDER_REPLICATE)[sharp]
+    stats["sky_refined_pixels"] = int(len(sel))
+
+
+def _foot_ratio(geo: "_Ground", box: PixelBox, prep: PreparedAsset, sky: SkyOcclusion, sun_def: np.ndarray,
+                E_safe: np.ndarray) -> np.ndarray:
+    """(3,) mean ratio on the ground under the object, solved in closed form (it closes the bounce model's loop)."""
+    foot = geo.footprint(sky.uv, sky.valid, prep)
+    if not foot.any():
+        return np.full(3, FOOT_RATIO_FALLBACK)
+    h, w = box.height, box.width
+    cells_yx = (np.clip(np.round(sky.uv[foot, 1] - box.y0).astype(int), 0, h - 1),
+                np.clip(np.round(sky.uv[foot, 0] - box.x0).astype(int), 0, w - 1))
+    s0 = 1.0 - (sky.D0[foot] / E_safe).mean(axis=0) - sun_def[cells_yx].mean(axis=0)
+    c = (sky.C[foot] / E_safe).mean(axis=0)
+    return np.clip(s0 / np.maximum(1.0 - c, 1e-3), 0.0, 1.0)
 
 
 FOOT_RATIO_FALLBACK = 0.15  # mean shadow ratio under a car when its footprint is not in view
@@ -261,9 +260,8 @@ SKY_REFINE_JUMP = 0.08  # sky-occlusion change (fraction of E) between neighbour
 class _Ground:
     """Ground points seen by pixels: from the depth map where known, else on the ground plane through the object."""
 
-    def __init__(self, K: np.ndarray, depth_m: np.ndarray, n_cam: np.ndarray, T_cam_from_object: np.ndarray) -> None:
-        self.K = np.asarray(K, dtype=np.float64)
-        self.Kinv = np.linalg.inv(self.K)
+    def __init__(self, camera: PinholeCamera, depth_m: np.ndarray, n_cam: np.ndarray, T_cam_from_object: np.ndarray) -> None:
+        self.camera = camera
         self.depth = depth_m
         self.n_cam = n_cam
         self.R = T_cam_from_object[:3, :3]
@@ -280,7 +278,7 @@ class _Ground:
         ix = np.clip(np.round(src[:, 0]).astype(int), 0, W - 1)
         iy = np.clip(np.round(src[:, 1]).astype(int), 0, H - 1)
         d = np.asarray(self.depth[iy, ix], dtype=np.float64)
-        rays = np.concatenate([uv, np.ones((len(uv), 1))], axis=1) @ self.Kinv.T  # z = 1
+        rays = self.camera.rays(uv, unit=False)  # z = 1
         denom = rays @ self.n_cam
         with np.errstate(divide="ignore", invalid="ignore"):
             z_plane = (self.t @ self.n_cam) / denom
@@ -341,7 +339,7 @@ def _sky_deficit(p_obj, n_obj, light, prep, bounce, n_dirs, R, rng, stats) -> tu
     A, B = bounce.radiance(face, dirs_obj[bi])
     # Each direction stands for a cell of the cone: use the sky averaged over cells of about that size
     # (a box-filtered map), not a point sample of a possibly spiky panorama.
-    L = lookup_equirect(_cell_filtered_env(light.envmap, n_dirs), dirs_obj[bi] @ R.T)
+    L = sample_equirect(_cell_filtered_env(light.envmap, n_dirs), *camera_dir_to_lonlat(dirs_obj[bi] @ R.T))
     wgt = weight_all[live[bi]]
     pix = live[bi] // n_dirs
     for k in range(3):
@@ -350,10 +348,10 @@ def _sky_deficit(p_obj, n_obj, light, prep, bounce, n_dirs, R, rng, stats) -> tu
     return D0, C
 
 
-def _sun_polygon_mask(geo: _Ground, box, light: DistantLight, prep: PreparedAsset, K: np.ndarray) -> np.ndarray | None:
+def _sun_polygon_mask(geo: _Ground, box: PixelBox, light: DistantLight, prep: PreparedAsset) -> np.ndarray | None:
     """(h, w) bool over ``box``: pixels the object's box can shade from the sun (its box projected along
     the sun onto the ground plane), or None when that projection reaches behind the camera."""
-    x0, y0, x1, y1 = box
+    x0, y0, x1, y1 = box.x0, box.y0, box.x1, box.y1
     s_obj = geo.R.T @ np.asarray(light.sun.direction, dtype=np.float64)
     n = geo.n_obj
     corners = prep.box_corners_object
@@ -362,14 +360,14 @@ def _sun_polygon_mask(geo: _Ground, box, light: DistantLight, prep: PreparedAsse
     pts_cam = np.concatenate([corners, shadow_pts]) @ geo.R.T + geo.t
     if np.any(pts_cam[:, 2] < 0.3):
         return None
-    uv, _ = project_points(K, pts_cam)
+    uv, _ = geo.camera.project(pts_cam)
     hull = cv2.convexHull(np.round((uv - [x0, y0]) * 4).astype(np.int32))  # 2 fractional bits
     mask = np.zeros((y1 - y0, x1 - x0), np.uint8)
     cv2.fillConvexPoly(mask, hull, 1, lineType=cv2.LINE_8, shift=2)
     return cv2.dilate(mask, np.ones((5, 5), np.uint8)) > 0
 
 
-def _sun_blocked(geo: _Ground, box, light: DistantLight, prep: PreparedAsset, settings: RenderSettings,
+def _sun_blocked(geo: _Ground, box: PixelBox, light: DistantLight, prep: PreparedAsset, settings: RenderSettings,
                  rng: np.random.Generator, stats: dict) -> np.ndarray:
     """(h, w) float32 fraction of the sun disc the object hides from each pixel's ground point.
 
@@ -377,11 +375,10 @@ def _sun_blocked(geo: _Ground, box, light: DistantLight, prep: PreparedAsset, se
     ``shadow_sun_dirs`` jittered rays (sub-pixel position x disc direction) in the pixels at the
     shadow's edge (the penumbra and the anti-aliased boundary).
     """
-    x0, y0, x1, y1 = box
-    h, w = y1 - y0, x1 - x0
+    x0, y0, h, w = box.x0, box.y0, box.height, box.width
     sun = light.sun
     s_obj = geo.R.T @ np.asarray(sun.direction, dtype=np.float64)
-    mask = _sun_polygon_mask(geo, box, light, prep, geo.K)
+    mask = _sun_polygon_mask(geo, box, light, prep)
     if mask is None:
         mask = np.ones((h, w), bool)
     ys, xs = np.nonzero(mask)

@@ -89,7 +89,7 @@ def test_match_camera_in_render_insertion():
     """With matching on, the object gets the image's noise and blur; off, the image is untouched elsewhere."""
     from render_fixtures import primitive_car, sunny_light
     from streetaug.augment.core import intrinsics_from_fov, pose_camera_to_transform
-    from streetaug.augment.render.insert import QUALITY_PRESETS, render_insertion
+    from streetaug.augment.render import QUALITY_PRESETS, render_insertion
 
     W, H = 320, 180
     K = intrinsics_from_fov(W, H, 60.0)

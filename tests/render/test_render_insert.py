@@ -10,7 +10,7 @@ from streetaug.augment.core import intrinsics_from_fov, pose_camera_to_transform
 from streetaug.augment.core import InputError
 from streetaug.augment.lighting.light import DistantLight
 from streetaug.augment.render.composite import composite, depth_visibility
-from streetaug.augment.render.insert import QUALITY_PRESETS, RenderSettings, render_insertion
+from streetaug.augment.render import QUALITY_PRESETS, RenderSettings, render_insertion
 
 W, H = 320, 180
 K = intrinsics_from_fov(W, H, 60.0)

@@ -3,22 +3,20 @@
 import numpy as np
 
 from render_fixtures import primitive_car, sunny_light
-from streetaug.augment.core import intrinsics_from_fov, pose_camera_to_transform
+from streetaug.augment.core import PinholeCamera, camera_envmap_directions, intrinsics_from_fov, pose_camera_to_transform
 from streetaug.augment.lighting.light import DistantLight
 from streetaug.augment.render.bounce import BounceLight, ground_radiance_below
 from streetaug.augment.core.depth import ground_plane_depth
-from streetaug.augment.render.geometry import prepare_asset
-from streetaug.augment.render.settings import RenderSettings
+from streetaug.augment.render import RenderSettings, footprint, prepare_asset
 from streetaug.augment.render.shadow import GroundShadow, render_shadow
 
 W, H = 320, 180
 K = intrinsics_from_fov(W, H, 60.0)
+CAMERA = PinholeCamera(K, W, H)
 UP = np.array([0.0, -1.0, 0.0])
 
 
 def _uniform_sky(level=1.0, ground=0.2):
-    from streetaug.augment.core import camera_envmap_directions
-
     d = camera_envmap_directions(32, 64)
     env = np.where((d @ UP > 0)[..., None], level, ground).astype(np.float32) * np.ones(3, np.float32)
     return DistantLight(env, None)
@@ -28,7 +26,9 @@ def _shadow(light, car, T, settings=None, bounce=None, seed=0):
     prep = prepare_asset(car)
     depth = ground_plane_depth(K, W, H, UP, 1.5)
     bounce = bounce or BounceLight.build(light, prep, T, UP)
-    return render_shadow(K, W, H, depth, light, prep, T, UP, settings or RenderSettings(), np.random.default_rng(seed), bounce)
+    settings = settings or RenderSettings()
+    box = footprint(CAMERA, car, T, light, settings).shadow_box
+    return render_shadow(CAMERA, box, depth, light, prep, T, UP, settings, np.random.default_rng(seed), bounce)
 
 
 def test_sky_occlusion_matches_a_dense_lattice():
@@ -80,7 +80,7 @@ def test_ground_shadow_seen_from_the_object():
     car = primitive_car()
     T = pose_camera_to_transform(0.0, 1.5, 10.0, 60.0)
     sh = _shadow(light, car, T)
-    g = GroundShadow(sh, K, T, T[:3, :3].T @ UP)
+    g = GroundShadow(sh, CAMERA, T, T[:3, :3].T @ UP)
     o = np.array([[0.0, 0.0, 0.2], [0.0, 0.0, 0.2], [0.0, 0.0, 0.2], [0.0, 0.0, 0.2]])
     d = np.array([[0.0, 0.0, -1.0], [0.0, 0.0, 1.0], [1.0, 0.0, -0.002], [-0.01, 0.0, -0.9999]])
     d /= np.linalg.norm(d, axis=1, keepdims=True)

@@ -1,23 +1,27 @@
-"""An asset prepared for ray tracing: validated mesh, Embree scene, per-face data, material tables.
+"""The surface of the object: the asset prepared for ray tracing, and what is at a ray hit.
 
-Built once per asset and kept in a small LRU cache (:func:`prepare_asset`), so repeated insertions
-of the same asset in one process pay for the BVH only once.  Everything is in the object frame
-(x front, y left, z up, metres).
+The bottom of the renderer's chain (surface -> bounce -> shadow -> foreground -> composite): every
+later stage traces rays against a :class:`PreparedAsset` and reads its hits with :func:`surface_at_hits`.
+
+* :func:`prepare_asset`: validated mesh, Embree scene, per-face data, material tables; built once per
+  asset and kept on the asset itself (:meth:`streetaug.augment.assets.asset.Asset.derived`), so repeated
+  insertions of the same asset pay for the BVH only once.
+* :func:`surface_at_hits`: a :class:`SurfaceHits` (normals, material, BRDF parameters with textures
+  applied) at ray hits, the renderer's G-buffer.
+
+Everything is in the object frame (x front, y left, z up, metres).
 """
 
 from __future__ import annotations
 
-from collections import OrderedDict
 from dataclasses import dataclass
 
 import numpy as np
 
 from ..assets.asset import Asset, Material
-from ..core import InputError
+from ..core import InputError, luminance
 from ..core.raycast import RayScene
-
-_CACHE: "OrderedDict[int, tuple[Asset, PreparedAsset]]" = OrderedDict()
-_CACHE_SIZE = 16
+from .brdf import BRDFParams, row_norm
 
 
 @dataclass(frozen=True)
@@ -58,9 +62,14 @@ class PreparedAsset:
     @property
     def box_corners_object(self) -> np.ndarray:
         """(8, 3) corners of the axis-aligned box of the vertices (object frame)."""
-        lo, hi = self.asset.vertices.min(axis=0), self.asset.vertices.max(axis=0)
-        ix = np.array([[i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)])
-        return np.where(ix == 0, lo, hi)
+        return box_corners_object(self.asset)
+
+
+def box_corners_object(asset: Asset) -> np.ndarray:
+    """(8, 3) float64 corners of the axis-aligned box of the asset's vertices (object frame, metres)."""
+    lo, hi = asset.vertices.min(axis=0), asset.vertices.max(axis=0)
+    ix = np.array([[i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)])
+    return np.where(ix == 0, lo, hi)
 
 
 def renderable_faces(asset: Asset) -> np.ndarray:
@@ -94,17 +103,8 @@ def renderable_faces(asset: Asset) -> np.ndarray:
 
 
 def prepare_asset(asset: Asset, backend: str = "embree") -> PreparedAsset:
-    """The :class:`PreparedAsset` of ``asset`` (cached by identity; at most 16 kept)."""
-    key = id(asset)
-    hit = _CACHE.get(key)
-    if hit is not None and hit[0] is asset and hit[1].scene.backend == backend:
-        _CACHE.move_to_end(key)
-        return hit[1]
-    prepared = _prepare(asset, backend)
-    _CACHE[key] = (asset, prepared)
-    while len(_CACHE) > _CACHE_SIZE:
-        _CACHE.popitem(last=False)
-    return prepared
+    """The :class:`PreparedAsset` of ``asset``, built on the first call and kept on the asset."""
+    return asset.derived(f"render.prepared.{backend}", lambda a: _prepare(a, backend))
 
 
 def _prepare(asset: Asset, backend: str) -> PreparedAsset:
@@ -135,8 +135,8 @@ def _prepare(asset: Asset, backend: str) -> PreparedAsset:
     clearcoat = np.array([m.clearcoat for m in mats], dtype=np.float64)
     emission = np.array([np.asarray(m.emission, dtype=np.float64)[:3] for m in mats])
     fm = np.asarray(asset.face_material, dtype=np.int64)[keep]
-    lum = np.array([0.2126, 0.7152, 0.0722])
-    albedo = (1 - metallic) * (base @ lum) + (1 - metallic) * 0.08 * specular + metallic * (base @ lum)
+    base_lum = luminance(base)
+    albedo = (1 - metallic) * base_lum + (1 - metallic) * 0.08 * specular + metallic * base_lum
     mean_albedo = float((albedo[fm] * area).sum() / max(area.sum(), 1e-30))
     return PreparedAsset(
         asset=asset,
@@ -170,3 +170,95 @@ def sample_texture(texture: np.ndarray, uv: np.ndarray) -> np.ndarray:
     y0m, y1m = np.mod(y0, h), np.mod(y0 + 1, h)
     t = texture
     return (t[y0m, x0m] * (1 - fx) + t[y0m, x1m] * fx) * (1 - fy) + (t[y1m, x0m] * (1 - fx) + t[y1m, x1m] * fx) * fy
+
+
+@dataclass(frozen=True)
+class SurfaceHits:
+    """What is at N ray hits on the object (object frame): the renderer's G-buffer.
+
+    Attributes:
+        normal: (N, 3) float64 unit shading normal (smooth, normal-mapped), on the ray origin's side.
+        geometric_normal: (N, 3) float64 unit face normal, turned towards the ray's origin.
+        front: (N,) bool, the ray hit the outer side of the face (its stored normal faces the ray's origin).
+        material: (N,) int64 material index of the hit face.
+        params: (N) BRDF parameters, textures (base colour, metallic-roughness) applied.
+        opacity: (N,) float64 material opacity (1 opaque, < 1 glass).
+        emission: (N, 3) float64 emitted radiance.
+    """
+
+    normal: np.ndarray
+    geometric_normal: np.ndarray
+    front: np.ndarray
+    material: np.ndarray
+    params: BRDFParams
+    opacity: np.ndarray
+    emission: np.ndarray
+
+
+def surface_at_hits(prep: PreparedAsset, face: np.ndarray, bary: np.ndarray, dirs: np.ndarray) -> SurfaceHits:
+    """The surface at ray hits (object frame), textures (base colour, metallic-roughness, normal map) applied.
+
+    Args:
+        prep: the prepared asset the rays hit.
+        face: (N,) int64 index into ``prep.faces``.
+        bary: (N, 2) float64 barycentrics (u, v) of the hits (weights of the face's 2nd and 3rd vertex).
+        dirs: (N, 3) float64 unit ray directions.
+    """
+    asset = prep.asset
+    f = prep.faces[face]
+    u, v = bary[:, :1], bary[:, 1:]
+    w0 = 1.0 - u - v
+    vn = asset.vertex_normals
+    n_s = w0 * vn[f[:, 0]] + u * vn[f[:, 1]] + v * vn[f[:, 2]]
+    n_g = prep.face_normal[face]
+    front = np.einsum("ij,ij->i", dirs, n_g) < 0.0
+    n_g = np.where(front[:, None], n_g, -n_g)
+    # Smooth normal on the viewer's side of the geometry.
+    n_s = np.where((np.einsum("ij,ij->i", n_s, n_g) < 0.0)[:, None], -n_s, n_s)
+    n_s /= np.maximum(row_norm(n_s)[:, None], 1e-12)
+    bad = ~np.isfinite(n_s).all(axis=1) | (row_norm(n_s) < 0.5)
+    n_s[bad] = n_g[bad]
+    mid = prep.face_material[face]
+    base = prep.base_color[mid].copy()
+    metallic = prep.metallic[mid].copy()
+    rough = prep.roughness[mid].copy()
+    if asset.uv is not None:
+        uvs = asset.uv[f]
+        uv = w0 * uvs[:, 0] + u * uvs[:, 1] + v * uvs[:, 2]
+        _apply_textures(prep, face, mid, uv, n_s, base, metallic, rough)
+    # Keep the shading normal within the viewer's hemisphere (avoids black rims on smoothed meshes).
+    view = -dirs
+    nv = np.einsum("ij,ij->i", n_s, view)
+    fix = nv < 0.02
+    if np.any(fix):
+        n_s[fix] += view[fix] * (0.02 - nv[fix])[:, None]
+        n_s[fix] /= row_norm(n_s[fix])[:, None]
+    params = BRDFParams(base, np.clip(metallic, 0, 1), np.clip(rough, 0, 1), prep.specular[mid], prep.clearcoat[mid])
+    return SurfaceHits(n_s, n_g, front, mid, params, prep.opacity[mid], prep.emission[mid])
+
+
+def _apply_textures(prep: PreparedAsset, face: np.ndarray, mid: np.ndarray, uv: np.ndarray, n_s: np.ndarray,
+                    base: np.ndarray, metallic: np.ndarray, rough: np.ndarray) -> None:
+    """Multiply the hits' material values by their textures at ``uv`` (N, 2) and normal-map ``n_s``, in place."""
+    for m_index, mat in enumerate(prep.asset.materials):
+        sel = np.flatnonzero(mid == m_index)
+        if len(sel) == 0:
+            continue
+        if mat.base_color_texture is not None:
+            base[sel] *= sample_texture(mat.base_color_texture, uv[sel])[:, :3]
+        if mat.metallic_roughness_texture is not None:
+            mr = sample_texture(mat.metallic_roughness_texture, uv[sel])
+            rough[sel] *= mr[:, 1]
+            metallic[sel] *= mr[:, 2]
+        if mat.normal_texture is not None and prep.face_tangent is not None:
+            t_n = sample_texture(mat.normal_texture, uv[sel]) * 2.0 - 1.0
+            T = prep.face_tangent[face[sel]]
+            B = prep.face_bitangent[face[sel]]
+            ns = n_s[sel]
+            T = T - np.einsum("ij,ij->i", T, ns)[:, None] * ns
+            T /= np.maximum(row_norm(T)[:, None], 1e-12)
+            B = B - np.einsum("ij,ij->i", B, ns)[:, None] * ns - np.einsum("ij,ij->i", B, T)[:, None] * T
+            B /= np.maximum(row_norm(B)[:, None], 1e-12)
+            nm = t_n[:, :1] * T + t_n[:, 1:2] * B + t_n[:, 2:3] * ns
+            nm /= np.maximum(row_norm(nm)[:, None], 1e-12)
+            n_s[sel] = np.where(np.isfinite(nm).all(axis=1, keepdims=True), nm, ns)

@@ -1,0 +1,156 @@
+"""Where an insertion can change an image: the object's pixel box and its shadow's.
+
+Both boxes are conservative (projected boxes of the object and of where its shadow and sky occlusion
+can fall, a few pixels of margin): outside them the renderer leaves every byte of the image unchanged.
+They cost a few projected corners, no ray tracing, so callers can ask first whether an object reaches
+a camera at all (:func:`footprint`, :attr:`Footprint.reaches_image`); the renderer works on the same boxes
+and returns them with its result (:attr:`streetaug.augment.render.insert.Insertion.footprint`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..assets.asset import Asset
+from ..core import PinholeCamera
+from ..lighting.light import DistantLight
+from .settings import RenderSettings
+from .surface import box_corners_object
+
+SKY_RADIUS_PER_HEIGHT = 2.0  # sky occlusion beyond ~2 object heights is below a few per cent
+OBJECT_BOX_PAD_PX = 2
+
+
+@dataclass(frozen=True)
+class PixelBox:
+    """An integer pixel box of an image, end-exclusive: columns x0 .. x1 - 1, rows y0 .. y1 - 1."""
+
+    x0: int
+    y0: int
+    x1: int
+    y1: int
+
+    @property
+    def width(self) -> int:
+        return self.x1 - self.x0
+
+    @property
+    def height(self) -> int:
+        return self.y1 - self.y0
+
+    @property
+    def slices(self) -> tuple[slice, slice]:
+        """(rows, columns) slices of an (H, W, ...) image array."""
+        return slice(self.y0, self.y1), slice(self.x0, self.x1)
+
+    def union(self, other: "PixelBox | None") -> "PixelBox":
+        """The smallest box holding this one and ``other``."""
+        if other is None:
+            return self
+        return PixelBox(min(self.x0, other.x0), min(self.y0, other.y0), max(self.x1, other.x1), max(self.y1, other.y1))
+
+    def grown(self, margin_px: int, camera: PinholeCamera) -> "PixelBox":
+        """The box grown by ``margin_px`` on every side, clipped to the image of ``camera``."""
+        return PixelBox(max(self.x0 - margin_px, 0), max(self.y0 - margin_px, 0),
+                        min(self.x1 + margin_px, camera.width), min(self.y1 + margin_px, camera.height))
+
+    def as_list(self) -> list[int]:
+        """[x0, y0, x1, y1] (for JSON stats)."""
+        return [self.x0, self.y0, self.x1, self.y1]
+
+
+def _clipped(x0: int, y0: int, x1: int, y1: int, camera: PinholeCamera) -> PixelBox | None:
+    x0, y0, x1, y1 = max(x0, 0), max(y0, 0), min(x1, camera.width), min(y1, camera.height)
+    if x1 <= x0 or y1 <= y0:
+        return None
+    return PixelBox(int(x0), int(y0), int(x1), int(y1))
+
+
+def object_pixel_box(camera: PinholeCamera, T_cam_from_object: np.ndarray, corners_object: np.ndarray,
+                     pad_px: int = OBJECT_BOX_PAD_PX) -> PixelBox | None:
+    """The pixel box covering the projected object box (8, 3) (object frame), or None if off-screen."""
+    pts = corners_object @ T_cam_from_object[:3, :3].T + T_cam_from_object[:3, 3]
+    z = pts[:, 2]
+    if np.all(z <= 1e-3):
+        return None
+    if np.any(z <= 1e-3):
+        # The box straddles the camera plane: anything on screen may be covered.
+        return PixelBox(0, 0, camera.width, camera.height)
+    uv, _ = camera.project(pts)
+    x0 = int(np.floor(uv[:, 0].min())) - pad_px
+    y0 = int(np.floor(uv[:, 1].min())) - pad_px
+    x1 = int(np.ceil(uv[:, 0].max())) + pad_px + 1
+    y1 = int(np.ceil(uv[:, 1].max())) + pad_px + 1
+    return _clipped(x0, y0, x1, y1, camera)
+
+
+def shadow_pixel_box(camera: PinholeCamera, T_cam_from_object: np.ndarray, asset: Asset, light: DistantLight,
+                     settings: RenderSettings) -> PixelBox | None:
+    """The pixel box where the shadow ratio map can differ from 1, or None.
+
+    The object's footprint grown by a sky-occlusion radius (:data:`SKY_RADIUS_PER_HEIGHT` object
+    heights) plus its top corners projected along the sun onto the ground (clamped to
+    ``settings.shadow_max_length_m``); the ground plane z = 0 of the object frame.
+    """
+    V = asset.vertices
+    lo, hi = V.min(axis=0), V.max(axis=0)
+    h_obj = float(max(hi[2], 0.0))
+    r = SKY_RADIUS_PER_HEIGHT * h_obj + 0.3
+    ground = np.array([[x, y, 0.0] for x in (lo[0] - r, hi[0] + r) for y in (lo[1] - r, hi[1] + r)])
+    pts = [ground]
+    if light.sun is not None:
+        s = T_cam_from_object[:3, :3].T @ np.asarray(light.sun.direction, dtype=np.float64)
+        if s[2] > 1e-3:
+            horiz = -s[:2] / s[2] * h_obj
+            length = np.linalg.norm(horiz)
+            if length > settings.shadow_max_length_m:
+                horiz *= settings.shadow_max_length_m / length
+            m = 0.3 + h_obj * np.tan(light.sun.half_angle_rad) * length / max(h_obj, 1e-6)
+            pts.append(np.array([[x + horiz[0] + dx, y + horiz[1] + dy, 0.0]
+                                 for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for dx in (-m, m) for dy in (-m, m)]))
+    pts = np.concatenate(pts)
+    pts_cam = pts @ T_cam_from_object[:3, :3].T + T_cam_from_object[:3, 3]
+    front = pts_cam[:, 2] > 0.3
+    if not front.any():
+        return None
+    uv, _ = camera.project(pts_cam[front])
+    x0, y0 = np.floor(uv.min(axis=0)).astype(int) - 2
+    x1, y1 = np.ceil(uv.max(axis=0)).astype(int) + 3
+    if not front.all():  # the region reaches behind the camera: extend to the bottom and the sides
+        x0, x1, y1 = 0, camera.width, camera.height
+    return _clipped(x0, y0, x1, y1, camera)
+
+
+@dataclass(frozen=True)
+class Footprint:
+    """Where inserting one object can change an image.
+
+    Attributes:
+        object_box: pixels the object itself can cover, or None (off-screen).
+        shadow_box: pixels its shadow (and sky occlusion) can darken, or None.
+    """
+
+    object_box: PixelBox | None
+    shadow_box: PixelBox | None
+
+    @property
+    def reaches_image(self) -> bool:
+        """Whether the object or its shadow can touch any pixel."""
+        return self.object_box is not None or self.shadow_box is not None
+
+    @property
+    def box(self) -> PixelBox | None:
+        """The union of both boxes, or None."""
+        if self.object_box is None:
+            return self.shadow_box
+        return self.object_box.union(self.shadow_box)
+
+
+def footprint(camera: PinholeCamera, asset: Asset, T_cam_from_object: np.ndarray, light: DistantLight,
+              settings: RenderSettings) -> Footprint:
+    """The :class:`Footprint` of ``asset`` at ``T_cam_from_object`` (4, 4) under ``light`` (camera frame)."""
+    T = np.asarray(T_cam_from_object, dtype=np.float64)
+    return Footprint(object_pixel_box(camera, T, box_corners_object(asset)),
+                     shadow_pixel_box(camera, T, asset, light, settings))

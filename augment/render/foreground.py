@@ -1,0 +1,299 @@
+"""Foreground rendering: camera rays through the object's pixels, G-buffer, Monte Carlo shading, denoising.
+
+Pipeline (all vectorised, rays in big Embree batches)::
+
+    object pixel box -> n x n jittered camera samples (+ k x k more in silhouette pixels, 2 x 2
+      at material boundaries and shading discontinuities)
+      -> ray-mesh hits (object frame) -> surface at the hits (:mod:`.surface`)
+      -> shading (:mod:`.shade`): sun + environment, self-occlusion, one bounce, the ground's shadow
+      -> glass: reflection on the glass + the continued ray (dark interior or what lies behind)
+      -> per-pixel premultiplied radiance, coverage alpha, camera-z depth
+      -> G-buffer-guided cross-bilateral denoising of the Monte Carlo residual only.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+
+from ..core import PinholeCamera, invert_transform, luminance
+from .brdf import BRDFParams, row_norm, schlick_weight
+from .footprint import PixelBox
+from .shade import RAY_EPS_M, ShadingContext, shade
+from .surface import surface_at_hits
+
+EDGE_LIGHT_SAMPLES = {"sun_samples": 1, "env_samples": 0, "brdf_samples": 1}  # per extra edge sample
+SHADING_EDGE_REL = 0.15  # relative jump of the noise-free radiance that marks a pixel for more samples
+DENOISE_RADIUS_PX = 6
+DENOISE_SIGMA_PX = 3.5
+DENOISE_DEPTH_SCALE_PER_M = 0.15  # guide units per metre of depth (0.5 m ~ one normal sigma)
+
+
+@dataclass(frozen=True)
+class Foreground:
+    """The rendered object over its pixel box.
+
+    Attributes:
+        x0, y0: top-left pixel of the box in the image (the box is ``alpha.shape`` big).
+        radiance_premult: (h, w, 3) float32 linear radiance x coverage (premultiplied).
+        alpha: (h, w) float32 coverage in [0, 1] (glass that shows the scene behind lowers it).
+        depth_m: (h, w) float32 camera-frame z of the nearest hit, inf where the object is absent.
+        stats: rays cast per stage and sample counts.
+    """
+
+    x0: int
+    y0: int
+    radiance_premult: np.ndarray
+    alpha: np.ndarray
+    depth_m: np.ndarray
+    stats: dict = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class CameraSamples:
+    """Traced camera samples (N of them), object frame.
+
+    Attributes:
+        pixel: (N,) int64 index of the sample's pixel in the box (row-major).
+        radiance: (N, 6) float64 premultiplied radiance: smooth part (3) then noisy part (3) (see :func:`.shade.shade`).
+        alpha: (N,) float64 1 - fraction of the background seen along the ray (0 where the ray misses).
+        t_first: (N,) float64 distance (metres) to the first hit, inf where none.
+        normal_first: (N, 3) float64 shading normal at the first hit, 0 where none.
+        material_first: (N,) int64 material index at the first hit, -1 where none.
+        dirs_obj: (N, 3) float64 unit ray directions.
+    """
+
+    pixel: np.ndarray
+    radiance: np.ndarray
+    alpha: np.ndarray
+    t_first: np.ndarray
+    normal_first: np.ndarray
+    material_first: np.ndarray
+    dirs_obj: np.ndarray
+
+    def concat(self, other: "CameraSamples") -> "CameraSamples":
+        """Both sets of samples, this one's first."""
+        return CameraSamples(*(np.concatenate([getattr(self, f.name), getattr(other, f.name)])
+                               for f in dataclasses.fields(self)))
+
+
+def render_foreground(camera: PinholeCamera, box: PixelBox | None, ctx: ShadingContext,
+                      T_cam_from_object: np.ndarray) -> Foreground | None:
+    """Render the object over its pixel ``box`` (see module docstring); None if it is off-screen.
+
+    Args:
+        camera: the camera of the image.
+        box: the object's :func:`~streetaug.augment.render.footprint.object_pixel_box`, or None.
+        ctx: the shading context (light, prepared asset, bounce, ground shadow, settings, random generator).
+        T_cam_from_object: (4, 4) pose.
+    """
+    if box is None:
+        return None
+    settings = ctx.settings
+    w, h = box.width, box.height
+    ys, xs = np.divmod(np.arange(w * h), w)
+    n = settings.aa_grid
+    traced = _cast(ctx, camera, T_cam_from_object, *_jittered_samples(xs + box.x0, ys + box.y0, n, ctx.rng))
+    counts = np.full(w * h, n * n, dtype=np.float64)
+    silhouette, inner = _refine_masks(traced, w, h, n)
+    n_edge = 0
+    # The extra samples are there for coverage and sharp shading edges; each pixel averages k x k of
+    # them, so each needs fewer light samples (EDGE_LIGHT_SAMPLES instead of the preset's).
+    ctx.settings = dataclasses.replace(settings, **{k: min(getattr(settings, k), v) for k, v in EDGE_LIGHT_SAMPLES.items()})
+    for edge, k in ((silhouette, settings.edge_grid), (inner, min(settings.edge_grid, 2))):
+        edge_ids = np.flatnonzero(edge.ravel())
+        if len(edge_ids) == 0 or k <= 1:
+            continue
+        uv2, pix2 = _jittered_samples(xs[edge_ids] + box.x0, ys[edge_ids] + box.y0, k, ctx.rng)
+        traced = traced.concat(_cast(ctx, camera, T_cam_from_object, uv2, edge_ids[pix2]))
+        counts[edge_ids] += k * k
+        n_edge += len(uv2)
+    ctx.settings = settings
+    return _resolve_pixels(traced, counts, box, T_cam_from_object[:3, :3], settings.denoise, ctx, n_edge)
+
+
+def _cast(ctx: ShadingContext, camera: PinholeCamera, T_cam_from_object: np.ndarray, uv: np.ndarray,
+          pixel: np.ndarray) -> CameraSamples:
+    """Trace camera rays through pixel positions uv (N, 2) (their box pixels ``pixel`` (N,))."""
+    R = T_cam_from_object[:3, :3]
+    d_obj = camera.rays(uv) @ R  # camera -> object frame
+    o_obj = np.broadcast_to(invert_transform(T_cam_from_object)[:3, 3], d_obj.shape)
+    return _trace(ctx, np.ascontiguousarray(o_obj), d_obj, pixel)
+
+
+def _refine_masks(traced: CameraSamples, w: int, h: int, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """(silhouette, inner), each (h, w) bool: pixels that get more camera samples after the first pass.
+
+    Silhouette pixels (mixed coverage or next to one); inside the object, material boundaries (window
+    frames, tyres, lights) and shading discontinuities (creases between flat faces, self-shadow edges:
+    the noise-free part of the first pass jumps by more than SHADING_EDGE_REL between neighbours).
+    """
+    pix = traced.pixel
+    hit = np.isfinite(traced.t_first)
+    nhit = np.bincount(pix, weights=hit, minlength=w * h).reshape(h, w)
+    any_hit = (nhit > 0).astype(np.uint8)
+    all_hit = (nhit == n * n).astype(np.uint8)
+    kernel = np.ones((3, 3), np.uint8)
+    silhouette = (cv2.dilate(any_hit, kernel) > 0) & ~(cv2.erode(all_hit, kernel, borderType=cv2.BORDER_REPLICATE) > 0)
+    mat = np.full(w * h, -1.0, np.float32)
+    first_hit = traced.material_first >= 0
+    mat[pix[first_hit]] = traced.material_first[first_hit]
+    mat = mat.reshape(h, w)
+    inner = (cv2.dilate(mat, kernel) != cv2.erode(mat, kernel, borderType=cv2.BORDER_REPLICATE)) & ~silhouette
+    smooth_lum = np.bincount(pix, weights=luminance(traced.radiance[:, :3]), minlength=w * h)
+    smooth_lum = np.log(np.maximum(smooth_lum.reshape(h, w) / (n * n), 1e-4)).astype(np.float32)
+    jump = cv2.dilate(smooth_lum, kernel) - cv2.erode(smooth_lum, kernel, borderType=cv2.BORDER_REPLICATE)
+    inner |= (jump > np.log1p(SHADING_EDGE_REL)) & (mat >= 0) & ~silhouette
+    return silhouette, inner
+
+
+def _resolve_pixels(traced: CameraSamples, counts: np.ndarray, box: PixelBox, R: np.ndarray, denoise: bool,
+                    ctx: ShadingContext, n_edge: int) -> Foreground:
+    """Average the samples per pixel (radiance, alpha), nearest depth, G-buffer; denoise the residual."""
+    w, h = box.width, box.height
+    P = w * h
+    pix = traced.pixel
+    rad_px = np.stack([np.bincount(pix, weights=traced.radiance[:, c], minlength=P) for c in range(6)], axis=1) / counts[:, None]
+    alpha_px = np.bincount(pix, weights=traced.alpha, minlength=P) / counts
+    # Camera z of the nearest hit per pixel.
+    t = traced.t_first
+    z = np.where(np.isfinite(t), t * np.einsum("ij,j->i", traced.dirs_obj, R[2]), np.inf)
+    depth_px = np.full(P, np.inf)
+    np.minimum.at(depth_px, pix, z)
+    # G-buffer per pixel (mean first-hit normal, a first-hit material) for the denoiser.
+    hit_all = traced.material_first >= 0
+    n_px = np.stack([np.bincount(pix, weights=traced.normal_first[:, c], minlength=P) for c in range(3)], axis=1)
+    n_px /= np.maximum(row_norm(n_px)[:, None], 1e-9)
+    m_px = np.full(P, -1, dtype=np.int64)
+    m_px[pix[hit_all]] = traced.material_first[hit_all]
+    smooth_px, noisy_px = rad_px[:, :3], rad_px[:, 3:]
+    if denoise:
+        # Only the Monte Carlo residual is filtered (widely); the control variates' expectations and
+        # the sun keep their full sharpness.  Guide: camera-frame normal, material, depth.
+        n_cam = n_px @ R.T
+        noisy_px = denoise_radiance(noisy_px.reshape(h, w, 3), alpha_px.reshape(h, w), n_cam.reshape(h, w, 3),
+                                    m_px.reshape(h, w), depth_m=depth_px.reshape(h, w),
+                                    radius=DENOISE_RADIUS_PX, sigma_px=DENOISE_SIGMA_PX).reshape(P, 3)
+    rad_px = smooth_px + noisy_px
+    stats = {"rays": dict(ctx.rays), "raycast_s": ctx.raycast_s, "pixels": int(P), "camera_samples": int(len(pix)),
+             "edge_samples": int(n_edge), "box": box.as_list()}
+    return Foreground(
+        x0=box.x0, y0=box.y0,
+        radiance_premult=rad_px.reshape(h, w, 3).astype(np.float32),
+        alpha=np.clip(alpha_px, 0.0, 1.0).reshape(h, w).astype(np.float32),
+        depth_m=depth_px.reshape(h, w).astype(np.float32),
+        stats=stats,
+    )
+
+
+def _trace(ctx: ShadingContext, origins: np.ndarray, dirs: np.ndarray, pixel: np.ndarray) -> CameraSamples:
+    """Follow camera rays (object frame, (N, 3) each) through glass: the :class:`CameraSamples` of ``pixel`` (N,)."""
+    N = len(origins)
+    radiance = np.zeros((N, 6))
+    normal_first = np.zeros((N, 3))
+    material_first = np.full(N, -1, dtype=np.int64)
+    escaped = np.zeros(N)
+    t_first = np.full(N, np.inf)
+    throughput = np.ones((N, 3))
+    active = np.arange(N)
+    o, d = origins, dirs
+    for depth in range(ctx.settings.max_glass_depth):
+        t0 = time.perf_counter()
+        hits = ctx.prep.scene.intersect(o, d)
+        ctx.count("camera" if depth == 0 else "glass", len(o), time.perf_counter() - t0)
+        if depth == 0:
+            t_first[active] = hits.t
+        miss = ~hits.hit
+        if depth > 0:
+            escaped[active[miss]] += throughput[active[miss]].mean(axis=1)
+        hit = np.flatnonzero(hits.hit)
+        if len(hit) == 0:
+            break
+        idx = active[hit]
+        dh = d[hit]
+        p = o[hit] + hits.t[hit, None] * dh
+        surf = surface_at_hits(ctx.prep, hits.face[hit], hits.bary[hit], dh)
+        if depth == 0:
+            normal_first[idx] = surf.normal
+            material_first[idx] = surf.material
+        tp = throughput[idx]
+        _shade_hits(ctx, surf, p, -dh, hits.face[hit], tp, idx, radiance, inside_glass=depth > 0)
+        # Glass continues with its transmission (1 - opacity)(1 - F) tinted by the base colour.
+        cont = np.flatnonzero(surf.opacity < 1.0)
+        if len(cont) == 0:
+            break
+        params = surf.params
+        nv = np.clip(np.einsum("ij,ij->i", surf.normal[cont], -dh[cont]), 0.0, 1.0)
+        c_spec = params.take(cont).c_spec
+        F = c_spec + (1 - c_spec) * schlick_weight(nv)[:, None]
+        tint = np.sqrt(np.clip(params.base_color[cont], 0.0, 1.0))
+        throughput[idx[cont]] = tp[cont] * (1.0 - surf.opacity[cont])[:, None] * (1.0 - F) * tint
+        active = idx[cont]
+        o = p[cont] - RAY_EPS_M * surf.geometric_normal[cont]
+        d = dh[cont]
+    # Whatever still travels after the last surface is absorbed by the (dark) interior.
+    alpha = np.where(np.isfinite(t_first), 1.0 - escaped, 0.0)
+    return CameraSamples(pixel, radiance, alpha, t_first, normal_first, material_first, dirs)
+
+
+def _shade_hits(ctx: ShadingContext, surf, p: np.ndarray, v: np.ndarray, face: np.ndarray, tp: np.ndarray,
+                idx: np.ndarray, radiance: np.ndarray, inside_glass: bool) -> None:
+    """Add the radiance of hits (``surf`` at points ``p``, towards ``v``) x throughput ``tp`` to rays ``idx``."""
+    # Front faces: full shading (glass: diffuse scaled by opacity, specular reflection kept).
+    fr = np.flatnonzero(surf.front)
+    if len(fr):
+        pr = surf.params.take(fr)
+        op = surf.opacity[fr]
+        pr = BRDFParams(pr.base_color * op[:, None], pr.metallic, pr.roughness, pr.specular, pr.clearcoat)
+        scale = None if ctx.bounce is None else ctx.bounce.face_sky_visibility(face[fr])
+        smooth, noisy = shade(ctx, p[fr], surf.normal[fr], surf.geometric_normal[fr], v[fr], pr, scale)
+        radiance[idx[fr], :3] += tp[fr] * (smooth + surf.emission[fr])
+        radiance[idx[fr], 3:] += tp[fr] * noisy
+    # Back faces (inside the car): opaque ones seen through glass show the dark interior; seen
+    # directly (through a hole of an open mesh, e.g. a hollow tyre) they get no light at all.
+    if inside_glass:
+        inner = np.flatnonzero(~surf.front & ~(surf.opacity < 1.0))
+        if len(inner):
+            radiance[idx[inner], :3] += tp[inner] * surf.params.base_color[inner] * ctx.interior_rgb[None]
+
+
+def _jittered_samples(xs: np.ndarray, ys: np.ndarray, n: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """n x n stratified jittered sub-pixel positions for pixels (xs, ys) (P,): returns uv (P n^2, 2), pixel id (P n^2,)."""
+    P = len(xs)
+    g = (np.arange(n) + 0.0) / n
+    gx, gy = np.meshgrid(g, g)
+    offs = np.stack([gx.ravel(), gy.ravel()], axis=1)  # (n^2, 2)
+    jitter = rng.random((P, n * n, 2)) / n
+    uv = np.stack([xs, ys], axis=1)[:, None, :] - 0.5 + offs[None] + jitter
+    return uv.reshape(-1, 2), np.repeat(np.arange(P), n * n)
+
+
+def denoise_radiance(radiance_premult: np.ndarray, alpha: np.ndarray, normal: np.ndarray, material: np.ndarray,
+                     radius: int = 3, sigma_px: float = 2.0, sigma_normal: float = 0.15,
+                     depth_m: np.ndarray | None = None) -> np.ndarray:
+    """Cross-bilateral filter of the object's Monte Carlo noise, guided by its noise-free G-buffer.
+
+    A joint bilateral filter (OpenCV ximgproc) whose guide is the first-hit normal, with each material
+    shifted far apart in guide space: each pixel's radiance becomes a weighted mean over a
+    (2r+1)^2 window of pixels with the same material and a similar normal (Gaussian in pixel distance
+    and normal difference).  With ``depth_m`` (and camera-frame normals, whose z is then redundant) the
+    third guide channel is the depth instead, so surfaces far apart in depth do not mix.  The radiance
+    is filtered un-premultiplied (uncovered pixels excluded) and multiplied by the pixel's own alpha again.
+    Shapes: (h, w, 3), (h, w), (h, w, 3) unit normals, (h, w) int (-1 = none), (h, w) metres (inf = none).
+    """
+    guide = (normal * 0.5 + 0.5).astype(np.float32)
+    guide[..., 0] += 100.0 * (material.astype(np.float32) + 1.0)  # different materials (and "none") never mix
+    if depth_m is not None:
+        d = np.where(np.isfinite(depth_m), depth_m, 0.0)
+        guide[..., 2] = (d * DENOISE_DEPTH_SCALE_PER_M).astype(np.float32)
+    guide[alpha <= 0, 0] = -1000.0  # uncovered pixels form their own class
+    d = 2 * radius + 1
+    with np.errstate(divide="ignore", invalid="ignore"):
+        rad = np.where(alpha[..., None] > 0, radiance_premult / alpha[..., None], 0.0).astype(np.float32)
+    # OpenCV's colour sigma is in guide units: normal difference sigma_normal maps to sigma_normal / 2.
+    out = cv2.ximgproc.jointBilateralFilter(guide, rad, d, sigma_normal / 2.0, sigma_px) * alpha[..., None]
+    return np.where(alpha[..., None] > 0, out, radiance_premult)
