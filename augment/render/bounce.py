@@ -30,7 +30,8 @@ from ..core import camera_envmap_directions, equirect_solid_angles
 from ..lighting.light import DistantLight
 from .brdf import specular_albedo, to_world
 from .surface import PreparedAsset, surface_at_hits
-from .sampling import env_pyramid, irradiance_map, lookup_irradiance
+from .environment import EnvironmentTables, environment_tables
+from .sampling import lookup_irradiance
 
 RAY_EPS_M = 1e-3
 VIEW_COS = 0.6  # n.v at which the faces' directional albedo is taken
@@ -49,12 +50,12 @@ VISIBILITY_LOCAL = _cosine_spiral(VISIBILITY_RAYS)
 SUN_POINTS = np.array([[2 / 3, 1 / 6, 1 / 6], [1 / 6, 2 / 3, 1 / 6], [1 / 6, 1 / 6, 2 / 3], [1 / 3, 1 / 3, 1 / 3]])
 
 
-def ground_radiance_below(envmap: np.ndarray, up_cam: np.ndarray) -> np.ndarray:
+def ground_radiance_below(env: EnvironmentTables, up_cam: np.ndarray) -> np.ndarray:
     """Mean radiance (3,) of the map below the horizon of ``up_cam`` (solid-angle weighted): the ground's.
 
-    Computed on a reduced copy of the map (at most 128 wide, from the cached pyramid).
+    Computed on a reduced copy of the map (at most 128 wide, from its pyramid).
     """
-    levels = env_pyramid(envmap)
+    levels = env.pyramid
     envmap = next((lev for lev in levels if lev.shape[1] <= 128), levels[-1])
     H, W = envmap.shape[:2]
     below = camera_envmap_directions(H, W) @ np.asarray(up_cam, dtype=np.float64) < 0
@@ -74,6 +75,7 @@ class BounceLight:
 
     Attributes:
         light: the camera-frame distant light.
+        env: the tables of its env map (irradiance, pyramid).
         prep: the prepared object.
         R_cam_from_obj: (3, 3) rotation object -> camera.
         up_obj: (3,) unit ground normal (up), object frame.
@@ -81,6 +83,7 @@ class BounceLight:
     """
 
     light: DistantLight
+    env: EnvironmentTables
     prep: PreparedAsset
     R_cam_from_obj: np.ndarray
     up_obj: np.ndarray
@@ -91,7 +94,8 @@ class BounceLight:
         R = np.asarray(T_cam_from_object, dtype=np.float64)[:3, :3]
         up = np.asarray(up_cam, dtype=np.float64)
         up = up / np.linalg.norm(up)
-        return BounceLight(light, prep, R, R.T @ up, ground_radiance_below(light.envmap, up))
+        env = environment_tables(light.envmap)
+        return BounceLight(light, env, prep, R, R.T @ up, ground_radiance_below(env, up))
 
     @cached_property
     def _tables(self) -> dict[str, np.ndarray]:
@@ -118,7 +122,7 @@ class BounceLight:
         surface = surface_at_hits(prep, faces, np.full((F, 2), 1.0 / 3.0), -n_g)
         n_s, params, emission = surface.normal, surface.params, surface.emission
         albedo = params.c_diff + specular_albedo(np.full(F, VIEW_COS), params)
-        E = lookup_irradiance(irradiance_map(self.light.envmap), n_s @ self.R_cam_from_obj.T)
+        E = lookup_irradiance(self.env.irradiance, n_s @ self.R_cam_from_obj.T)
         n_up = n_s @ self.up_obj
         t = np.clip(-n_up, 0.0, 1.0)
         E_low = np.pi * self.ground_rgb[None] * ((1.0 - n_up) / 2.0)[:, None]

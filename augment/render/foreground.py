@@ -24,7 +24,7 @@ from ..core import PinholeCamera, invert_transform, luminance
 from .brdf import BRDFParams, row_norm, schlick_weight
 from .footprint import PixelBox
 from .shade import RAY_EPS_M, ShadingContext, shade
-from .surface import surface_at_hits
+from .surface import SurfaceHits, surface_at_hits
 
 EDGE_LIGHT_SAMPLES = {"sun_samples": 1, "env_samples": 0, "brdf_samples": 1}  # per extra edge sample
 SHADING_EDGE_REL = 0.15  # relative jump of the noise-free radiance that marks a pixel for more samples
@@ -240,7 +240,7 @@ def _trace(ctx: ShadingContext, origins: np.ndarray, dirs: np.ndarray, pixel: np
     return CameraSamples(pixel, radiance, alpha, t_first, normal_first, material_first, dirs)
 
 
-def _shade_hits(ctx: ShadingContext, surf, p: np.ndarray, v: np.ndarray, face: np.ndarray, tp: np.ndarray,
+def _shade_hits(ctx: ShadingContext, surf: SurfaceHits, p: np.ndarray, v: np.ndarray, face: np.ndarray, tp: np.ndarray,
                 idx: np.ndarray, radiance: np.ndarray, inside_glass: bool) -> None:
     """Add the radiance of hits (``surf`` at points ``p``, towards ``v``) x throughput ``tp`` to rays ``idx``."""
     # Front faces: full shading (glass: diffuse scaled by opacity, specular reflection kept).

@@ -20,7 +20,6 @@ from .bounce import BounceLight
 from .composite import Composited, composite_layers, object_layers
 from .footprint import Footprint, footprint
 from .foreground import Foreground, render_foreground
-from .sampling import sky_irradiance
 from .settings import RenderSettings, resolve_settings
 from .shade import ShadingContext
 from .shadow import GroundShadow, ShadowMap, car_ambient_radiance, render_shadow
@@ -162,9 +161,10 @@ def _prepare(asset: Asset, light: DistantLight, T: np.ndarray, ground_normal_cam
     up = T[:3, 2] if ground_normal_cam is None else np.asarray(ground_normal_cam, dtype=np.float64)
     check_shape(up, (3,), "ground_normal_cam")
     up = up / np.linalg.norm(up)
-    ambient = car_ambient_radiance(light, prep.mean_albedo, up)
-    interior = INTERIOR_SKY_FRACTION * sky_irradiance(light.envmap, up) / np.pi
-    return _Prepared(prep, up, ambient, interior, BounceLight.build(light, prep, T, up))
+    bounce = BounceLight.build(light, prep, T, up)
+    ambient = car_ambient_radiance(bounce.env, prep.mean_albedo, up)
+    interior = INTERIOR_SKY_FRACTION * bounce.env.sky_irradiance(up) / np.pi
+    return _Prepared(prep, up, ambient, interior, bounce)
 
 
 def _foreground(x: _Inputs, where: Footprint, light: DistantLight, prepared: _Prepared, sh: ShadowMap | None,
@@ -173,7 +173,7 @@ def _foreground(x: _Inputs, where: Footprint, light: DistantLight, prepared: _Pr
     T = x.T_cam_from_object
     foot = None if sh is None else sh.foot_ratio
     ground = None if sh is None else GroundShadow(sh, x.camera, T, T[:3, :3].T @ prepared.up_cam)
-    ctx = ShadingContext.for_object(prepared.prep, light, T, settings, rng, prepared.ambient_rgb,
+    ctx = ShadingContext.for_object(prepared.prep, light, prepared.bounce.env, T, settings, rng, prepared.ambient_rgb,
                                     prepared.interior_rgb, prepared.bounce, foot, ground)
     return render_foreground(x.camera, where.object_box, ctx, T)
 

@@ -7,7 +7,6 @@ camera-frame equirectangular convention of :mod:`streetaug.augment.core`.
 
 from __future__ import annotations
 
-from collections import OrderedDict
 from dataclasses import dataclass
 
 import cv2
@@ -105,36 +104,6 @@ class EnvSampler:
         return self.pmf[row * self.width + col] / self.solid_angle[row]
 
 
-_SAMPLER_CACHE: "OrderedDict[int, tuple[np.ndarray, EnvSampler]]" = OrderedDict()
-_SAMPLER_CACHE_SIZE = 8
-
-
-SAMPLER_MAX_WIDTH = 256
-
-
-def sampler_map(envmap: np.ndarray) -> np.ndarray:
-    """The box-filtered copy of ``envmap`` (from the cached pyramid) that :func:`env_sampler_for` samples."""
-    levels = env_pyramid(envmap)
-    return next((lev for lev in levels if lev.shape[1] <= SAMPLER_MAX_WIDTH), levels[-1])
-
-
-def env_sampler_for(envmap: np.ndarray) -> EnvSampler:
-    """The :class:`EnvSampler` of ``envmap``, built once and cached (keyed by the array's identity)."""
-    key = id(envmap)
-    hit = _SAMPLER_CACHE.get(key)
-    if hit is not None and hit[0] is envmap:
-        _SAMPLER_CACHE.move_to_end(key)
-        return hit[1]
-    # Built on a copy at most SAMPLER_MAX_WIDTH wide (:func:`sampler_map`): environment samples must
-    # look their radiance up in that same copy, so that radiance / pdf stays bounded (a bright pixel of
-    # the full map inside a dimmer sampler texel would otherwise be a firefly).
-    sampler = EnvSampler.build(sampler_map(envmap))
-    _SAMPLER_CACHE[key] = (envmap, sampler)  # holding the array keeps its id from being reused
-    while len(_SAMPLER_CACHE) > _SAMPLER_CACHE_SIZE:
-        _SAMPLER_CACHE.popitem(last=False)
-    return sampler
-
-
 def hemisphere_irradiance(envmap: np.ndarray, normal: np.ndarray) -> np.ndarray:
     """Irradiance (3,) on a surface with unit ``normal`` (3,) from an unoccluded camera-frame envmap."""
     H, W = envmap.shape[:2]
@@ -161,9 +130,6 @@ def equirect_texel_moments(height: int, width: int) -> np.ndarray:
     return np.stack([x, y, z], axis=-1)
 
 
-_IRRADIANCE_CACHE: "OrderedDict[int, tuple[np.ndarray, np.ndarray]]" = OrderedDict()
-
-
 def irradiance_map(envmap: np.ndarray, height: int = 32, width: int = 64) -> np.ndarray:
     """Unoccluded irradiance for every normal direction: (height + 2, width, 3), look up with :func:`lookup_irradiance`.
 
@@ -171,12 +137,8 @@ def irradiance_map(envmap: np.ndarray, height: int = 32, width: int = 64) -> np.
     row 0 and row height + 1 at the north (up, -y) and south pole, so that normals near the poles are
     interpolated rather than clamped to the first texel row.  ``E(n) = sum_texels L max(0, n . m)`` over
     the map reduced to (height, width) texels (power kept exactly, ``m`` = the texel's integrated
-    direction).  Cached by the map's identity.
+    direction).  Built once per map by :class:`streetaug.augment.render.environment.EnvironmentTables`.
     """
-    key = id(envmap)
-    hit = _IRRADIANCE_CACHE.get(key)
-    if hit is not None and hit[0] is envmap:
-        return hit[1]
     H, W = envmap.shape[:2]
     # Power per small texel (radiance x solid angle summed exactly), and the texel's mean direction
     # vector m = int d dw: int_texel L max(0, n.d) dw ~ (power / solid angle) max(0, n.m) is exact for
@@ -190,11 +152,7 @@ def irradiance_map(envmap: np.ndarray, height: int = 32, width: int = 64) -> np.
     cos = np.maximum(d.astype(np.float32) @ m.T.astype(np.float32), 0.0)  # (normals, texels): max(0, n . m)
     E_dirs = (cos @ radiance.astype(np.float32)).astype(np.float64)
     E = np.concatenate([np.repeat(E_dirs[:1], width, axis=0), E_dirs[1:-1], np.repeat(E_dirs[-1:], width, axis=0)])
-    E = E.reshape(height + 2, width, 3)
-    _IRRADIANCE_CACHE[key] = (envmap, E)
-    while len(_IRRADIANCE_CACHE) > _SAMPLER_CACHE_SIZE:
-        _IRRADIANCE_CACHE.popitem(last=False)
-    return E
+    return E.reshape(height + 2, width, 3)
 
 
 def lookup_irradiance(E: np.ndarray, normals_cam: np.ndarray) -> np.ndarray:
@@ -220,26 +178,10 @@ def lookup_irradiance(E: np.ndarray, normals_cam: np.ndarray) -> np.ndarray:
     return top * (1 - fy) + bot * fy
 
 
-def sky_irradiance(envmap: np.ndarray, normal: np.ndarray) -> np.ndarray:
-    """Irradiance (3,) on a surface with unit camera-frame ``normal`` (3,), from the cached :func:`irradiance_map`."""
-    n = np.asarray(normal, dtype=np.float64)
-    return lookup_irradiance(irradiance_map(envmap), (n / np.linalg.norm(n))[None])[0]
-
-
-_PYRAMID_CACHE: "OrderedDict[int, tuple[np.ndarray, list[np.ndarray]]]" = OrderedDict()
-
-
 def env_pyramid(envmap: np.ndarray, min_width: int = 8) -> list[np.ndarray]:
-    """Box-filtered copies of an equirect map, widths W, W/2, ... down to ``min_width`` (cached by identity)."""
-    key = id(envmap)
-    hit = _PYRAMID_CACHE.get(key)
-    if hit is not None and hit[0] is envmap:
-        return hit[1]
+    """Box-filtered copies (float32) of an equirect map, widths W, W/2, ... down to ``min_width``."""
     levels = [np.asarray(envmap, dtype=np.float32)]
     while levels[-1].shape[1] // 2 >= min_width and levels[-1].shape[0] >= 2:
         h, w = levels[-1].shape[:2]
         levels.append(cv2.resize(levels[-1], (w // 2, max(h // 2, 1)), interpolation=cv2.INTER_AREA))
-    _PYRAMID_CACHE[key] = (envmap, levels)
-    while len(_PYRAMID_CACHE) > _SAMPLER_CACHE_SIZE:
-        _PYRAMID_CACHE.popitem(last=False)
     return levels

@@ -26,7 +26,8 @@ from ..core import camera_dir_to_lonlat, sample_equirect
 from ..lighting.light import DistantLight
 from .bounce import BounceLight
 from .brdf import BRDFParams, brdf_pdf, eval_brdf, sample_brdf, schlick_weight, specular_albedo
-from .sampling import EnvSampler, env_pyramid, env_sampler_for, irradiance_map, lookup_irradiance, sample_cone, sampler_map
+from .environment import EnvironmentTables
+from .sampling import lookup_irradiance, sample_cone
 from .settings import RenderSettings
 from .shadow import GroundShadow
 from .surface import PreparedAsset
@@ -66,7 +67,7 @@ class ShadingContext:
     """Everything the shading of one object in one image reads, plus its ray counters (mutable).
 
     Attributes:
-        prep: the prepared object; light: the camera-frame distant light.
+        prep: the prepared object; light: the camera-frame distant light; env: the tables of its env map.
         R_cam_from_obj: (3, 3) rotation object -> camera; sun_dir_obj: (3,) unit sun direction, object frame.
         settings: the render settings (the foreground lowers the light samples for its edge passes).
         rng: the render's random generator (draw order is part of the result).
@@ -80,6 +81,7 @@ class ShadingContext:
 
     prep: PreparedAsset
     light: DistantLight
+    env: EnvironmentTables
     R_cam_from_obj: np.ndarray
     sun_dir_obj: np.ndarray | None
     settings: RenderSettings
@@ -92,35 +94,15 @@ class ShadingContext:
     rays: dict[str, int] = field(default_factory=dict)
     raycast_s: float = 0.0
 
-    @property
-    def sampler(self) -> EnvSampler:
-        """Importance sampler of the env map (built on :attr:`sampler_env`)."""
-        return env_sampler_for(self.light.envmap)
-
-    @property
-    def sampler_env(self) -> np.ndarray:
-        """The reduced env map the sampler draws from: environment samples look their radiance up there."""
-        return sampler_map(self.light.envmap)
-
-    @property
-    def irradiance(self) -> np.ndarray:
-        """Irradiance map of the env map (:func:`streetaug.augment.render.sampling.irradiance_map`)."""
-        return irradiance_map(self.light.envmap)
-
-    @property
-    def pyramid(self) -> list[np.ndarray]:
-        """Box-filtered copies of the env map (filtered importance sampling)."""
-        return env_pyramid(self.light.envmap)
-
     @classmethod
-    def for_object(cls, prep: PreparedAsset, light: DistantLight, T_cam_from_object: np.ndarray,
+    def for_object(cls, prep: PreparedAsset, light: DistantLight, env: EnvironmentTables, T_cam_from_object: np.ndarray,
                    settings: RenderSettings, rng: np.random.Generator, ambient_rgb: np.ndarray,
                    interior_rgb: np.ndarray, bounce: BounceLight | None = None, foot_ratio: np.ndarray | None = None,
                    ground_shadow: GroundShadow | None = None) -> "ShadingContext":
         """The context of ``prep`` at ``T_cam_from_object`` (4, 4); ``foot_ratio`` None = 0.15."""
         R = np.asarray(T_cam_from_object, dtype=np.float64)[:3, :3]
         sun_obj = None if light.sun is None else R.T @ np.asarray(light.sun.direction, dtype=np.float64)
-        return cls(prep, light, R, sun_obj, settings, rng, np.asarray(ambient_rgb, dtype=np.float64),
+        return cls(prep, light, env, R, sun_obj, settings, rng, np.asarray(ambient_rgb, dtype=np.float64),
                    np.asarray(interior_rgb, dtype=np.float64), bounce,
                    np.full(3, 0.15) if foot_ratio is None else np.asarray(foot_ratio, dtype=np.float64), ground_shadow)
 
@@ -198,7 +180,7 @@ def _shade_batch(ctx: ShadingContext, p: np.ndarray, n_s: np.ndarray, n_g: np.nd
     g_color = (params.c_diff + spec_cv) / np.pi * coat_keep[:, None]  # (N, 3)
     if cv_scale is not None:
         g_color = g_color * cv_scale[:, None]
-    smooth += g_color * lookup_irradiance(ctx.irradiance, n_s @ ctx.R_cam_from_obj.T)
+    smooth += g_color * lookup_irradiance(ctx.env.irradiance, n_s @ ctx.R_cam_from_obj.T)
     for kind in ("env", "brdf"):
         if (ctx.settings.env_samples if kind == "env" else ctx.settings.brdf_samples) > 0:
             samples.append(_env_samples(ctx, kind, p, n_s, n_g, v, params, g_color, noisy))
@@ -237,7 +219,7 @@ def _env_samples(ctx: ShadingContext, kind: str, p: np.ndarray, n_s: np.ndarray,
     pr = params.take(idx)
     nn, vv, ng = n_s[idx], v[idx], n_g[idx]
     if kind == "env":
-        l_cam, p_env = ctx.sampler.sample(rng.random((len(idx), 3)))
+        l_cam, p_env = ctx.env.sampler.sample(rng.random((len(idx), 3)))
         l = l_cam @ R  # camera -> object frame (R^T l)
         p_brdf = brdf_pdf(nn, vv, l, pr)
         w = (n_e * p_env) ** 2 / np.maximum((n_e * p_env) ** 2 + (n_b * p_brdf) ** 2, 1e-300) / (n_e * p_env)
@@ -245,7 +227,7 @@ def _env_samples(ctx: ShadingContext, kind: str, p: np.ndarray, n_s: np.ndarray,
         l = sample_brdf(nn, vv, pr, rng.random((len(idx), 3)))
         l_cam = l @ R.T
         p_brdf = brdf_pdf(nn, vv, l, pr)
-        p_env = ctx.sampler.pdf(l_cam) if n_e else np.zeros(len(idx))
+        p_env = ctx.env.sampler.pdf(l_cam) if n_e else np.zeros(len(idx))
         w = (n_b * p_brdf) ** 2 / np.maximum((n_e * p_env) ** 2 + (n_b * p_brdf) ** 2, 1e-300) / np.maximum(n_b * p_brdf, 1e-300)
     cos = np.clip(np.einsum("ij,ij->i", nn, l), 0.0, 1.0)
     up = np.einsum("ij,ij->i", ng, l) > 0
@@ -254,9 +236,9 @@ def _env_samples(ctx: ShadingContext, kind: str, p: np.ndarray, n_s: np.ndarray,
     il = idx[live]
     weight = eval_brdf(nn[live], vv[live], l[live], pr.take(live)) * cw[live, None]
     if kind == "brdf":  # filtered importance sampling: a sample of a wide lobe sees a blurred sky
-        L = filtered_env_radiance(ctx.pyramid, l_cam[live], 1.0 / np.maximum(n_b * p_brdf[live], 1e-12))
+        L = filtered_env_radiance(ctx.env.pyramid, l_cam[live], 1.0 / np.maximum(n_b * p_brdf[live], 1e-12))
     else:
-        L = lookup_envmap(ctx.sampler_env, l_cam[live])  # the map the samples were drawn from
+        L = lookup_envmap(ctx.env.sampler_map, l_cam[live])  # the map the samples were drawn from
     cv = g_color[il] * cw[live, None] * L  # the control variate, MIS-weighted
     contrib = weight * L - cv
     down = np.flatnonzero(~up[live])

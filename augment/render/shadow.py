@@ -18,9 +18,9 @@ since the light is distant)::
   :mod:`.bounce` (instead of the paper's constant 0.1): ``A + B S_foot`` with ``S_foot`` the mean
   ratio under the object, solved in closed form from the map itself.
 
-The map is computed only in the image box that can be non-trivial -- the footprint grown by a
-sky-occlusion radius plus the object's top corners projected along the sun onto the ground (clamped
-to ``shadow_max_length_m``).  :class:`GroundShadow` lets the foreground renderer look the map up for
+The map is computed only in the image box that can be non-trivial
+(:func:`streetaug.augment.render.footprint.shadow_pixel_box`: the footprint grown by a sky-occlusion
+radius plus the object's top corners projected along the sun onto the ground).  :class:`GroundShadow` lets the foreground renderer look the map up for
 rays that leave the object downwards.
 """
 
@@ -36,7 +36,8 @@ from ..lighting.light import DistantLight
 from .bounce import BounceLight
 from .brdf import row_norm, to_world
 from .footprint import PixelBox
-from .sampling import GOLDEN_ANGLE, sample_cone, sky_irradiance
+from .environment import EnvironmentTables
+from .sampling import GOLDEN_ANGLE, sample_cone
 from .settings import RenderSettings
 from .surface import PreparedAsset
 
@@ -108,7 +109,7 @@ class GroundShadow:
         return out
 
 
-def car_ambient_radiance(light: DistantLight, mean_albedo: float, up_cam: np.ndarray) -> np.ndarray:
+def car_ambient_radiance(env: EnvironmentTables, mean_albedo: float, up_cam: np.ndarray) -> np.ndarray:
     """Radiance (3,) the object sends along rays it blocks: ``albedo x E_sky(up) / (2 pi)``.
 
     A matte surface of albedo rho under a sky giving ``E_sky`` on a horizontal plane receives about
@@ -116,7 +117,7 @@ def car_ambient_radiance(light: DistantLight, mean_albedo: float, up_cam: np.nda
     reflects ``rho E_sky / (2 pi)``.  The direct sun is left out: the side facing a shadowed point is
     the side turned away from the sun.
     """
-    return mean_albedo * sky_irradiance(light.envmap, up_cam) / (2.0 * np.pi)
+    return mean_albedo * env.sky_irradiance(up_cam) / (2.0 * np.pi)
 
 
 def render_shadow(camera: PinholeCamera, box: PixelBox | None, depth_m: np.ndarray, light: DistantLight,
@@ -136,7 +137,7 @@ def render_shadow(camera: PinholeCamera, box: PixelBox | None, depth_m: np.ndarr
     n_cam = np.asarray(ground_normal_cam, dtype=np.float64)
     n_cam = n_cam / np.linalg.norm(n_cam)
     geo = _Ground(camera, np.asarray(depth_m), n_cam, T_cam_from_object)
-    E_sky = sky_irradiance(light.envmap, n_cam)
+    E_sky = bounce.env.sky_irradiance(n_cam)
     sun = light.sun
     cos_sun = 0.0 if sun is None else float(max(np.dot(sun.direction, n_cam), 0.0))
     E_sun = np.zeros(3) if sun is None else np.asarray(sun.irradiance_rgb, dtype=np.float64) * cos_sun
@@ -296,9 +297,10 @@ class _Ground:
         return valid & np.all((p[:, :2] >= lo[:2]) & (p[:, :2] <= hi[:2]), axis=1)
 
 
-def _sky_deficit(p_obj, n_obj, light, prep, bounce, n_dirs, R, rng, stats) -> tuple[np.ndarray, np.ndarray]:
+def _sky_deficit(p_obj: np.ndarray, n_obj: np.ndarray, light: DistantLight, prep: PreparedAsset, bounce: BounceLight,
+                 n_dirs: int, R: np.ndarray, rng: np.random.Generator, stats: dict) -> tuple[np.ndarray, np.ndarray]:
     """Sky light the object takes from ground points p_obj (P, 3): (D0, C), each (P, 3), the deficit being
-    ``D0 - C S_foot`` (irradiance units).
+    ``D0 - C S_foot`` (irradiance units).  ``n_obj`` (3,) is the ground normal, ``R`` (3, 3) object -> camera.
 
     Only directions towards the object can be blocked: each point samples ``n_dirs`` directions
     uniformly (a randomly rotated Fibonacci spiral) in the cone around the object's bounding sphere,

@@ -184,14 +184,19 @@ def test_env_sampler_pdf_is_consistent():
 
 
 def test_irradiance_map_matches_direct_integration():
+    from streetaug.augment.render.environment import environment_tables
     from streetaug.augment.render.sampling import hemisphere_irradiance, irradiance_map, lookup_irradiance
     rng = np.random.default_rng(3)
     env = (rng.random((64, 128, 3)) * np.linspace(2, 0.1, 64)[:, None, None]).astype(np.float32)
     E = irradiance_map(env)
-    assert irradiance_map(env) is E  # cached
     for n in ([0, -1.0, 0], [0.6, -0.3, 0.74], [0, 1.0, 0]):
         n = np.asarray(n) / np.linalg.norm(n)
         np.testing.assert_allclose(lookup_irradiance(E, n[None])[0], hemisphere_irradiance(env, n), rtol=0.01)
+    tables = environment_tables(env)
+    assert environment_tables(env.copy()) is tables and tables.irradiance is tables.irradiance  # built once per content
+    np.testing.assert_array_equal(tables.irradiance, E)
+    env[0, 0] += 1.0  # changed in place: new content, new tables
+    assert environment_tables(env) is not tables
 
 
 @pytest.mark.parametrize("nv,rough,metallic", [(0.9, 0.5, 1.0), (0.3, 1.0, 1.0), (0.6, 0.2, 0.0), (0.5, 0.8, 0.3)])

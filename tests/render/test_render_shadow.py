@@ -6,6 +6,7 @@ from render_fixtures import primitive_car, sunny_light
 from streetaug.augment.core import PinholeCamera, camera_envmap_directions, intrinsics_from_fov, pose_camera_to_transform
 from streetaug.augment.lighting.light import DistantLight
 from streetaug.augment.render.bounce import BounceLight, ground_radiance_below
+from streetaug.augment.render.environment import environment_tables
 from streetaug.augment.core.depth import ground_plane_depth
 from streetaug.augment.render import RenderSettings, footprint, prepare_asset
 from streetaug.augment.render.shadow import GroundShadow, render_shadow
@@ -45,7 +46,7 @@ def test_sky_occlusion_matches_a_dense_lattice():
 
 def test_ground_radiance_below_the_horizon():
     light = _uniform_sky(1.0, 0.3)
-    np.testing.assert_allclose(ground_radiance_below(light.envmap, UP), 0.3, rtol=1e-6)
+    np.testing.assert_allclose(ground_radiance_below(environment_tables(light.envmap), UP), 0.3, rtol=1e-6)
 
 
 def test_bounce_light_back_faces_are_interior_and_undersides_see_the_shadow():
