@@ -11,13 +11,20 @@ from streetaug.augment.render.brdf import (
     brdf_pdf,
     eval_brdf,
     ggx_d,
+    reflect,
     sample_brdf,
+    specular_albedo,
     tangent_frame,
 )
+from streetaug.augment.render.environment import environment_tables
 from streetaug.augment.render.sampling import (
     EnvSampler,
     cosine_hemisphere,
+    equirect_texel_moments,
     fibonacci_hemisphere,
+    hemisphere_irradiance,
+    irradiance_map,
+    lookup_irradiance,
     sample_cone,
 )
 
@@ -119,7 +126,6 @@ def test_clearcoat_pdf_normalised():
     h = np.stack([st_ * np.cos(P), st_ * np.sin(P), C], -1).reshape(-1, 3)
     w = np.repeat(dct, 256) * (2 * np.pi / 256)
     vv = np.tile(v, (len(h), 1))
-    from streetaug.augment.render.brdf import reflect
     l = reflect(vv, h)
     vh = np.einsum("ij,ij->i", vv, h)
     ok = vh > 0
@@ -184,8 +190,6 @@ def test_env_sampler_pdf_is_consistent():
 
 
 def test_irradiance_map_matches_direct_integration():
-    from streetaug.augment.render.environment import environment_tables
-    from streetaug.augment.render.sampling import hemisphere_irradiance, irradiance_map, lookup_irradiance
     rng = np.random.default_rng(3)
     env = (rng.random((64, 128, 3)) * np.linspace(2, 0.1, 64)[:, None, None]).astype(np.float32)
     E = irradiance_map(env)
@@ -202,7 +206,6 @@ def test_irradiance_map_matches_direct_integration():
 @pytest.mark.parametrize("nv,rough,metallic", [(0.9, 0.5, 1.0), (0.3, 1.0, 1.0), (0.6, 0.2, 0.0), (0.5, 0.8, 0.3)])
 def test_specular_albedo_table_matches_integration(nv, rough, metallic):
     """The tabulated GGX-lobe albedo equals the directional albedo integrated by brute force."""
-    from streetaug.augment.render.brdf import specular_albedo
 
     params = BRDFParams.uniform(1, (0.9, 0.6, 0.05), metallic, rough, 0.5)
     v = np.array([np.sqrt(1 - nv * nv), 0.0, nv])
@@ -212,7 +215,6 @@ def test_specular_albedo_table_matches_integration(nv, rough, metallic):
 
 def test_texel_moments_are_exact_integrals():
     """m = int_texel d dw: summed over the sphere it vanishes, and n . m integrates a cosine exactly."""
-    from streetaug.augment.render.sampling import equirect_texel_moments
 
     m = equirect_texel_moments(16, 32)
     np.testing.assert_allclose(m.sum(axis=(0, 1)), 0.0, atol=1e-12)

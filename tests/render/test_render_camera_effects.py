@@ -6,8 +6,9 @@ import cv2
 import numpy as np
 import pytest
 
-from render_fixtures import degrade, sharp_polygons
-from streetaug.augment.core import InputError
+from render_fixtures import degrade, primitive_car, sharp_polygons, sunny_light
+from streetaug.augment.core import InputError, intrinsics_from_fov, pose_camera_to_transform
+from streetaug.augment.render import QUALITY_PRESETS, render_insertion
 from streetaug.augment.render.camera_effects import (
     CameraEffects,
     add_object_noise,
@@ -87,9 +88,6 @@ def test_object_noise_only_where_covered():
 
 def test_match_camera_in_render_insertion():
     """With matching on, the object gets the image's noise and blur; off, the image is untouched elsewhere."""
-    from render_fixtures import primitive_car, sunny_light
-    from streetaug.augment.core import intrinsics_from_fov, pose_camera_to_transform
-    from streetaug.augment.render import QUALITY_PRESETS, render_insertion
 
     W, H = 320, 180
     K = intrinsics_from_fov(W, H, 60.0)

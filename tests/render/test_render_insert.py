@@ -4,13 +4,14 @@
 import numpy as np
 import pytest
 
-from render_fixtures import primitive_car, sphere_asset, sunny_light, ground_scene
+from render_fixtures import ground_scene, primitive_car, sphere_asset, sunny_light
 from streetaug.augment.assets.asset import Asset, Material
-from streetaug.augment.core import intrinsics_from_fov, pose_camera_to_transform
-from streetaug.augment.core import InputError
-from streetaug.augment.lighting.light import DistantLight
+from streetaug.augment.core import (InputError, hdr_to_ldr_uint8, intrinsics_from_fov, invert_transform,
+                                    ldr_uint8_to_hdr, pose_camera_to_transform, unproject_depth)
+from streetaug.augment.lighting.light import DistantLight, SunLight
+from streetaug.augment.render import QUALITY_PRESETS, RenderSettings, render_insertion, shade, shadow
+from streetaug.augment.render.brdf import BRDFParams, eval_brdf
 from streetaug.augment.render.composite import composite, depth_visibility
-from streetaug.augment.render import QUALITY_PRESETS, RenderSettings, render_insertion
 
 W, H = 320, 180
 K = intrinsics_from_fov(W, H, 60.0)
@@ -61,7 +62,6 @@ def test_shadow_ratio_one_far_and_below_one_under(result, car, scene):
     assert (y1 - y0) < 0.5 * H  # the ratio map is only computed near the object
     # Ground points under the car's body (object frame |x| < 1.5 m, |y| < 0.6 m) that the camera sees
     # between the wheels: the body hides the sun and most of the sky from them.
-    from streetaug.augment.core import invert_transform, unproject_depth
 
     ys, xs = np.nonzero((result.coverage == 0) & np.isfinite(scene[2]))
     p_cam = unproject_depth(K, np.stack([xs, ys], 1).astype(float), scene[2][ys, xs])
@@ -132,7 +132,6 @@ def test_partial_occlusion_soft_edge():
 def test_composite_formula():
     rng = np.random.default_rng(0)
     img = rng.integers(0, 256, (4, 5, 3)).astype(np.uint8)
-    from streetaug.augment.core import hdr_to_ldr_uint8, ldr_uint8_to_hdr
 
     rad = np.full((4, 5, 3), 0.3, np.float32)
     cov = np.zeros((4, 5), np.float32)
@@ -220,7 +219,6 @@ def test_bad_inputs(car, scene):
 
 def test_chunked_shading_matches_one_batch(car, scene, monkeypatch):
     """Splitting the shading into memory-bounded chunks changes the noise, not the image."""
-    from streetaug.augment.render import shade, shadow
 
     light, image, depth, ev = scene
     T = pose_camera_to_transform(0.0, 1.5, 12.0, 90.0)
@@ -236,7 +234,6 @@ def test_chunked_shading_matches_one_batch(car, scene, monkeypatch):
 
 def test_furnace_white_metal_matches_albedo():
     """A white rough metal under a constant unit environment reflects its directional albedo (MIS path)."""
-    from streetaug.augment.render.brdf import BRDFParams, eval_brdf
 
     light = DistantLight(np.ones((32, 64, 3), np.float32), None)
     sphere = sphere_asset(1.0, Material("metal", np.ones(3), metallic=1.0, roughness=0.5))
@@ -319,7 +316,6 @@ def test_normal_map_tilts_the_shading_normal():
     T = pose_camera_to_transform(0.0, 1.0, 6.0, 0.0)
     # Object frame: the quad faces -x, its tangent (+u) is -y; the sun comes from -x, -y, a little above.
     s_obj = np.array([-1.0, -1.0, 0.3]) / np.linalg.norm([-1.0, -1.0, 0.3])
-    from streetaug.augment.lighting.light import SunLight
 
     light = DistantLight(np.full((16, 32, 3), 0.02, np.float32), SunLight(T[:3, :3] @ s_obj, np.full(3, 3.0)))
     res = render_insertion(np.full((H, W, 3), 100, np.uint8), K, np.full((H, W), np.inf, np.float32), light,

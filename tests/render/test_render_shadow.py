@@ -1,5 +1,6 @@
 """Shadow ratio map details: cone sampling, the object's bounce light, the ground shadow seen from the object."""
 
+import cv2
 import numpy as np
 
 from render_fixtures import primitive_car, sunny_light
@@ -98,7 +99,6 @@ def test_sun_shadow_edge_is_sharp():
     light = DistantLight(np.zeros_like(light.envmap), light.sun)  # sun only
     sh = _shadow(light, primitive_car(), pose_camera_to_transform(0.0, 1.5, 12.0, 90.0),
                  RenderSettings(shadow_factor=6))
-    import cv2
 
     r = sh.ratio_rgb.mean(axis=2)
     dark = (r < 0.1).astype(np.uint8)
