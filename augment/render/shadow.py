@@ -89,11 +89,10 @@ class GroundShadow:
         g = origins_obj[ok] + (height[ok] / -down[ok])[:, None] * dirs_obj[ok]
         R, t = self.T_cam_from_object[:3, :3], self.T_cam_from_object[:3, 3]
         g_cam = g @ R.T + t
-        front = g_cam[:, 2] > 1e-3
-        uvw = g_cam @ self.camera.K.T
-        with np.errstate(divide="ignore", invalid="ignore"):
-            u = uvw[:, 0] / uvw[:, 2] - self.shadow.x0
-            v = uvw[:, 1] / uvw[:, 2] - self.shadow.y0
+        uv, z = self.camera.project(g_cam)
+        front = z > 1e-3
+        u = uv[:, 0] - self.shadow.x0
+        v = uv[:, 1] - self.shadow.y0
         h, w = self.shadow.ratio_rgb.shape[:2]
         inside = front & (u >= 0) & (u <= w - 1) & (v >= 0) & (v <= h - 1)
         sel = ok[inside]
