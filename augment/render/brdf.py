@@ -19,6 +19,8 @@ from functools import cached_property
 
 import numpy as np
 
+from ..core import luminance
+
 CLEARCOAT_ROUGHNESS = 0.05
 CLEARCOAT_F0 = 0.04
 MIN_ROUGHNESS = 0.03  # below this GGX is a delta lobe that a few samples cannot integrate
@@ -200,9 +202,8 @@ def lobe_probabilities(params: BRDFParams) -> np.ndarray:
     Proportional to each lobe's rough reflectance (luminance of c_diff, of c_spec plus a Fresnel
     allowance, clear-coat strength x 0.1), with a floor so that no lobe with weight is starved.
     """
-    lum = np.array([0.2126, 0.7152, 0.0722])
-    w_d = np.einsum("ij,j->i", params.c_diff, lum)
-    w_s = np.einsum("ij,j->i", params.c_spec, lum) + 0.05
+    w_d = luminance(params.c_diff)
+    w_s = luminance(params.c_spec) + 0.05
     w_c = 0.1 * params.clearcoat
     w = np.stack([w_d, w_s, w_c], axis=1)
     w = np.where(w > 0, np.maximum(w, 0.05 * w.sum(axis=1, keepdims=True)), 0.0)
