@@ -56,11 +56,11 @@ from scipy.spatial import cKDTree  # noqa: E402
 
 from streetaug.augment.assets.loader import load_asset  # noqa: E402
 from streetaug.augment.assets.procedural import procedural_car  # noqa: E402
-from streetaug.augment.core import quat_to_rotation, transform_points  # noqa: E402
+from streetaug.augment.core import PinholeCamera, quat_to_rotation, transform_points  # noqa: E402
 from streetaug.augment.core import write_image_rgb  # noqa: E402
 from streetaug.augment.lighting.light import DistantLight  # noqa: E402
 from streetaug.augment.pipeline import item_seed, scene_depth_for_view  # noqa: E402
-from streetaug.augment.render.insert import render_insertion  # noqa: E402
+from streetaug.augment.render import render_insertion  # noqa: E402
 from streetaug.datasets.bundled import bundled_dataroot  # noqa: E402
 from streetaug.datasets.nuscenes import NuScenesReader  # noqa: E402
 from streetaug.datasets.sample import Box  # noqa: E402
@@ -68,7 +68,8 @@ from streetaug.placement.audit import AUDITED_RULES, audit_placements  # noqa: E
 from streetaug.placement.config import PlacementConfig  # noqa: E402
 from streetaug.placement.explain import draw_placement_bev  # noqa: E402
 from streetaug.placement.labels import object_label  # noqa: E402
-from streetaug.placement.place import _camera_azimuth_range, place_objects  # noqa: E402
+from streetaug.placement.candidates import camera_azimuth_range  # noqa: E402
+from streetaug.placement.place import place_objects  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 SHARED = (ROOT / ".." / "shared" / "data").resolve()
@@ -148,8 +149,8 @@ def label_accuracy(view, asset, placement, light, depth_m, image, seed: int) -> 
     T_co = view.T_cam_from_global @ placement.T_global_from_object
     normal_cam = view.T_cam_from_global[:3, :3] @ placement.ground_normal_global
     ins = render_insertion(image, view.K, depth_m, light, asset, T_co, normal_cam, quality="draft", seed=seed)
-    label = object_label(T_co, asset.wlh, asset.category, view.K, view.width, view.height, ins.mask, ins.coverage,
-                         T_global_from_cam=view.T_global_from_cam, attribute=placement.attribute)
+    label = object_label(T_co, asset.wlh, asset.category, PinholeCamera(view.K, view.width, view.height), ins.mask,
+                         ins.coverage, T_global_from_cam=view.T_global_from_cam, attribute=placement.attribute)
     g = label["box_global"]
     box = Box(np.array(g["translation"]), np.array(g["size"]), np.array(g["rotation"]), label["category"])
     # 2D: pixels of the object vs the projected label box
@@ -182,8 +183,8 @@ def label_accuracy(view, asset, placement, light, depth_m, image, seed: int) -> 
 def sampled_region_diagnosis(sample, view, drivable, config: PlacementConfig) -> dict:
     """Drivable area inside the sampled region (field of view x [min, max] distance), and nearer than min."""
     cam_xy = view.T_global_from_cam[:2, 3]
-    base, left, right = _camera_azimuth_range(view)
-    az = np.linspace(base - right, base + left, 64)
+    fov = camera_azimuth_range(view)
+    az = np.linspace(fov.heading_rad - fov.right_rad, fov.heading_rad + fov.left_rad, 64)
     ring = np.c_[np.cos(az), np.sin(az)]
 
     def wedge(r0, r1):
@@ -249,8 +250,7 @@ def main() -> None:
                     first = seed * args.objects + 5 * n_combos  # vary the assets across combinations
                     assets = [objects[(first + k) % len(objects)] for k in range(args.objects)]
                     t0, c0 = time.perf_counter(), time.process_time()
-                    res = place_objects(sample, view, [a.wlh for a in assets], rng, config,
-                                        categories=[a.category for a in assets])
+                    res = place_objects(sample, view, assets, rng, config)
                     dt = time.perf_counter() - t0
                     t_image.append(dt)
                     cpu_image.append(time.process_time() - c0)
@@ -260,13 +260,7 @@ def main() -> None:
                     if res.reason:
                         reasons[res.reason.split(" (")[0] if "no candidate" in res.reason else res.reason] += 1
                     last = res
-                    # the objects actually placed, in order (place_objects keeps the order, skipping failures)
-                    placed_assets, k = [], 0
-                    for p in res.placements:
-                        while not np.allclose(assets[k].wlh, p.wlh):
-                            k += 1
-                        placed_assets.append(assets[k])
-                        k += 1
+                    placed_assets = [assets[p.asset_index] for p in res.placements]
                     for p, a, aud in zip(res.placements, placed_assets,
                                          audit_placements(sample, view, res.placements, res.drivable, config)):
                         audits.append(aud.passed)
@@ -290,7 +284,7 @@ def main() -> None:
                     combo["diagnosis"] = sampled_region_diagnosis(sample, view, last.drivable, config)
                     near = dataclasses.replace(config, min_distance_m=5.0)
                     combo["diagnosis"]["succeeds_with_min_distance_5m"] = bool(place_objects(
-                        sample, view, [objects[0].wlh], item_seed(0, sample.token, channel), near).placements)
+                        sample, view, [objects[0]], item_seed(0, sample.token, channel), near).placements)
                     png = args.png_dir / f"placement_bev_{ds_name}_{sample.scene_name}_{channel}.png"
                     write_image_rgb(png, draw_placement_bev(sample, view, last))
                     combo["explain_png"] = str(png)

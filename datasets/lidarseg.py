@@ -6,7 +6,7 @@ File formats (no header in either):
   intensity, ring index.  The file size is therefore a multiple of 20 bytes.
 * ``*_lidarseg.bin``: one uint8 class index per point, same order as the point file.  Class
   indices follow the nuScenes ``category.index`` (e.g. 17 = vehicle.car, 24 = flat.driveable_surface,
-  31 = vehicle.ego, 0 = noise).
+  31 = vehicle.ego, 0 = noise; :mod:`streetaug.datasets.nuscenes_format`).
 """
 
 from __future__ import annotations
@@ -19,11 +19,6 @@ from .errors import DatasetError
 
 LIDAR_VALUES_PER_POINT = 5
 LIDAR_BYTES_PER_POINT = LIDAR_VALUES_PER_POINT * 4
-
-# nuScenes-lidarseg class indices used by placement (nuScenes ``category.index``).
-LIDARSEG_CAR = 17
-LIDARSEG_DRIVEABLE_SURFACE = 24
-LIDARSEG_EGO = 31
 
 
 def read_lidar_points(path: str | Path) -> np.ndarray:

@@ -21,7 +21,6 @@ needs the link updated (``ln -sfn NEW out_dir/source``). Tokens of new rows are 
 
 from __future__ import annotations
 
-import hashlib
 import json
 import os
 import shutil
@@ -31,17 +30,12 @@ from typing import Sequence
 
 from streetaug.augment.core import InputError, atomic_path
 
+from .nuscenes_format import VISIBILITY_LEVELS, new_token
+
 SOURCE_LINK = "source"
 # Source folders the devkit looks for under its dataroot itself (not through a table's filename):
 # NuScenesMap reads maps/expansion/, NuScenes counts the files in lidarseg/<version>/ and panoptic/<version>/.
 FOLDER_LINKS = ("maps", "lidarseg", "panoptic")
-
-VISIBILITY_LEVELS = {
-    "1": ("v0-40", "visibility of whole object is between 0 and 40%"),
-    "2": ("v40-60", "visibility of whole object is between 40 and 60%"),
-    "3": ("v60-80", "visibility of whole object is between 60 and 80%"),
-    "4": ("v80-100", "visibility of whole object is between 80 and 100%"),
-}
 
 
 @dataclass(frozen=True)
@@ -79,11 +73,6 @@ class InsertedObject:
     @property
     def instance_token(self) -> str:
         return new_token("instance", self.seed, self.sample_token, self.object_index)
-
-
-def new_token(*keys) -> str:
-    """A 32-hex-digit token (as nuScenes tokens) from keys, stable across runs and machines."""
-    return hashlib.md5("|".join(["streetaug", *map(str, keys)]).encode()).hexdigest()
 
 
 def link_source(out_dir: str | Path, source_dataroot: str | Path) -> None:
@@ -267,4 +256,4 @@ def _write_rows(path: Path, rows: list[dict]) -> None:
         f.write("]\n")
 
 
-__all__ = ["InsertedObject", "SOURCE_LINK", "link_source", "new_token", "write_augmented_tables"]
+__all__ = ["InsertedObject", "SOURCE_LINK", "link_source", "write_augmented_tables"]

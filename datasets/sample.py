@@ -20,9 +20,13 @@ from streetaug.augment.core import (
     invert_transform,
     make_transform,
     quat_to_rotation,
+    read_image_rgb,
+    rotate_vectors,
     rotation_to_quat,
     transform_points,
 )
+
+from .nuscenes_map import LaneCenterlines
 
 # nuScenes categories whose boxes count as dynamic for placement clearance.
 DYNAMIC_CATEGORY_PREFIXES = ("vehicle.", "human.", "animal")
@@ -101,8 +105,6 @@ class CameraView:
     def image(self) -> np.ndarray:
         """(H, W, 3) uint8 RGB, decoded on first access."""
         if self._load_image is None:
-            from streetaug.augment.core.io import read_image_rgb
-
             return read_image_rgb(self.image_path)
         return self._load_image()
 
@@ -117,6 +119,14 @@ class CameraView:
     @property
     def T_cam_from_ego(self) -> np.ndarray:
         return invert_transform(self.T_ego_from_cam)
+
+    @property
+    def ego_ground_plane_cam(self) -> tuple[np.ndarray, float]:
+        """The ego's ground plane (ego z = 0) in this camera's frame as (normal (3,), offset d): n . p + d = 0."""
+        T_cam_from_ego = self.T_cam_from_ego
+        normal = rotate_vectors(T_cam_from_ego, np.array([[0.0, 0.0, 1.0]]))[0]
+        point = transform_points(T_cam_from_ego, np.zeros((1, 3)))[0]
+        return normal, float(-normal @ point)
 
 
 @dataclass(frozen=True)
@@ -164,8 +174,7 @@ class Sample:
         boxes: annotated boxes in the global frame.
         drivable_area_global: list of shapely (Multi)Polygons in global x/y, or None when no map.
         load_lidar: callable returning the LiDAR sweep (or None when the sample has none).
-        lanes: lane centre lines of the map (:class:`streetaug.datasets.nuscenes_map.LaneCenterlines`),
-            or None when the map has no lanes.
+        lanes: lane centre lines of the map, or None when the map has no lanes.
     """
 
     token: str
@@ -176,7 +185,7 @@ class Sample:
     boxes: tuple[Box, ...]
     drivable_area_global: list | None = None
     _load_lidar: Callable[[], LidarSweep | None] = field(repr=False, compare=False, default=None)
-    lanes: object | None = field(repr=False, compare=False, default=None)
+    lanes: LaneCenterlines | None = field(repr=False, compare=False, default=None)
 
     @functools.cached_property
     def lidar(self) -> LidarSweep | None:

@@ -24,7 +24,9 @@ import shapely
 from streetaug.augment.core import quat_to_rotation, transform_points
 from streetaug.datasets.sample import Box, CameraView, Sample
 
-from .config import LIDARSEG_NON_DRIVABLE, PlacementConfig
+from streetaug.datasets.nuscenes_format import LIDARSEG_NON_DRIVABLE
+
+from .config import PlacementConfig
 from .drivable import DrivableArea
 
 AUDITED_RULES = ("drivable", "distance", "annotated_boxes", "lidar_obstacles", "lidarseg", "in_view",

@@ -10,14 +10,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-# nuScenes-lidarseg class indices used by placement.
-LIDARSEG_VEHICLE_CAR = 17
-LIDARSEG_DRIVEABLE = 24
-LIDARSEG_NON_DRIVABLE = (25, 26, 27, 28, 29, 30)  # flat.other, sidewalk, terrain, manmade, static.other, vegetation
-LIDARSEG_GROUND = (24, 25, 26, 27)  # flat.* classes: usable for the local ground fit
-LIDARSEG_EGO = 31
-
-
 @dataclass(frozen=True)
 class PlacementConfig:
     """Thresholds of the placement rules (metres, degrees, counts).

@@ -26,8 +26,9 @@ import numpy as np
 import shapely
 
 from streetaug.augment.core import check_shape, invert_transform, transform_points
+from streetaug.datasets.nuscenes_format import LIDARSEG_DRIVEABLE, LIDARSEG_EGO, LIDARSEG_NOISE
 
-from .config import LIDARSEG_DRIVEABLE, LIDARSEG_EGO, PlacementConfig
+from .config import PlacementConfig
 
 _MAX_BLOCKER_HEIGHT_M = 3.0  # points higher above the ego ground (canopies, signs) do not block the road
 
@@ -248,7 +249,7 @@ def drivable_from_lidarseg(
     if not drv.any():
         return None
     z_ego = transform_points(invert_transform(T_global_from_ego), points_global)[:, 2]
-    block = (~drv) & (labels != 0) & (labels != LIDARSEG_EGO) & (z_ego < _MAX_BLOCKER_HEIGHT_M)
+    block = (~drv) & (labels != LIDARSEG_NOISE) & (labels != LIDARSEG_EGO) & (z_ego < _MAX_BLOCKER_HEIGHT_M)
     grid, origin = _ray_fill_grid(points_global[drv, :2], points_global[block, :2], sensor_xy, config)
     return DrivableArea("lidarseg", "medium", grid=grid, grid_origin_xy=origin, resolution_m=config.grid_resolution_m)
 

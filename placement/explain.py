@@ -15,7 +15,8 @@ import numpy as np
 
 from streetaug.datasets.sample import CameraView, Sample
 
-from .place import PlacementResult, _camera_azimuth_range
+from .candidates import camera_azimuth_range
+from .place import PlacementResult
 
 LANE_COLOR_RGB = (150, 120, 40)
 
@@ -60,7 +61,7 @@ def draw_placement_bev(
         img[q[ok, 1], q[ok, 0]] = (70, 70, 70)
         r = max(int(np.ceil(area.resolution_m / m_per_px / 2)), 1)
         img = cv2.dilate(img, np.ones((2 * r + 1, 2 * r + 1), np.uint8))
-    lanes = getattr(sample, "lanes", None)
+    lanes = sample.lanes
     if lanes is not None and len(lanes.points_xy):
         q = to_px(lanes.points_xy)
         ok = (q[:, 0] >= 0) & (q[:, 0] < size_px) & (q[:, 1] >= 0) & (q[:, 1] < size_px)
@@ -79,8 +80,8 @@ def draw_placement_bev(
         a, b = to_px(np.stack([p.box.center[:2], p.box.center[:2] + 0.6 * p.wlh[1] * p.T_global_from_object[:2, 0]]))
         cv2.arrowedLine(img, (int(a[0]), int(a[1])), (int(b[0]), int(b[1])), (0, 255, 0), 1, tipLength=0.3)
     if result.config is not None:  # the sampled region: camera field of view x [min, max] distance
-        base, left, right = _camera_azimuth_range(view)
-        az = np.linspace(base - right, base + left, 64)
+        fov = camera_azimuth_range(view)
+        az = np.linspace(fov.heading_rad - fov.right_rad, fov.heading_rad + fov.left_rad, 64)
         ring = np.c_[np.cos(az), np.sin(az)]
         wedge = np.concatenate([cam_xy + result.config.min_distance_m * ring,
                                 cam_xy + result.config.max_distance_m * ring[::-1]])

@@ -12,8 +12,9 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from streetaug.augment.core import check_shape
+from streetaug.datasets.nuscenes_format import LIDARSEG_DRIVEABLE, LIDARSEG_GROUND
 
-from .config import LIDARSEG_DRIVEABLE, LIDARSEG_GROUND, PlacementConfig
+from .config import PlacementConfig
 
 
 @dataclass(frozen=True)

@@ -26,16 +26,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from streetaug.augment.core import check_shape, rotation_to_quat, transform_to_pose_camera
+from streetaug.augment.core import PinholeCamera, check_shape, rotation_to_quat, transform_to_pose_camera
+from streetaug.datasets.nuscenes_format import VEHICLE_MOVING, visibility_token
 
+from .place import Placement
 from .rules import box_corners_object, projected_inside_fraction
-
-VISIBILITY_EDGES = (0.4, 0.6, 0.8)
-
-
-def visibility_token(visible_fraction: float) -> str:
-    """nuScenes visibility bin ("1".."4") of a visible fraction in [0, 1]."""
-    return str(1 + int(np.searchsorted(VISIBILITY_EDGES, float(visible_fraction), side="right")))
 
 
 def bbox_from_mask(mask: np.ndarray, threshold: float = 0.5) -> list[float] | None:
@@ -54,9 +49,7 @@ def object_label(
     T_cam_from_object: np.ndarray,
     wlh: np.ndarray,
     category: str,
-    K: np.ndarray,
-    width: int,
-    height: int,
+    camera: PinholeCamera,
     mask: np.ndarray,
     coverage: np.ndarray,
     T_global_from_cam: np.ndarray | None = None,
@@ -68,7 +61,7 @@ def object_label(
         T_cam_from_object: (4, 4) object frame (x front, y left, z up, origin at the bottom centre) -> camera.
         wlh: (3,) box size [w, l, h] in metres.
         category: nuScenes category, e.g. ``vehicle.car``.
-        K: (3, 3) intrinsics; width, height: image size in pixels.
+        camera: the camera (intrinsics, image size).
         mask: (H, W) float visible coverage of the object in [0, 1] (after occlusion).
         coverage: (H, W) float coverage of the object without occluders.
         T_global_from_cam: (4, 4) camera -> global; when given, ``box_global`` is added.
@@ -86,8 +79,8 @@ def object_label(
     check_shape(wlh, (3,), "wlh")
     mask = np.asarray(mask, dtype=np.float64)
     coverage = np.asarray(coverage, dtype=np.float64)
-    check_shape(mask, (height, width), "mask")
-    check_shape(coverage, (height, width), "coverage")
+    check_shape(mask, camera.shape, "mask")
+    check_shape(coverage, camera.shape, "coverage")
 
     up_cam = T[:3, 2]
     center_cam = T[:3, 3] + 0.5 * wlh[2] * up_cam
@@ -95,7 +88,7 @@ def object_label(
     total = float(coverage.sum())
     visible = float(np.clip(mask.sum() / total, 0.0, 1.0)) if total > 0 else 0.0
     corners_cam = box_corners_object(wlh) @ T[:3, :3].T + T[:3, 3]
-    inside = float(projected_inside_fraction(corners_cam[None], K, width, height, near_m=0.1)[0])
+    inside = float(projected_inside_fraction(corners_cam[None], camera, near_m=0.1)[0])
     label = {
         "category": category,
         "box_camera": {
@@ -109,7 +102,7 @@ def object_label(
         "truncation": float(1.0 - inside),
         "num_lidar_pts": 0,
         "num_radar_pts": 0,
-        "attribute": attribute or "vehicle.moving",
+        "attribute": attribute or VEHICLE_MOVING,
     }
     if T_global_from_cam is not None:
         T_gc = np.asarray(T_global_from_cam, dtype=np.float64)
@@ -123,7 +116,7 @@ def object_label(
     return label
 
 
-def placement_label_fields(placement) -> dict:
+def placement_label_fields(placement: Placement) -> dict:
     """Extra ``labels.json`` keys describing how a :class:`~streetaug.placement.place.Placement` was made.
 
     Returns ``{"placement": {drivable_source, drivable_confidence, ground_source, yaw_source, distance_m,

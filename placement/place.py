@@ -10,30 +10,29 @@ The rules are applied in ``RULE_ORDER``; the first surviving candidate (in sampl
 ``drivable`` and ``annotated_boxes`` first filter the flat footprints cheaply; each survivor then
 stands on the local ground plane fitted from LiDAR (roll/pitch from its normal, heading projected onto
 the plane) and every footprint rule is (re)applied to the footprint of that tilted box
-(:func:`box_footprint_rect`), so a final placement satisfies each rule as labelled.
+(:func:`~streetaug.placement.rules.box_footprint_rect`), so a final placement satisfies each rule as labelled.
+Candidates are sampled and stood on the ground in :mod:`~streetaug.placement.candidates`.
+
+What hides a candidate (``in_view``, ``corners_unoccluded``) is the scene depth the renderer's depth
+test uses (:func:`~streetaug.placement.scene.scene_depth`): pass the pipeline's to :func:`place_objects`,
+or it is computed here.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Sequence
+from typing import Protocol, Sequence
 
 import numpy as np
 
-from streetaug.augment.core import rotation_to_quat, transform_points
-from streetaug.augment.core import InputError
+from streetaug.augment.core import InputError, rotation_to_quat
+from streetaug.datasets.nuscenes_format import VEHICLE_MOVING, VEHICLE_PARKED
 from streetaug.datasets.sample import Box, CameraView, Sample
 
-from .config import LIDARSEG_NON_DRIVABLE, PlacementConfig
+from .candidates import Candidates, StoodCandidates, sample_candidates, stand_candidates
+from .config import PlacementConfig
 from .drivable import DrivableArea, drivable_area_for_sample
-from .ground import LocalGroundFitter
 from .rules import (
-    box_corners_object,
-    box_footprint_rect,
-    box_footprints,
-    footprint_corners,
-    points_in_boxes,
-    lidar_depth_image,
     rule_box_clearance,
     rule_corners_unoccluded,
     rule_distance,
@@ -44,8 +43,9 @@ from .rules import (
     rule_obstacles,
     visible_fraction_estimate,
 )
+from .scene import PlacementScene
 
-_CHUNK = 48  # candidates stood on the ground and checked per round (the first survivor wins)
+CHUNK = 48  # candidates stood on the ground and checked per round (the first survivor wins)
 
 RULE_ORDER = (
     "drivable",
@@ -59,11 +59,35 @@ RULE_ORDER = (
 )
 
 
+class Placeable(Protocol):
+    """What placement reads of an object: its box size and category (an ``Asset`` is one)."""
+
+    @property
+    def wlh(self) -> np.ndarray: ...
+
+    @property
+    def category(self) -> str: ...
+
+
+@dataclass(frozen=True)
+class ObjectBox:
+    """An object known only by its box (for callers without a mesh).
+
+    Attributes:
+        wlh: (3,) float64 width, length, height in metres.
+        category: nuScenes category of the box.
+    """
+
+    wlh: np.ndarray
+    category: str = "vehicle.car"
+
+
 @dataclass(frozen=True)
 class Placement:
     """One placed object.
 
     Attributes:
+        asset_index: index of the object in the sequence given to :func:`place_objects`.
         T_global_from_object: (4, 4) object frame (x front, y left, z up, origin at the bottom centre) -> global.
         box: nuScenes :class:`Box` in the global frame (centre = bottom centre + h/2 along the object's up).
         wlh: (3,) float64 width, length, height in metres.
@@ -78,8 +102,11 @@ class Placement:
         yaw_source: ``"lane"`` (heading of the nearest lane centre line of the map) or ``"ego"``
             (the ego heading or its opposite).
         footprint_xy: (4, 2) float64 the footprint the rules checked (:func:`box_footprint_rect`), global x/y.
+        visible_fraction: the estimated fraction of the box's image inside the image and not hidden by
+            the scene depth (:func:`visible_fraction_estimate`), as the ``in_view`` rule judged it.
     """
 
+    asset_index: int
     T_global_from_object: np.ndarray
     box: Box
     wlh: np.ndarray
@@ -87,11 +114,12 @@ class Placement:
     ground_source: str
     drivable_source: str
     drivable_confidence: str = ""
-    attribute: str = "vehicle.moving"
+    attribute: str = VEHICLE_MOVING
     distance_m: float = float("nan")
     edge_distance_m: float = float("nan")
     yaw_source: str = "ego"
-    footprint_xy: np.ndarray | None = None
+    footprint_xy: np.ndarray = field(default_factory=lambda: np.zeros((4, 2)))
+    visible_fraction: float = float("nan")
 
     def T_cam_from_object(self, view: CameraView) -> np.ndarray:
         """(4, 4) object -> camera frame of ``view``."""
@@ -103,7 +131,8 @@ class PlacementResult:
     """Outcome of :func:`place_objects`.
 
     Attributes:
-        placements: the placed objects (possibly fewer than requested, possibly none).
+        placements: the placed objects (possibly fewer than requested, possibly none), each with the
+            index of its object (``asset_index``).
         report: rule name -> number of candidates it rejected (summed over objects), keys in ``RULE_ORDER``.
         reason: why fewer objects than requested were placed (None when all were placed).
         candidates_xy: (C, 2) float64 every sampled candidate's bottom-centre x/y (global), for explanations.
@@ -121,203 +150,176 @@ class PlacementResult:
     config: PlacementConfig | None = None
 
 
-def object_transforms(
-    bottom_xy: np.ndarray, yaw_rad: np.ndarray, ground_z: np.ndarray, normals: np.ndarray
-) -> np.ndarray:
-    """T_global_from_object (N, 4, 4) for objects standing on planes.
+class RuleTally:
+    """The rejections of one object's candidates: which rule rejected each, and counts per rule."""
 
-    Args:
-        bottom_xy: (N, 2) global x/y of the bottom centre.
-        yaw_rad: (N,) heading in the global x/y plane (rad, from +x towards +y).
-        ground_z: (N,) ground height at bottom_xy.
-        normals: (N, 3) unit ground normals (z > 0); become the object's +z.
+    def __init__(self, n_candidates: int, report: dict[str, int]) -> None:
+        self.rejected_by = np.full(n_candidates, "", dtype=object)
+        self.report = report
+
+    def keep(self, name: str, index: np.ndarray, alive: np.ndarray, ok: np.ndarray) -> np.ndarray:
+        """Record rule ``name`` rejecting candidates ``index[alive[~ok]]``; return the surviving ``alive[ok]``."""
+        ok = np.asarray(ok, dtype=bool)
+        self.rejected_by[index[alive[~ok]]] = name
+        self.report[name] += int((~ok).sum())
+        return alive[ok]
+
+
+def prefilter(scene: PlacementScene, cands: Candidates, tally: RuleTally) -> np.ndarray:
+    """Indices of the candidates whose flat footprints pass ``drivable`` and ``annotated_boxes`` (cheap, vectorised)."""
+    cfg = scene.config
+    everyone = np.arange(len(cands.xy))
+    alive = tally.keep("drivable", everyone, everyone, rule_drivable(scene.drivable, cands.footprints_xy))
+    return tally.keep("annotated_boxes", everyone, alive, rule_box_clearance(
+        cands.footprints_xy[alive], scene.box_footprints_xy, scene.box_is_dynamic, cfg.dynamic_clearance_m,
+        cfg.static_clearance_m))
+
+
+@dataclass(frozen=True)
+class ChunkSurvivors:
+    """Positions (K,) in a chunk of the candidates passing every rule, with their visible fractions (K,)."""
+
+    alive: np.ndarray
+    visible_fraction: np.ndarray
+
+
+def check_stood(scene: PlacementScene, stood: StoodCandidates, wlh: np.ndarray, placed_xy: np.ndarray,
+                tally: RuleTally) -> ChunkSurvivors:
+    """Apply every rule, in ``RULE_ORDER``, to the standing boxes of one chunk."""
+    cfg, camera, idx = scene.config, scene.camera, stood.index
+    k = np.arange(len(idx))
+    rect = stood.footprints_xy
+    k = tally.keep("drivable", idx, k, rule_drivable(scene.drivable, rect[k]))
+    k = tally.keep("annotated_boxes", idx, k, rule_box_clearance(
+        rect[k], scene.box_footprints_xy, scene.box_is_dynamic, cfg.dynamic_clearance_m, cfg.static_clearance_m))
+    k = tally.keep("distance", idx, k, rule_distance(stood.centers[k, :2], scene.camera_xy, cfg.min_distance_m,
+                                                     cfg.max_distance_m))
+    k = tally.keep("lidar_obstacles", idx, k, rule_obstacles(
+        rect[k], stood.ground_points[k], stood.ground_normals[k], scene.obstacle_points, cfg.static_clearance_m,
+        cfg.obstacle_min_height_m, cfg.obstacle_max_height_m, cfg.obstacle_max_points))
+    k = tally.keep("lidarseg", idx, k, rule_lidarseg(rect[k], scene.non_drivable_xy, cfg.static_clearance_m,
+                                                     cfg.lidarseg_max_points))
+    visible = np.zeros(len(idx))
+    visible[k] = visible_fraction_estimate(stood.T_cam_from_object[k], wlh, camera, scene.depth_m,
+                                           cfg.occlusion_tolerance_m)
+    k = tally.keep("in_view", idx, k, rule_in_view(stood.corners_cam[k], camera, cfg.min_visible_fraction,
+                                                   cfg.near_plane_m, visible[k]))
+    if cfg.require_unoccluded_corners:
+        k = tally.keep("corners_unoccluded", idx, k, rule_corners_unoccluded(
+            stood.corners_cam[k], camera, scene.depth_m, cfg.occlusion_tolerance_m))
+    k = tally.keep("mutual_collision", idx, k, rule_mutual(rect[k], placed_xy, cfg.mutual_clearance_m))
+    return ChunkSurvivors(k, visible[k])
+
+
+def make_placement(scene: PlacementScene, asset_index: int, obj: Placeable, wlh: np.ndarray, cands: Candidates,
+                   stood: StoodCandidates, j: int, visible_fraction: float) -> Placement:
+    """The :class:`Placement` of position ``j`` of ``stood``."""
+    T, center, fp = stood.T_global_from_object[j], stood.centers[j], stood.footprints_xy[j]
+    edge = float(scene.drivable.edge_distance(fp[None])[0])
+    return Placement(
+        asset_index=asset_index,
+        T_global_from_object=T,
+        box=Box(center.copy(), wlh.copy(), rotation_to_quat(T[:3, :3]), obj.category),
+        wlh=wlh.copy(),
+        ground_normal_global=stood.planes[j].normal_global.copy(),
+        ground_source=str(stood.planes[j].source),
+        drivable_source=scene.drivable.source,
+        drivable_confidence=scene.drivable.confidence,
+        attribute=VEHICLE_PARKED if edge <= scene.config.kerb_distance_m else VEHICLE_MOVING,
+        distance_m=float(np.linalg.norm(center[:2] - scene.camera_xy)),
+        edge_distance_m=edge,
+        yaw_source="lane" if cands.on_lane[stood.index[j]] else "ego",
+        footprint_xy=fp.copy(),
+        visible_fraction=float(visible_fraction),
+    )
+
+
+@dataclass(frozen=True)
+class ObjectAttempt:
+    """One object's candidates, what became of each, and the placement (None when no candidate passed)."""
+
+    candidates_xy: np.ndarray
+    rejected_by: np.ndarray
+    placement: Placement | None
+
+
+def place_one(scene: PlacementScene, asset_index: int, obj: Placeable, rng: np.random.Generator,
+              placed_xy: np.ndarray, report: dict[str, int]) -> ObjectAttempt:
+    """Sample candidates for one object and keep the first (in sampling order) passing every rule.
+
+    Candidates past the cheap pre-filters are stood on the ground and checked in chunks of ``CHUNK``, so
+    later chunks are only evaluated when needed; the survivors not chosen are marked ``unused``.
     """
-    n = np.asarray(normals, dtype=np.float64)
-    n = n / np.linalg.norm(n, axis=1, keepdims=True)
-    h = np.stack([np.cos(yaw_rad), np.sin(yaw_rad), np.zeros_like(yaw_rad)], axis=1)
-    x = h - np.einsum("nd,nd->n", h, n)[:, None] * n
-    x /= np.linalg.norm(x, axis=1, keepdims=True)
-    y = np.cross(n, x)
-    T = np.tile(np.eye(4), (len(n), 1, 1))
-    T[:, :3, 0], T[:, :3, 1], T[:, :3, 2] = x, y, n
-    T[:, :3, 3] = np.concatenate([bottom_xy, np.asarray(ground_z).reshape(-1, 1)], axis=1)
-    return T
+    wlh = np.asarray(obj.wlh, dtype=np.float64)
+    cands = sample_candidates(scene, wlh, rng)
+    tally = RuleTally(len(cands.xy), report)
+    alive = prefilter(scene, cands, tally)
+    for start in range(0, len(alive), CHUNK):
+        stood = stand_candidates(scene, cands, alive[start:start + CHUNK], wlh)
+        survivors = check_stood(scene, stood, wlh, placed_xy, tally)
+        if len(survivors.alive):
+            j = survivors.alive[0]
+            tally.rejected_by[stood.index[survivors.alive[1:]]] = "unused"
+            tally.rejected_by[alive[start + CHUNK:]] = "unused"  # passed the pre-filters, not evaluated further
+            placement = make_placement(scene, asset_index, obj, wlh, cands, stood, j, survivors.visible_fraction[0])
+            return ObjectAttempt(cands.xy, tally.rejected_by, placement)
+    return ObjectAttempt(cands.xy, tally.rejected_by, None)
 
 
-def _check_wlhs(wlhs: Sequence[np.ndarray]) -> list[np.ndarray]:
-    out = []
-    for i, wlh in enumerate(wlhs):
-        a = np.asarray(wlh, dtype=np.float64)
+def check_objects(objects: Sequence[Placeable]) -> None:
+    """Raise :class:`InputError` unless every object has 3 positive finite sizes [w, l, h]."""
+    for i, obj in enumerate(objects):
+        if not (hasattr(obj, "wlh") and hasattr(obj, "category")):
+            raise InputError(f"place_objects: objects[{i}] must have a size .wlh and a .category (an Asset or an "
+                             f"ObjectBox), got {type(obj).__name__}")
+        a = np.asarray(obj.wlh, dtype=np.float64)
         if a.shape != (3,) or not np.all(np.isfinite(a)) or np.any(a <= 0):
-            raise InputError(f"place_objects: wlhs[{i}] must be 3 positive finite sizes [w, l, h] in metres, got {a.tolist()}")
-        out.append(a)
-    return out
-
-
-def _camera_azimuth_range(view: CameraView) -> tuple[float, float, float]:
-    """(heading of the camera's optical axis in global x/y, max angle to the left, max angle to the right)."""
-    fwd = view.T_global_from_cam[:3, 2]
-    if np.hypot(fwd[0], fwd[1]) < 1e-3:
-        raise InputError(f"camera {view.channel}: optical axis is vertical; cannot place objects on the ground")
-    base = float(np.arctan2(fwd[1], fwd[0]))
-    fx, cx = view.K[0, 0], view.K[0, 2]
-    left = float(np.arctan((cx + 0.5) / fx))
-    right = float(np.arctan((view.width - 0.5 - cx) / fx))
-    return base, left, right
+            raise InputError(f"place_objects: objects[{i}].wlh must be 3 positive finite sizes [w, l, h] in metres, "
+                             f"got {a.tolist()}")
 
 
 def place_objects(
     sample: Sample,
     view: CameraView,
-    wlhs: list[np.ndarray],
+    objects: Sequence[Placeable],
     rng: np.random.Generator,
     config: PlacementConfig = PlacementConfig(),
-    categories: Sequence[str] | None = None,
+    depth_m: np.ndarray | None = None,
 ) -> PlacementResult:
-    """Place ``len(wlhs)`` objects (sizes [w, l, h] in metres) in ``view`` of ``sample``.
+    """Place ``objects`` (assets, or :class:`ObjectBox` sizes and categories) in ``view`` of ``sample``.
 
     Deterministic for a given ``rng`` state. ``config.n_objects`` is not used here: the caller passes
-    one size per object. ``categories`` (one per object, default ``vehicle.car``) name the boxes.
+    the objects. Each placement names its object by ``asset_index`` (objects that found no place are
+    left out).
+
+    Args:
+        depth_m: (H, W) float32 the scene depth of ``view`` (camera z, metres, inf = unknown) the
+            renderer will test against; None computes the same (:func:`scene_depth`).
     """
-    wlhs = _check_wlhs(wlhs)
-    categories = list(categories) if categories is not None else ["vehicle.car"] * len(wlhs)
-    if len(categories) != len(wlhs):
-        raise InputError(f"place_objects: {len(categories)} categories for {len(wlhs)} objects")
+    check_objects(objects)
     report = {name: 0 for name in RULE_ORDER}
     drivable, reason = drivable_area_for_sample(sample, view, config)
     if drivable is None:
         return PlacementResult([], report, reason, config=config)
-
-    T_cam_from_global = view.T_cam_from_global
-    cam_xy = view.T_global_from_cam[:2, 3]
-    base, left, right = _camera_azimuth_range(view)
-    R_ego = view.T_global_from_ego[:3, :3]
-    yaw_ego = float(np.arctan2(R_ego[1, 0], R_ego[0, 0]))
-
-    boxes = list(sample.boxes)
-    box_fp = box_footprints(boxes)
-    box_dyn = np.array([b.is_dynamic for b in boxes], dtype=bool)
-    lidar = sample.lidar
-    if lidar is not None:
-        points = lidar.points_global
-        labels = lidar.labels
-        free = ~points_in_boxes(points, boxes, margin_m=0.1)
-        obstacle_pts = points[free]
-        if labels is not None:
-            non_drivable_xy = points[np.isin(labels, LIDARSEG_NON_DRIVABLE)][:, :2]
-            fitter = LocalGroundFitter(obstacle_pts, view.T_global_from_ego, labels[free], config)
-        else:
-            non_drivable_xy = np.zeros((0, 2))
-            fitter = LocalGroundFitter(obstacle_pts, view.T_global_from_ego, None, config)
-    else:
-        points, labels = None, None
-        obstacle_pts, non_drivable_xy = np.zeros((0, 3)), np.zeros((0, 2))
-        fitter = LocalGroundFitter(None, view.T_global_from_ego, None, config)
-    depth_m = None  # sparse scene depth from LiDAR: what hides a candidate (in_view, corners_unoccluded)
-    if points is not None:
-        depth_m = lidar_depth_image(transform_points(T_cam_from_global, points), view.K, view.width, view.height)
-
-    lanes = sample.lanes if config.use_lanes else None
+    scene = PlacementScene.of(sample, view, config, drivable, depth_m)
     placements: list[Placement] = []
-    all_xy, all_rej = [], []
-    placed_fp = np.zeros((0, 4, 2))
-    n = config.n_candidates
-    for wlh, category in zip(wlhs, categories):
-        w, l, h = wlh
-        r = rng.uniform(config.min_distance_m, config.max_distance_m, n)
-        az = base + rng.uniform(-right, left, n)
-        flip = rng.random(n) < config.opposite_heading_probability
-        noise = np.radians(rng.normal(0.0, config.yaw_sigma_deg, n))
-        xy = cam_xy + r[:, None] * np.stack([np.cos(az), np.sin(az)], axis=1)
-        heading = yaw_ego + np.pi * flip
-        on_lane = np.zeros(n, dtype=bool)
-        if lanes is not None:
-            lane_heading, on_lane = lanes.heading_at(xy, config.lane_max_distance_m)
-            heading = np.where(on_lane, lane_heading, heading)
-        yaw = np.mod(heading + noise + np.pi, 2 * np.pi) - np.pi
-        corners = footprint_corners(xy, yaw, l, w)
-        rejected = np.full(n, "", dtype=object)
-
-        def apply(name: str, idx: np.ndarray, ok: np.ndarray) -> np.ndarray:
-            """Record the rejections of rule ``name`` among candidates ``idx``; return the survivors."""
-            rejected[idx[~ok]] = name
-            report[name] += int((~ok).sum())
-            return idx[ok]
-
-        # cheap vectorised pre-filters on the flat footprints of all candidates
-        alive = apply("drivable", np.arange(n), rule_drivable(drivable, corners))
-        alive = apply("annotated_boxes", alive, rule_box_clearance(
-            corners[alive], box_fp, box_dyn, config.dynamic_clearance_m, config.static_clearance_m))
-        # then, in sampling order and in chunks (the first survivor wins, so later chunks are only
-        # evaluated when needed): stand each candidate on its local ground and apply every rule to the
-        # box as placed (footprint of the tilted box, its corners in the camera)
-        chosen = None
-        for start in range(0, len(alive), _CHUNK):
-            idx = alive[start:start + _CHUNK]
-            planes = [fitter.fit(p) for p in xy[idx]]
-            g_point = np.array([p.point_global for p in planes]).reshape(-1, 3)
-            g_normal = np.array([p.normal_global for p in planes]).reshape(-1, 3)
-            T_go = object_transforms(xy[idx], yaw[idx], g_point[:, 2], g_normal)
-            centers = T_go[:, :3, 3] + 0.5 * h * T_go[:, :3, 2]
-            rect = box_footprint_rect(T_go, wlh)
-            T_co = T_cam_from_global[None] @ T_go
-            corners_cam = np.einsum("nij,kj->nki", T_co[:, :3, :3], box_corners_object(wlh)) + T_co[:, None, :3, 3]
-            k = np.arange(len(idx))  # positions in this chunk still alive
-
-            def apply_k(name: str, ok: np.ndarray) -> np.ndarray:
-                return k[np.isin(idx[k], apply(name, idx[k], ok))]
-
-            k = apply_k("drivable", rule_drivable(drivable, rect[k]))
-            k = apply_k("annotated_boxes", rule_box_clearance(
-                rect[k], box_fp, box_dyn, config.dynamic_clearance_m, config.static_clearance_m))
-            k = apply_k("distance", rule_distance(centers[k, :2], cam_xy, config.min_distance_m, config.max_distance_m))
-            k = apply_k("lidar_obstacles", rule_obstacles(
-                rect[k], g_point[k], g_normal[k], obstacle_pts, config.static_clearance_m,
-                config.obstacle_min_height_m, config.obstacle_max_height_m, config.obstacle_max_points))
-            k = apply_k("lidarseg", rule_lidarseg(rect[k], non_drivable_xy, config.static_clearance_m,
-                                                  config.lidarseg_max_points))
-            visible = visible_fraction_estimate(T_co[k], wlh, view.K, view.width, view.height, depth_m,
-                                                config.occlusion_tolerance_m)
-            k = apply_k("in_view", rule_in_view(corners_cam[k], view.K, view.width, view.height,
-                                                config.min_visible_fraction, config.near_plane_m, visible))
-            if config.require_unoccluded_corners and depth_m is not None:
-                k = apply_k("corners_unoccluded", rule_corners_unoccluded(
-                    corners_cam[k], view.K, depth_m, config.occlusion_tolerance_m))
-            k = apply_k("mutual_collision", rule_mutual(rect[k], placed_fp, config.mutual_clearance_m))
-            if len(k):
-                j = k[0]
-                chosen = (idx[j], T_go[j], centers[j], rect[j], g_normal[j], planes[j].source)
-                rejected[idx[k[1:]]] = "unused"
-                rejected[alive[start + _CHUNK:]] = "unused"  # passed the pre-filters, not evaluated further
-                break
-
-        if chosen is not None:
-            i, T, center, fp, normal, g_source = chosen
-            box = Box(center.copy(), wlh.copy(), rotation_to_quat(T[:3, :3]), category)
-            edge = float(drivable.edge_distance(fp[None])[0])
-            placements.append(Placement(
-                T_global_from_object=T,
-                box=box,
-                wlh=wlh.copy(),
-                ground_normal_global=normal.copy(),
-                ground_source=str(g_source),
-                drivable_source=drivable.source,
-                drivable_confidence=drivable.confidence,
-                attribute="vehicle.parked" if edge <= config.kerb_distance_m else "vehicle.moving",
-                distance_m=float(np.linalg.norm(center[:2] - cam_xy)),
-                edge_distance_m=edge,
-                yaw_source="lane" if on_lane[i] else "ego",
-                footprint_xy=fp.copy(),
-            ))
-            placed_fp = np.concatenate([placed_fp, fp[None]])
-        all_xy.append(xy)
-        all_rej.append(rejected)
-
-    if len(placements) == len(wlhs):
-        reason = None
-    else:
+    attempts = []
+    for i, obj in enumerate(objects):
+        placed_xy = np.array([p.footprint_xy for p in placements]).reshape(-1, 4, 2)
+        attempt = place_one(scene, i, obj, rng, placed_xy, report)
+        attempts.append(attempt)
+        if attempt.placement is not None:
+            placements.append(attempt.placement)
+    reason = None
+    if len(placements) < len(objects):
         worst = ", ".join(f"{k}: {v}" for k, v in report.items() if v)
-        reason = (f"placed {len(placements)} of {len(wlhs)} objects: no candidate passed every rule "
-                  f"({len(wlhs) * n} candidates; rejected by {worst})")
-    return PlacementResult(placements, report, reason, np.concatenate(all_xy), np.concatenate(all_rej), drivable,
-                           config)
+        reason = (f"placed {len(placements)} of {len(objects)} objects: no candidate passed every rule "
+                  f"({len(objects) * config.n_candidates} candidates; rejected by {worst})")
+    return PlacementResult(placements, report, reason, np.concatenate([a.candidates_xy for a in attempts]),
+                           np.concatenate([a.rejected_by for a in attempts]), drivable, config)
+
+
+__all__ = [
+    "CHUNK", "RULE_ORDER", "ChunkSurvivors", "ObjectAttempt", "ObjectBox", "Placeable", "Placement", "PlacementResult",
+    "RuleTally", "check_objects", "check_stood", "make_placement", "place_objects", "place_one", "prefilter",
+]

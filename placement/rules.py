@@ -9,12 +9,14 @@ from __future__ import annotations
 
 from typing import Sequence
 
-import cv2
 import numpy as np
 import shapely
 from scipy.spatial import cKDTree
 
-from streetaug.augment.core import check_shape, invert_transform, transform_points
+from streetaug.augment.core import PinholeCamera, check_shape, invert_transform, transform_points
+from streetaug.datasets.sample import Box
+
+from .drivable import DrivableArea
 
 # The 12 edges of a box whose corners are ordered as in box_corners_object.
 _BOX_EDGES = np.array(
@@ -73,21 +75,21 @@ def box_footprint_rect(T_global_from_object: np.ndarray, wlh: np.ndarray) -> np.
     return T[:, None, :2, 3] + ca[..., None] * u[:, None] + cb[..., None] * v[:, None]
 
 
-def box_footprints(boxes: Sequence) -> np.ndarray:
+def box_footprints(boxes: Sequence[Box]) -> np.ndarray:
     """Footprints (B, 4, 2) of nuScenes :class:`Box` objects (global frame, bottom face corners in x/y)."""
     if len(boxes) == 0:
         return np.zeros((0, 4, 2))
     return np.stack([b.corners()[[0, 1, 5, 4], :2] for b in boxes])
 
 
-def points_in_box(points_global: np.ndarray, box, margin_m: float = 0.0) -> np.ndarray:
+def points_in_box(points_global: np.ndarray, box: Box, margin_m: float = 0.0) -> np.ndarray:
     """(P,) bool: whether each point (P, 3) lies inside the box grown by ``margin_m``, boundary included
     (a nuScenes ``num_lidar_pts`` count with ``margin_m`` 0)."""
     p = transform_points(invert_transform(box.T_global_from_box), np.asarray(points_global, np.float64).reshape(-1, 3))
     return np.all(np.abs(p) <= np.asarray(box.wlh, np.float64)[[1, 0, 2]] / 2 + margin_m, axis=1)
 
 
-def points_in_boxes(points_global: np.ndarray, boxes: Sequence, margin_m: float = 0.0) -> np.ndarray:
+def points_in_boxes(points_global: np.ndarray, boxes: Sequence[Box], margin_m: float = 0.0) -> np.ndarray:
     """(P,) bool: whether each point (P, 3) lies inside any box (grown by ``margin_m``)."""
     points_global = np.asarray(points_global, dtype=np.float64)
     check_shape(points_global, ("P", 3), "points_global")
@@ -104,7 +106,8 @@ def points_in_boxes(points_global: np.ndarray, boxes: Sequence, margin_m: float 
     return inside
 
 
-def _points_near_footprints(corners_xy: np.ndarray, points_xy: np.ndarray, margin_m: float):
+def _points_near_footprints(corners_xy: np.ndarray, points_xy: np.ndarray,
+                            margin_m: float) -> tuple[np.ndarray, np.ndarray]:
     """Pairs (candidate index (K,), point index (K,)) of points within the footprint grown by ``margin_m``.
 
     The grown footprint is the rectangle enlarged by ``margin_m`` on every side.
@@ -131,9 +134,7 @@ def _points_near_footprints(corners_xy: np.ndarray, points_xy: np.ndarray, margi
     return cand[keep], pt[keep]
 
 
-def projected_inside_fraction(
-    corners_cam: np.ndarray, K: np.ndarray, width: int, height: int, near_m: float = 0.1
-) -> np.ndarray:
+def projected_inside_fraction(corners_cam: np.ndarray, camera: PinholeCamera, near_m: float = 0.1) -> np.ndarray:
     """(N,) fraction of each projected 3D box inside the image.
 
     The projected box is the convex hull of the projection of the box clipped at the plane z = near_m
@@ -158,11 +159,11 @@ def projected_inside_fraction(
     first = np.argmax(valid, axis=1)
     pts = np.where(valid[..., None], pts, pts[np.arange(N), first][:, None, :])
     pts[:, :, 2] = np.maximum(pts[:, :, 2], near_m * 0.999)
-    uvw = pts @ np.asarray(K, dtype=np.float64).T
+    uvw = pts @ camera.K.T
     uv = uvw[..., :2] / uvw[..., 2:3]
     hull = shapely.convex_hull(shapely.multipoints(uv))
     area = shapely.area(hull)
-    image = shapely.box(-0.5, -0.5, width - 0.5, height - 0.5)
+    image = shapely.box(-0.5, -0.5, camera.width - 0.5, camera.height - 0.5)
     inside = shapely.area(shapely.intersection(hull, image))
     with np.errstate(divide="ignore", invalid="ignore"):
         frac = np.where(area > 1e-12, inside / area, 0.0)
@@ -178,7 +179,7 @@ def rule_distance(center_xy: np.ndarray, camera_xy: np.ndarray, min_m: float, ma
     return (d >= min_m) & (d <= max_m)
 
 
-def rule_drivable(drivable, corners_xy: np.ndarray) -> np.ndarray:
+def rule_drivable(drivable: DrivableArea, corners_xy: np.ndarray) -> np.ndarray:
     """The whole footprint (N, 4, 2) lies in the drivable area (a :class:`DrivableArea`)."""
     return drivable.contains_footprints(corners_xy)
 
@@ -255,10 +256,8 @@ def rule_lidarseg(corners_xy: np.ndarray, non_drivable_xy: np.ndarray, margin_m:
 def visible_fraction_estimate(
     T_cam_from_object: np.ndarray,
     wlh: np.ndarray,
-    K: np.ndarray,
-    width: int,
-    height: int,
-    depth_m: np.ndarray | None,
+    camera: PinholeCamera,
+    depth_m: np.ndarray,
     tolerance_m: float,
     grid: int = 16,
 ) -> np.ndarray:
@@ -267,8 +266,9 @@ def visible_fraction_estimate(
     A ``grid`` x ``grid`` lattice of rays spans the bounding rectangle of each projected box; the rays
     that hit the box (slab test in the object frame) are its samples, with the box surface's camera
     z. A sample counts as visible when its pixel is in the image and the scene depth there (``depth_m``,
-    (H, W) camera z in metres, inf = unknown; None = no scene) is not nearer than the box surface by more
-    than ``tolerance_m``. Boxes not wholly in front of the camera (z > 0.1 m) give 0.
+    (H, W) camera z in metres, inf = unknown: the renderer's, :func:`streetaug.placement.scene.scene_depth`)
+    is not nearer than the box surface by more than ``tolerance_m``. Boxes not wholly in front of the
+    camera (z > 0.1 m) give 0.
 
     Args:
         T_cam_from_object: (N, 4, 4) object (x front, y left, z up, origin at the bottom centre) -> camera.
@@ -282,13 +282,13 @@ def visible_fraction_estimate(
     if not front.any():
         return out
     T, corners = T[front], corners[front]
-    uv = corners @ np.asarray(K, dtype=np.float64).T
+    uv = corners @ camera.K.T
     uv = uv[..., :2] / uv[..., 2:3]
     lo, hi = uv.min(axis=1), uv.max(axis=1)  # (M, 2)
     t = (np.arange(grid) + 0.5) / grid
     gu = lo[:, None, 0] + (hi - lo)[:, None, 0] * np.repeat(t, grid)[None]  # (M, S)
     gv = lo[:, None, 1] + (hi - lo)[:, None, 1] * np.tile(t, grid)[None]
-    d_cam = np.stack([(gu - K[0, 2]) / K[0, 0], (gv - K[1, 2]) / K[1, 1], np.ones_like(gu)], axis=2)  # z = 1
+    d_cam = camera.rays(np.stack([gu, gv], axis=2).reshape(-1, 2), unit=False).reshape(*gu.shape, 3)  # z = 1
     R, o = T[:, :3, :3], T[:, :3, 3]
     d_obj = np.einsum("mji,msj->msi", R, d_cam)  # R^T d
     o_obj = -np.einsum("mji,mj->mi", R, o)[:, None, :]  # camera centre in the object frame
@@ -302,12 +302,10 @@ def visible_fraction_estimate(
     hit = (t_near < t_far) & (t_far > 0)
     z_surface = np.maximum(t_near, 0.0)  # d_cam has z = 1: the ray parameter is the camera z
     ui, vi = np.round(gu).astype(np.int64), np.round(gv).astype(np.int64)
-    in_image = (ui >= 0) & (ui < width) & (vi >= 0) & (vi < height)
-    visible = hit & in_image
-    if depth_m is not None:
-        scene = np.full(gu.shape, np.inf)
-        scene[in_image] = depth_m[vi[in_image], ui[in_image]]
-        visible &= ~(scene < z_surface - tolerance_m)
+    in_image = (ui >= 0) & (ui < camera.width) & (vi >= 0) & (vi < camera.height)
+    scene = np.full(gu.shape, np.inf)
+    scene[in_image] = depth_m[vi[in_image], ui[in_image]]
+    visible = hit & in_image & ~(scene < z_surface - tolerance_m)
     n_hit = hit.sum(axis=1)
     out[front] = np.where(n_hit > 0, visible.sum(axis=1) / np.maximum(n_hit, 1), 0.0)
     return out
@@ -315,9 +313,7 @@ def visible_fraction_estimate(
 
 def rule_in_view(
     corners_cam: np.ndarray,
-    K: np.ndarray,
-    width: int,
-    height: int,
+    camera: PinholeCamera,
     min_fraction: float,
     near_m: float,
     visible_fraction: np.ndarray | None = None,
@@ -330,7 +326,7 @@ def rule_in_view(
     """
     corners_cam = np.asarray(corners_cam, dtype=np.float64)
     front = np.all(corners_cam[..., 2] >= near_m, axis=1)
-    frac = projected_inside_fraction(corners_cam, K, width, height, near_m)
+    frac = projected_inside_fraction(corners_cam, camera, near_m)
     ok = front & (frac >= min_fraction)
     if visible_fraction is not None:
         ok &= np.asarray(visible_fraction) >= min_fraction
@@ -344,82 +340,8 @@ def rule_mutual(corners_xy: np.ndarray, placed_corners_xy: np.ndarray, clearance
     )
 
 
-def lidar_depth_image(
-    points_cam: np.ndarray,
-    K: np.ndarray,
-    width: int,
-    height: int,
-    spread_px: int = 3,
-    fill_gap_px: int = 48,
-    fill_rel_tol: float = 0.05,
-) -> np.ndarray:
-    """Scene depth (H, W) float32 from camera-frame LiDAR points (P, 3); inf where unknown.
-
-    Nearest z per pixel, spread to a (2 spread_px + 1)^2 neighbourhood by a min filter; then, per image
-    column, the rows between two returns at most ``fill_gap_px`` apart whose depths agree within
-    ``fill_rel_tol`` (a wall, a vehicle side: the gaps between LiDAR beams) take the farther of the two.
-    Ground rings, whose depths differ a lot from one beam to the next, are not filled: a hole there
-    stays unknown and hides nothing.
-    """
-    points_cam = np.asarray(points_cam, dtype=np.float64).reshape(-1, 3)
-    depth = np.full((height, width), np.inf, np.float32)
-    front = points_cam[:, 2] > 0.1
-    uvw = points_cam[front] @ np.asarray(K, dtype=np.float64).T
-    u = np.round(uvw[:, 0] / uvw[:, 2]).astype(np.int64)
-    v = np.round(uvw[:, 1] / uvw[:, 2]).astype(np.int64)
-    ok = (u >= 0) & (u < width) & (v >= 0) & (v < height)
-    np.minimum.at(depth, (v[ok], u[ok]), points_cam[front][ok, 2].astype(np.float32))
-    if spread_px > 0:
-        finite = np.where(np.isfinite(depth), depth, np.float32(1e9))
-        finite = cv2.erode(finite, np.ones((2 * spread_px + 1, 2 * spread_px + 1), np.uint8))
-        depth = np.where(finite < 1e9, finite, np.inf).astype(np.float32)
-    if fill_gap_px > 0:
-        # on a 4x min-pooled image, per depth layer (so that returns from behind a near surface, which a
-        # real LiDAR would not see but merged or synthetic sweeps may hold, do not break its gaps)
-        f = _FILL_POOL
-        H2, W2 = -(-height // f), -(-width // f)
-        padded = np.full((H2 * f, W2 * f), np.inf, np.float32)
-        padded[:height, :width] = depth
-        pooled = cv2.erode(padded, np.ones((f, f), np.uint8), anchor=(0, 0))[::f, ::f]
-        filled = np.full_like(pooled, np.inf)
-        for limit in _FILL_LAYERS_M:
-            layer = np.where(pooled <= limit, pooled, np.inf)
-            filled = np.minimum(filled, _fill_vertical_gaps(layer, fill_gap_px // f, fill_rel_tol))
-        # the blocks just above and below a filled run hold its end points: they fill their own holes too
-        run = np.isfinite(filled)
-        ends = np.zeros_like(run)
-        ends[1:] |= run[:-1]
-        ends[:-1] |= run[1:]
-        coarse = np.where(run, filled, np.where(ends & ~run, pooled, np.inf))
-        up = np.repeat(np.repeat(coarse, f, axis=0), f, axis=1)[:height, :width]
-        depth = np.minimum(depth, up).astype(np.float32)
-    return depth
-
-
-_FILL_POOL = 4
-_FILL_LAYERS_M = (8.0, 20.0, 50.0, np.inf)
-
-
-def _fill_vertical_gaps(depth: np.ndarray, max_gap_px: int, rel_tol: float) -> np.ndarray:
-    """Per column, the unknown (inf) runs of at most ``max_gap_px`` rows between two known pixels whose
-    depths agree within ``rel_tol``, set to the farther of the two; inf elsewhere."""
-    height, width = depth.shape
-    known = np.isfinite(depth)
-    rows = np.arange(height)[:, None]
-    above = np.maximum.accumulate(np.where(known, rows, -1), axis=0)  # last known row at or above
-    below = np.minimum.accumulate(np.where(known, rows, height)[::-1], axis=0)[::-1]  # first at or below
-    hole = ~known & (above >= 0) & (below < height) & (below - above <= max_gap_px)
-    cols = np.broadcast_to(np.arange(width)[None, :], depth.shape)
-    z_above = depth[np.clip(above, 0, height - 1), cols]
-    z_below = depth[np.clip(below, 0, height - 1), cols]
-    near, far = np.minimum(z_above, z_below), np.maximum(z_above, z_below)
-    with np.errstate(invalid="ignore"):
-        fill = hole & (far - near <= rel_tol * near)
-    return np.where(fill, far, np.inf)  # only the filled pixels
-
-
 def rule_corners_unoccluded(
-    corners_cam: np.ndarray, K: np.ndarray, depth_m: np.ndarray, tolerance_m: float = 1.0
+    corners_cam: np.ndarray, camera: PinholeCamera, depth_m: np.ndarray, tolerance_m: float = 1.0
 ) -> np.ndarray:
     """The paper's occlusion rule: no top corner of the box (N, 8, 3) is hidden by the scene.
 
@@ -429,11 +351,12 @@ def rule_corners_unoccluded(
     """
     corners_cam = np.asarray(corners_cam, dtype=np.float64)
     check_shape(corners_cam, ("N", 8, 3), "corners_cam")
-    H, W = depth_m.shape
+    check_shape(depth_m, camera.shape, "depth_m")
+    H, W = camera.shape
     top = corners_cam[:, [0, 1, 4, 5]]  # (N, 4, 3)
     z = top[..., 2]
     with np.errstate(divide="ignore", invalid="ignore"):
-        uvw = top @ np.asarray(K, dtype=np.float64).T
+        uvw = top @ camera.K.T
         u = np.round(uvw[..., 0] / uvw[..., 2])
         v = np.round(uvw[..., 1] / uvw[..., 2])
     inside = (z > 0) & (u >= 0) & (u < W) & (v >= 0) & (v < H)

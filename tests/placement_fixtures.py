@@ -9,7 +9,8 @@ from __future__ import annotations
 import numpy as np
 import shapely
 
-from streetaug.augment.core import make_transform, transform_points, yaw_to_quat
+from streetaug.augment.core import PinholeCamera, make_transform, transform_points, yaw_to_quat
+from streetaug.datasets.nuscenes_map import LaneCenterlines
 from streetaug.datasets.sample import Box, CameraView, LidarSweep, Sample
 
 EGO_YAW_RAD = np.radians(30.0)
@@ -21,6 +22,7 @@ T_EGO_FROM_CAM = make_transform(R_EGO_FROM_CAM, [1.7, 0.0, 1.5])
 T_EGO_FROM_LIDAR = make_transform(np.eye(3), [0.9, 0.0, 1.8])
 K = np.array([[1266.0, 0.0, 800.0], [0.0, 1266.0, 450.0], [0.0, 0.0, 1.0]])
 WIDTH, HEIGHT = 1600, 900
+CAMERA = PinholeCamera(K, WIDTH, HEIGHT)
 
 
 def ego_to_global_xy(xy_ego: np.ndarray) -> np.ndarray:
@@ -93,10 +95,8 @@ def lane_ego(y: float, heading_ego: float = 0.0, x_range=(-20.0, 90.0), resoluti
     return np.c_[ego_to_global_xy(xy_ego), np.full(len(x), EGO_YAW_RAD + heading_ego)]
 
 
-def lanes_from(*centre_lines: np.ndarray):
+def lanes_from(*centre_lines: np.ndarray) -> LaneCenterlines:
     """LaneCenterlines from centre-line samples (N_i, 3) (global x, y, heading)."""
-    from streetaug.datasets.nuscenes_map import LaneCenterlines
-
     allp = np.concatenate(centre_lines)
     idx = np.concatenate([np.full(len(c), i) for i, c in enumerate(centre_lines)])
     heading = np.mod(allp[:, 2] + np.pi, 2 * np.pi) - np.pi

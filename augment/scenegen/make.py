@@ -25,14 +25,15 @@ from streetaug.augment.core import (
     yaw_to_quat,
 )
 from streetaug.augment.core import encode_image_rgb, write_bytes_atomic, write_exr
-from streetaug.augment.lighting.sun import sun_direction_global
 from streetaug.augment.core.raycast import RayScene
+from streetaug.augment.lighting.sun import sun_direction_global
+from streetaug.datasets.nuscenes_format import LIDARSEG_DRIVEABLE, content_token, visibility_token
+from streetaug.datasets.sample import Box
 
 from .lidar import T_ego_from_lidar, points_in_box, simulate_lidar
-from .nuscenes_tables import NuScenesTables, dumps, token, visibility_token
+from .nuscenes_tables import NuScenesTables, dumps
 from .render import SkyParams, StreetRenderer
-from .street import LABEL_DRIVEABLE, StreetParams, StreetScene, build_street
-from streetaug.datasets.sample import Box
+from .street import StreetParams, StreetScene, build_street
 
 VERSION = "v1.0-samples"
 JPEG_QUALITY = 90
@@ -155,7 +156,7 @@ def choose_exposure(radiance: np.ndarray, label: np.ndarray) -> float:
     """
     lum = luminance(np.asarray(radiance, dtype=np.float64))
     k = KEY_VALUE / float(np.exp(np.mean(np.log(np.maximum(lum, 1e-9)))))
-    road = label == LABEL_DRIVEABLE
+    road = label == LIDARSEG_DRIVEABLE
     if road.any():
         road_med = float(np.median(lum[road]))
         lo, hi = (v**GAMMA / max(road_med, 1e-12) for v in ROAD_LDR_RANGE)
@@ -203,7 +204,7 @@ def _make_scene(spec: SceneSpec, out_dir: Path, tables: NuScenesTables, width: i
     renderer = StreetRenderer(scene, sky)
     T_global_from_ego = scene.T_global_from_ego
 
-    sample_token = token("sample", spec.name)
+    sample_token = content_token("sample", spec.name)
     log_token = tables.add_log(spec.name, spec.logfile, spec.location, spec.local_time[:10])
     scene_token = tables.add_scene(spec.name, spec.description, log_token, sample_token)
     tables.add_sample(sample_token, scene_token, ts)

@@ -6,7 +6,6 @@ floats are rounded to fixed precision, nothing depends on the current time.
 
 from __future__ import annotations
 
-import hashlib
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -14,31 +13,9 @@ from typing import Any
 
 import numpy as np
 
-from streetaug.augment.core import write_bytes_atomic
+from streetaug.augment.core import rotation_to_quat, write_bytes_atomic
+from streetaug.datasets.nuscenes_format import ATTRIBUTES, CATEGORY_NAMES, VISIBILITY_LEVELS, content_token
 
-# nuScenes-lidarseg class index -> category name (the devkit's category table order).
-CATEGORY_NAMES = (
-    "noise", "animal", "human.pedestrian.adult", "human.pedestrian.child",
-    "human.pedestrian.construction_worker", "human.pedestrian.personal_mobility",
-    "human.pedestrian.police_officer", "human.pedestrian.stroller", "human.pedestrian.wheelchair",
-    "movable_object.barrier", "movable_object.debris", "movable_object.pushable_pullable",
-    "movable_object.trafficcone", "static_object.bicycle_rack", "vehicle.bicycle", "vehicle.bus.bendy",
-    "vehicle.bus.rigid", "vehicle.car", "vehicle.construction", "vehicle.emergency.ambulance",
-    "vehicle.emergency.police", "vehicle.motorcycle", "vehicle.trailer", "vehicle.truck",
-    "flat.driveable_surface", "flat.other", "flat.sidewalk", "flat.terrain", "static.manmade",
-    "static.other", "static.vegetation", "vehicle.ego",
-)
-ATTRIBUTES = {
-    "cycle.with_rider": "A rider is on the cycle.",
-    "cycle.without_rider": "No rider is on the cycle.",
-    "pedestrian.moving": "The pedestrian is moving.",
-    "pedestrian.standing": "The pedestrian is standing.",
-    "pedestrian.sitting_lying_down": "The pedestrian is sitting or lying down.",
-    "vehicle.moving": "The vehicle is moving.",
-    "vehicle.parked": "The vehicle is parked.",
-    "vehicle.stopped": "The vehicle has stopped but intends to move on.",
-}
-VISIBILITY_LEVELS = (("1", "v0-40"), ("2", "v40-60"), ("3", "v60-80"), ("4", "v80-100"))
 # Map canvas sizes (metres) of the nuScenes map expansion (public devkit facts).
 CANVAS_EDGE = {
     "boston-seaport": [2979.5, 2118.1],
@@ -52,19 +29,6 @@ MAP_LAYERS_LIST = (
     "traffic_light", "walkway",
 )
 MAP_LAYERS_DICT = ("arcline_path_3", "connectivity")
-
-
-def token(*parts: Any) -> str:
-    """Deterministic 32-hex token from descriptive parts."""
-    return hashlib.md5("/".join(str(p) for p in parts).encode()).hexdigest()
-
-
-def visibility_token(fraction: float) -> str:
-    """nuScenes visibility token ('1'..'4') of a visible fraction in [0, 1]."""
-    for tok, upper in (("1", 0.4), ("2", 0.6), ("3", 0.8)):
-        if fraction < upper:
-            return tok
-    return "4"
 
 
 def _r(x: Any, nd: int) -> Any:
@@ -91,33 +55,33 @@ class NuScenesTables:
                      "sample", "sample_annotation", "sample_data", "scene", "sensor", "visibility", "lidarseg"):
             self.rows.setdefault(name, [])
         self.rows["category"] = [
-            {"token": token("category", n), "name": n, "index": i, "description": f"nuScenes class {n}."}
+            {"token": content_token("category", n), "name": n, "index": i, "description": f"nuScenes class {n}."}
             for i, n in enumerate(CATEGORY_NAMES)
         ]
         self.rows["attribute"] = [
-            {"token": token("attribute", n), "name": n, "description": d} for n, d in ATTRIBUTES.items()
+            {"token": content_token("attribute", n), "name": n, "description": d} for n, d in ATTRIBUTES.items()
         ]
         self.rows["visibility"] = [
             {"token": t, "level": lvl, "description": f"visibility of whole object is {lvl[1:].replace('-', ' to ')} %"}
-            for t, lvl in VISIBILITY_LEVELS
+            for t, (lvl, _) in VISIBILITY_LEVELS.items()
         ]
 
     # ------------------------------------------------------------------ rows
 
     def add_sensor(self, channel: str, modality: str) -> str:
-        tok = token("sensor", channel)
+        tok = content_token("sensor", channel)
         if all(r["token"] != tok for r in self.rows["sensor"]):
             self.rows["sensor"].append({"token": tok, "channel": channel, "modality": modality})
         return tok
 
     def add_log(self, name: str, logfile: str, location: str, date_captured: str) -> str:
-        tok = token("log", name)
+        tok = content_token("log", name)
         self.rows["log"].append({"token": tok, "logfile": logfile, "vehicle": logfile.split("-")[0],
                                  "date_captured": date_captured, "location": location})
         return tok
 
     def add_scene(self, name: str, description: str, log_token: str, sample_token: str) -> str:
-        tok = token("scene", name)
+        tok = content_token("scene", name)
         self.rows["scene"].append({"token": tok, "name": name, "description": description, "log_token": log_token,
                                    "nbr_samples": 1, "first_sample_token": sample_token,
                                    "last_sample_token": sample_token})
@@ -131,10 +95,8 @@ class NuScenesTables:
                         filename: str, width: int, height: int, T_ego_from_sensor: np.ndarray,
                         T_global_from_ego: np.ndarray, K: np.ndarray | None) -> str:
         """Adds sample_data + its ego_pose (same token, as in nuScenes) + calibrated_sensor; returns the token."""
-        from streetaug.augment.core import rotation_to_quat
-
-        sd_tok = token("sample_data", scene_name, channel)
-        cs_tok = token("calibrated_sensor", scene_name, channel)
+        sd_tok = content_token("sample_data", scene_name, channel)
+        cs_tok = content_token("calibrated_sensor", scene_name, channel)
         self.rows["calibrated_sensor"].append({
             "token": cs_tok, "sensor_token": self.add_sensor(channel, modality),
             "translation": _r(T_ego_from_sensor[:3, 3], 6), "rotation": _r(rotation_to_quat(T_ego_from_sensor[:3, :3]), 10),
@@ -155,14 +117,14 @@ class NuScenesTables:
     def add_annotation(self, scene_name: str, index: int, sample_token: str, category: str, translation: np.ndarray,
                        size_wlh: np.ndarray, rotation: np.ndarray, attribute: str, num_lidar_pts: int,
                        visibility: str) -> str:
-        ann_tok = token("sample_annotation", scene_name, index)
-        inst_tok = token("instance", scene_name, index)
-        self.rows["instance"].append({"token": inst_tok, "category_token": token("category", category),
+        ann_tok = content_token("sample_annotation", scene_name, index)
+        inst_tok = content_token("instance", scene_name, index)
+        self.rows["instance"].append({"token": inst_tok, "category_token": content_token("category", category),
                                       "nbr_annotations": 1, "first_annotation_token": ann_tok,
                                       "last_annotation_token": ann_tok})
         self.rows["sample_annotation"].append({
             "token": ann_tok, "sample_token": sample_token, "instance_token": inst_tok,
-            "visibility_token": visibility, "attribute_tokens": [token("attribute", attribute)] if attribute else [],
+            "visibility_token": visibility, "attribute_tokens": [content_token("attribute", attribute)] if attribute else [],
             "translation": _r(translation, 3), "size": _r(size_wlh, 3), "rotation": _r(rotation, 10),
             "prev": "", "next": "", "num_lidar_pts": int(num_lidar_pts), "num_radar_pts": 0,
         })
@@ -176,7 +138,7 @@ class NuScenesTables:
     def add_map_polygon(self, location: str, log_token: str, polygon_xy: np.ndarray) -> None:
         """Register a drivable-area polygon (N, 2) global x/y of a log at ``location``."""
         self.map_polygons.setdefault(location, []).append(np.asarray(polygon_xy, dtype=np.float64))
-        tok = token("map", location)
+        tok = content_token("map", location)
         row = next((r for r in self.rows["map"] if r["token"] == tok), None)
         if row is None:
             row = {"token": tok, "category": "semantic_prior", "filename": "", "log_tokens": []}
@@ -200,12 +162,12 @@ class NuScenesTables:
         for k, poly in enumerate(self.map_polygons.get(location, [])):
             node_tokens = []
             for j, (x, y) in enumerate(poly):
-                nt = token("node", location, k, j)
+                nt = content_token("node", location, k, j)
                 m["node"].append({"token": nt, "x": _r(x, 4), "y": _r(y, 4)})
                 node_tokens.append(nt)
-            pt = token("polygon", location, k)
+            pt = content_token("polygon", location, k)
             m["polygon"].append({"token": pt, "exterior_node_tokens": node_tokens, "holes": []})
-            m["drivable_area"].append({"token": token("drivable_area", location, k), "polygon_tokens": [pt]})
+            m["drivable_area"].append({"token": content_token("drivable_area", location, k), "polygon_tokens": [pt]})
         for k, (a, b, width) in enumerate(self.map_lanes.get(location, [])):
             # A lane: its area as a polygon, and its centre line as one straight arcline path ("LSR" with
             # zero-length arcs), the format of the nuScenes map expansion v1.3.
@@ -213,12 +175,12 @@ class NuScenesTables:
             n = np.array([-d[1], d[0]]) * width / 2
             node_tokens = []
             for j, (x, y) in enumerate([a - n, b - n, b + n, a + n]):
-                nt = token("lane_node", location, k, j)
+                nt = content_token("lane_node", location, k, j)
                 m["node"].append({"token": nt, "x": _r(x, 4), "y": _r(y, 4)})
                 node_tokens.append(nt)
-            pt = token("lane_polygon", location, k)
+            pt = content_token("lane_polygon", location, k)
             m["polygon"].append({"token": pt, "exterior_node_tokens": node_tokens, "holes": []})
-            lt = token("lane", location, k)
+            lt = content_token("lane", location, k)
             m["lane"].append({"token": lt, "polygon_token": pt, "lane_type": "CAR", "from_edge_line_token": None,
                               "to_edge_line_token": None, "left_lane_divider_segments": [],
                               "right_lane_divider_segments": []})

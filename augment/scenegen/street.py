@@ -15,17 +15,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from streetaug.augment.core import make_transform, rotation_to_quat, transform_points, yaw_to_quat
+from streetaug.datasets.nuscenes_format import (LIDARSEG_CAR, LIDARSEG_DRIVEABLE, LIDARSEG_MANMADE, LIDARSEG_SIDEWALK,
+                                                LIDARSEG_TERRAIN, LIDARSEG_TRAFFICCONE, LIDARSEG_VEGETATION)
 from streetaug.datasets.sample import Box
-
-# nuScenes-lidarseg class indices (category table ``index``).
-LABEL_NOISE = 0
-LABEL_TRAFFICCONE = 12
-LABEL_CAR = 17
-LABEL_DRIVEABLE = 24
-LABEL_SIDEWALK = 26
-LABEL_TERRAIN = 27
-LABEL_MANMADE = 28
-LABEL_VEGETATION = 30
 
 ROAD_HALF_WIDTH_M = 8.0  # kerb to kerb 16 m: 2 x (2 lanes of 2.8 m + a 2.4 m parking strip)
 LANE_WIDTH_M = 2.8
@@ -285,21 +277,21 @@ _CAR_COLOURS = [
     (0.04, 0.10, 0.30), (0.55, 0.55, 0.56), (0.12, 0.20, 0.12), (0.50, 0.40, 0.25), (0.62, 0.10, 0.04),
 ]
 
-M_ASPHALT = SurfaceMaterial("asphalt", (0.12, 0.12, 0.125), LABEL_DRIVEABLE, "asphalt", lidar_reflectivity=0.08)
-M_PAINT_WHITE = SurfaceMaterial("paint_white", (0.62, 0.62, 0.60), LABEL_DRIVEABLE, "paint", lidar_reflectivity=0.6)
-M_PAINT_YELLOW = SurfaceMaterial("paint_yellow", (0.60, 0.42, 0.08), LABEL_DRIVEABLE, "paint", lidar_reflectivity=0.55)
-M_SIDEWALK = SurfaceMaterial("sidewalk", (0.30, 0.29, 0.27), LABEL_SIDEWALK, "paving", lidar_reflectivity=0.2)
-M_KERB = SurfaceMaterial("kerb", (0.38, 0.37, 0.35), LABEL_SIDEWALK, "plain", lidar_reflectivity=0.25)
-M_TERRAIN = SurfaceMaterial("terrain", (0.09, 0.12, 0.05), LABEL_TERRAIN, "grass", lidar_reflectivity=0.15)
-M_POLE = SurfaceMaterial("pole", (0.25, 0.26, 0.27), LABEL_MANMADE, "plain", lidar_reflectivity=0.4)
-M_LAMP = SurfaceMaterial("lamp", (0.55, 0.55, 0.52), LABEL_MANMADE, "plain", lidar_reflectivity=0.4)
-M_TRUNK = SurfaceMaterial("trunk", (0.16, 0.11, 0.07), LABEL_VEGETATION, "plain", lidar_reflectivity=0.2)
-M_FOLIAGE = SurfaceMaterial("foliage", (0.07, 0.14, 0.04), LABEL_VEGETATION, "foliage", lidar_reflectivity=0.25)
-M_TYRE = SurfaceMaterial("tyre", (0.03, 0.03, 0.03), LABEL_CAR, "plain", lidar_reflectivity=0.1)
-M_CAR_GLASS = SurfaceMaterial("car_glass", (0.02, 0.025, 0.03), LABEL_CAR, "plain", gloss=0.3, lidar_reflectivity=0.05)
-M_HEADLIGHT = SurfaceMaterial("headlight", (0.75, 0.75, 0.72), LABEL_CAR, "plain", gloss=0.3, lidar_reflectivity=0.8)
-M_TAILLIGHT = SurfaceMaterial("taillight", (0.45, 0.02, 0.02), LABEL_CAR, "plain", gloss=0.3, lidar_reflectivity=0.8)
-M_CONE = SurfaceMaterial("cone", (0.80, 0.18, 0.02), LABEL_TRAFFICCONE, "plain", lidar_reflectivity=0.7)
+M_ASPHALT = SurfaceMaterial("asphalt", (0.12, 0.12, 0.125), LIDARSEG_DRIVEABLE, "asphalt", lidar_reflectivity=0.08)
+M_PAINT_WHITE = SurfaceMaterial("paint_white", (0.62, 0.62, 0.60), LIDARSEG_DRIVEABLE, "paint", lidar_reflectivity=0.6)
+M_PAINT_YELLOW = SurfaceMaterial("paint_yellow", (0.60, 0.42, 0.08), LIDARSEG_DRIVEABLE, "paint", lidar_reflectivity=0.55)
+M_SIDEWALK = SurfaceMaterial("sidewalk", (0.30, 0.29, 0.27), LIDARSEG_SIDEWALK, "paving", lidar_reflectivity=0.2)
+M_KERB = SurfaceMaterial("kerb", (0.38, 0.37, 0.35), LIDARSEG_SIDEWALK, "plain", lidar_reflectivity=0.25)
+M_TERRAIN = SurfaceMaterial("terrain", (0.09, 0.12, 0.05), LIDARSEG_TERRAIN, "grass", lidar_reflectivity=0.15)
+M_POLE = SurfaceMaterial("pole", (0.25, 0.26, 0.27), LIDARSEG_MANMADE, "plain", lidar_reflectivity=0.4)
+M_LAMP = SurfaceMaterial("lamp", (0.55, 0.55, 0.52), LIDARSEG_MANMADE, "plain", lidar_reflectivity=0.4)
+M_TRUNK = SurfaceMaterial("trunk", (0.16, 0.11, 0.07), LIDARSEG_VEGETATION, "plain", lidar_reflectivity=0.2)
+M_FOLIAGE = SurfaceMaterial("foliage", (0.07, 0.14, 0.04), LIDARSEG_VEGETATION, "foliage", lidar_reflectivity=0.25)
+M_TYRE = SurfaceMaterial("tyre", (0.03, 0.03, 0.03), LIDARSEG_CAR, "plain", lidar_reflectivity=0.1)
+M_CAR_GLASS = SurfaceMaterial("car_glass", (0.02, 0.025, 0.03), LIDARSEG_CAR, "plain", gloss=0.3, lidar_reflectivity=0.05)
+M_HEADLIGHT = SurfaceMaterial("headlight", (0.75, 0.75, 0.72), LIDARSEG_CAR, "plain", gloss=0.3, lidar_reflectivity=0.8)
+M_TAILLIGHT = SurfaceMaterial("taillight", (0.45, 0.02, 0.02), LIDARSEG_CAR, "plain", gloss=0.3, lidar_reflectivity=0.8)
+M_CONE = SurfaceMaterial("cone", (0.80, 0.18, 0.02), LIDARSEG_TRAFFICCONE, "plain", lidar_reflectivity=0.7)
 
 
 # ----------------------------------------------------------------------------- street parts
@@ -362,7 +354,7 @@ def _add_buildings(b: _MeshBuilder, rng: np.random.Generator) -> None:
             colour = _BUILDING_COLOURS[rng.integers(len(_BUILDING_COLOURS))]
             tint = np.clip(np.asarray(colour) * rng.uniform(0.85, 1.1), 0, 1)
             m = SurfaceMaterial(
-                f"building_{side:+d}_{k}", tuple(float(c) for c in tint), LABEL_MANMADE, "facade",
+                f"building_{side:+d}_{k}", tuple(float(c) for c in tint), LIDARSEG_MANMADE, "facade",
                 gloss=0.25, lidar_reflectivity=0.35,
                 window_albedo=tuple(float(c) for c in rng.uniform(0.02, 0.07) * np.array([0.9, 1.0, 1.15])),
                 floor_height_m=float(rng.uniform(3.0, 3.8)), window_pitch_m=float(rng.uniform(2.2, 3.4)),
@@ -375,7 +367,7 @@ def _add_buildings(b: _MeshBuilder, rng: np.random.Generator) -> None:
     # a few far blocks that close the view at the ends of the street
     for j, xc in enumerate((-260.0, 460.0, 520.0)):
         colour = _BUILDING_COLOURS[rng.integers(len(_BUILDING_COLOURS))]
-        m = SurfaceMaterial(f"far_block_{j}", colour, LABEL_MANMADE, "facade", gloss=0.2)
+        m = SurfaceMaterial(f"far_block_{j}", colour, LIDARSEG_MANMADE, "facade", gloss=0.2)
         yc = rng.uniform(-60.0, 60.0) if xc > 0 else 0.0
         yc = yc + np.sign(yc + 1e-9) * 25.0
         b.add(_box(xc, yc, 40.0, 30.0, 0.0, rng.uniform(25.0, 60.0)), m)
@@ -434,7 +426,7 @@ def _add_car(b: _MeshBuilder, objects: list[StreetObject], x: float, y: float, y
     w = float(rng.uniform(1.75, 1.95))
     h = float(rng.uniform(1.42, 1.70))
     colour = _CAR_COLOURS[rng.integers(len(_CAR_COLOURS))]
-    paint = SurfaceMaterial(f"car_paint_{len(objects)}", colour, LABEL_CAR, "plain", gloss=0.08,
+    paint = SurfaceMaterial(f"car_paint_{len(objects)}", colour, LIDARSEG_CAR, "plain", gloss=0.08,
                             lidar_reflectivity=0.5)
     T = make_transform(yaw_to_quat(yaw), [x, y, 0.0])
     for part, m in car_parts(l, w, h, paint):

@@ -2,29 +2,33 @@
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 
-from placement_fixtures import HEIGHT, K, WIDTH, camera_view
+from placement_fixtures import CAMERA, camera_view, ground_grid_ego, lidar_sweep, make_sample
 from streetaug.augment.core import (
+    PinholeCamera,
     invert_transform,
     pose_camera_to_transform,
     quat_to_rotation,
     transform_points,
 )
-from streetaug.placement.labels import bbox_from_mask, object_label, visibility_token
+from streetaug.datasets.nuscenes_format import visibility_token
+from streetaug.placement.labels import bbox_from_mask, object_label, placement_label_fields
+from streetaug.placement.place import ObjectBox, place_objects
 from streetaug.placement.rules import box_corners_object, projected_inside_fraction
 
 WLH = np.array([1.8, 4.5, 1.5])
+SMALL_CAMERA = PinholeCamera(np.diag([0.1, 0.1, 1.0]) @ CAMERA.K, 160, 90)
 
 
 def _label(T_cam_from_object, mask=None, coverage=None, **kw):
-    h, w = 90, 160
-    K_small = K / 10.0
-    K_small[2, 2] = 1.0
+    h, w = SMALL_CAMERA.shape
     mask = np.zeros((h, w)) if mask is None else mask
     coverage = np.ones((h, w)) if coverage is None else coverage
-    return object_label(T_cam_from_object, WLH, "vehicle.car", K_small, w, h, mask, coverage, **kw)
+    return object_label(T_cam_from_object, WLH, "vehicle.car", SMALL_CAMERA, mask, coverage, **kw)
 
 
 @pytest.mark.parametrize("yaw_deg", [0.0, 37.0, 90.0, -120.0, 179.0])
@@ -84,9 +88,7 @@ def test_truncation():
     T = pose_camera_to_transform(13.0, 1.5, 20, 0)
     edge = _label(T)
     corners = box_corners_object(WLH) @ T[:3, :3].T + T[:3, 3]
-    K_small = K / 10.0
-    K_small[2, 2] = 1
-    expected = 1 - projected_inside_fraction(corners[None], K_small, 160, 90, 0.1)[0]
+    expected = 1 - projected_inside_fraction(corners[None], SMALL_CAMERA, 0.1)[0]
     assert 0.1 < edge["truncation"] < 0.9 and edge["truncation"] == pytest.approx(expected)
     behind = _label(pose_camera_to_transform(0, 1.5, -20, 0))
     assert behind["truncation"] == 1.0
@@ -94,19 +96,13 @@ def test_truncation():
 
 def test_label_rejects_mismatched_mask():
     with pytest.raises(ValueError, match="mask"):
-        object_label(np.eye(4), WLH, "vehicle.car", K, WIDTH, HEIGHT, np.zeros((10, 10)), np.zeros((10, 10)))
+        object_label(np.eye(4), WLH, "vehicle.car", CAMERA, np.zeros((10, 10)), np.zeros((10, 10)))
 
 
 def test_placement_label_fields_are_json_ready():
-    import json
-
-    from placement_fixtures import ground_grid_ego, lidar_sweep, make_sample
-    from streetaug.placement.labels import placement_label_fields
-    from streetaug.placement.place import place_objects
-
     pts = ground_grid_ego(0.5)
     s = make_sample(lidar=lidar_sweep(pts))
-    p = place_objects(s, s.cameras["CAM_FRONT"], [WLH], np.random.default_rng(0)).placements[0]
+    p = place_objects(s, s.cameras["CAM_FRONT"], [ObjectBox(WLH)], np.random.default_rng(0)).placements[0]
     fields = json.loads(json.dumps(placement_label_fields(p)))["placement"]
     assert fields["drivable_source"] == "map" and fields["drivable_confidence"] == "high"
     assert fields["ground_source"] == "lidar-plane" and fields["yaw_source"] == "ego"

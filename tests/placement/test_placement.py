@@ -11,6 +11,7 @@ import pytest
 import shapely
 
 from placement_fixtures import (
+    CAMERA,
     EGO_YAW_RAD,
     HEIGHT,
     K,
@@ -25,18 +26,27 @@ from placement_fixtures import (
     lidar_sweep,
     make_sample,
 )
-from streetaug.augment.core import quat_to_rotation, quat_to_yaw, transform_points
-from streetaug.augment.core import InputError
+from scipy.spatial import cKDTree
+
+from streetaug.augment.core import InputError, PinholeCamera, make_transform, quat_to_rotation, quat_to_yaw, transform_points
+from streetaug.augment.core.depth import densify_lidar_depth
+from streetaug.datasets.lidarseg import read_lidar_points, read_lidarseg_labels
+from streetaug.datasets.nuscenes import NuScenesReader
+from streetaug.datasets.sample import LidarSweep
 from streetaug.placement.config import PlacementConfig
 from streetaug.placement.drivable import DrivableArea, drivable_area_for_sample, drivable_from_map
+from streetaug.placement.explain import RULE_COLORS_RGB, draw_placement_bev
 from streetaug.placement.ground import LocalGroundFitter, ego_ground_plane
-from streetaug.placement.place import RULE_ORDER, place_objects
+from streetaug.placement.labels import object_label
+from streetaug.placement.place import RULE_ORDER, ObjectBox, place_objects
 from streetaug.placement.rules import (
     box_corners_object,
     box_footprints,
     footprint_corners,
+    points_in_boxes,
     projected_inside_fraction,
     rule_box_clearance,
+    rule_corners_unoccluded,
     rule_distance,
     rule_in_view,
     rule_lidarseg,
@@ -113,7 +123,7 @@ def test_drivable_sources_in_order_and_reason_when_none():
 
 def test_no_drivable_area_gives_no_placement_with_reason():
     s = make_sample(polygons=None, lidar=None)
-    r = place_objects(s, s.cameras["CAM_FRONT"], [np.array([W, L, 1.5])], np.random.default_rng(0))
+    r = place_objects(s, s.cameras["CAM_FRONT"], [ObjectBox(np.array([W, L, 1.5]))], np.random.default_rng(0))
     assert r.placements == [] and r.reason.startswith("no drivable area")
 
 
@@ -245,18 +255,18 @@ def test_rule_in_view_and_inside_fraction():
 
     centred, behind = at(0, 1.5, 20), at(0, 1.5, -20)
     half_out = at((WIDTH - 0.5 - K[0, 2]) * 20 / K[0, 0], 1.5, 20)  # straddles the right image edge
-    frac = projected_inside_fraction(np.concatenate([centred, half_out, behind]), K, WIDTH, HEIGHT, 0.5)
+    frac = projected_inside_fraction(np.concatenate([centred, half_out, behind]), CAMERA, 0.5)
     assert frac[0] == pytest.approx(1.0)
     assert 0.05 < frac[1] < 0.95
     assert frac[1] == pytest.approx(_raster_inside_fraction(half_out[0]), abs=0.01)
     assert frac[2] == 0.0
-    ok = rule_in_view(np.concatenate([centred, half_out, behind]), K, WIDTH, HEIGHT, frac[1] + 0.01, 0.5)
+    ok = rule_in_view(np.concatenate([centred, half_out, behind]), CAMERA, frac[1] + 0.01, 0.5)
     assert ok.tolist() == [True, False, False]
-    ok = rule_in_view(np.concatenate([centred, half_out, behind]), K, WIDTH, HEIGHT, frac[1] - 0.01, 0.5)
+    ok = rule_in_view(np.concatenate([centred, half_out, behind]), CAMERA, frac[1] - 0.01, 0.5)
     assert ok.tolist() == [True, True, False]
     # a box straddling the near plane is not "in front of the camera" even if its projection is in the image
     straddle = at(0, 1.5, 2.0)
-    assert not rule_in_view(straddle, K, WIDTH, HEIGHT, 0.0, 0.5)[0]
+    assert not rule_in_view(straddle, CAMERA, 0.0, 0.5)[0]
 
 
 def test_rule_mutual():
@@ -303,7 +313,7 @@ def _check_all_rules(sample, view, placements, cfg=CFG):
 def test_place_objects_passes_all_rules_and_is_deterministic():
     s = _scene()
     view = s.cameras["CAM_FRONT"]
-    wlhs = [np.array([1.8, 4.5, 1.5]), np.array([2.0, 5.0, 1.8]), np.array([1.7, 4.0, 1.5])]
+    wlhs = [ObjectBox(np.array([1.8, 4.5, 1.5])), ObjectBox(np.array([2.0, 5.0, 1.8])), ObjectBox(np.array([1.7, 4.0, 1.5]))]
     r1 = place_objects(s, view, wlhs, np.random.default_rng(7))
     r2 = place_objects(s, view, wlhs, np.random.default_rng(7))
     r3 = place_objects(s, view, wlhs, np.random.default_rng(8))
@@ -321,7 +331,7 @@ def test_place_objects_passes_all_rules_and_is_deterministic():
 def test_place_objects_rejects_candidates_near_unannotated_obstacles():
     s = _scene()
     view = s.cameras["CAM_FRONT"]
-    r = place_objects(s, view, [np.array([1.8, 4.5, 1.5])] * 3, np.random.default_rng(3),
+    r = place_objects(s, view, [ObjectBox(np.array([1.8, 4.5, 1.5]))] * 3, np.random.default_rng(3),
                       dataclasses.replace(CFG, n_candidates=2000))
     assert r.report["lidar_obstacles"] > 0
     pole = transform_points(T_GLOBAL_FROM_EGO, np.array([[28.0, -3.5, 1.0]]))[0, :2]
@@ -333,7 +343,7 @@ def test_place_objects_rejects_candidates_near_unannotated_obstacles():
 def test_place_objects_impossible_rules_give_reason():
     s = _scene()
     cfg = dataclasses.replace(CFG, min_distance_m=80.0, max_distance_m=90.0, n_candidates=50)
-    r = place_objects(s, s.cameras["CAM_FRONT"], [np.array([1.8, 4.5, 1.5])], np.random.default_rng(0), cfg)
+    r = place_objects(s, s.cameras["CAM_FRONT"], [ObjectBox(np.array([1.8, 4.5, 1.5]))], np.random.default_rng(0), cfg)
     assert r.placements == [] and "no candidate passed" in r.reason and r.report["drivable"] > 0
 
 
@@ -341,20 +351,22 @@ def test_yaw_along_ego_heading_faces_plus_z_in_front_camera():
     s = _scene()
     view = s.cameras["CAM_FRONT"]
     cfg = dataclasses.replace(CFG, yaw_sigma_deg=0.0, opposite_heading_probability=0.0)
-    r = place_objects(s, view, [np.array([1.8, 4.5, 1.5])], np.random.default_rng(0), cfg)
+    r = place_objects(s, view, [ObjectBox(np.array([1.8, 4.5, 1.5]))], np.random.default_rng(0), cfg)
     p = r.placements[0]
     front_cam = (view.T_cam_from_global @ p.T_global_from_object)[:3, 0]
     np.testing.assert_allclose(front_cam, [0, 0, 1], atol=1e-6)
     assert quat_to_yaw(p.box.rotation) == pytest.approx(EGO_YAW_RAD, abs=1e-9)
     cfg_opp = dataclasses.replace(cfg, opposite_heading_probability=1.0)
-    p2 = place_objects(s, view, [np.array([1.8, 4.5, 1.5])], np.random.default_rng(0), cfg_opp).placements[0]
+    p2 = place_objects(s, view, [ObjectBox(np.array([1.8, 4.5, 1.5]))], np.random.default_rng(0), cfg_opp).placements[0]
     np.testing.assert_allclose((view.T_cam_from_global @ p2.T_global_from_object)[:3, 0], [0, 0, -1], atol=1e-6)
 
 
 def test_place_objects_rejects_bad_sizes():
     s = _scene()
-    with pytest.raises(InputError, match="wlhs\\[0\\]"):
-        place_objects(s, s.cameras["CAM_FRONT"], [np.array([1.8, -4.5, 1.5])], np.random.default_rng(0))
+    with pytest.raises(InputError, match="objects\\[0\\]"):
+        place_objects(s, s.cameras["CAM_FRONT"], [ObjectBox(np.array([1.8, -4.5, 1.5]))], np.random.default_rng(0))
+    with pytest.raises(InputError, match="ObjectBox"):  # a bare size is not an object
+        place_objects(s, s.cameras["CAM_FRONT"], [np.array([1.8, 4.5, 1.5])], np.random.default_rng(0))
     with pytest.raises(ValueError):
         PlacementConfig(min_distance_m=50.0, max_distance_m=40.0)
 
@@ -363,7 +375,7 @@ def test_place_objects_with_lidarseg_only():
     pts = lidar_rings_ego()
     labels = np.where(np.abs(pts[:, 1]) <= ROAD_HALF_WIDTH_M, 24, 26)
     s = make_sample(polygons=None, lidar=lidar_sweep(pts, labels))
-    r = place_objects(s, s.cameras["CAM_FRONT"], [np.array([1.8, 4.5, 1.5])] * 2, np.random.default_rng(2))
+    r = place_objects(s, s.cameras["CAM_FRONT"], [ObjectBox(np.array([1.8, 4.5, 1.5]))] * 2, np.random.default_rng(2))
     assert len(r.placements) == 2
     for p in r.placements:
         assert p.drivable_source == "lidarseg" and p.ground_source == "lidarseg"
@@ -382,8 +394,6 @@ REAL_TOKEN = "ca9a282c9e77460f8360f564131a8af5"
 def real_sample():
     if not REAL.is_dir():
         pytest.skip(f"real nuScenes sample not found at {REAL}")
-    from streetaug.datasets.nuscenes import NuScenesReader
-
     return NuScenesReader(REAL, "v1.0-mini").sample(REAL_TOKEN)
 
 
@@ -398,8 +408,6 @@ def _raster_fraction(corners_cam, K_, width, height):
 
 @pytest.mark.parametrize("camera", ["CAM_FRONT", "CAM_BACK"])
 def test_real_sample_placements_pass_every_rule(real_sample, camera):
-    from scipy.spatial import cKDTree
-
     s = real_sample
     view = s.cameras[camera]
     road = shapely.union_all(s.drivable_area_global)
@@ -408,7 +416,7 @@ def test_real_sample_placements_pass_every_rule(real_sample, camera):
     cam_xy = view.T_global_from_cam[:2, 3]
     n_placed = 0
     for seed in range(3):
-        r = place_objects(s, view, [np.array([1.9, 4.6, 1.6]), np.array([1.8, 4.2, 1.5])], np.random.default_rng(seed))
+        r = place_objects(s, view, [ObjectBox(np.array([1.9, 4.6, 1.6])), ObjectBox(np.array([1.8, 4.2, 1.5]))], np.random.default_rng(seed))
         assert r.placements, r.reason
         fps = []
         for p in r.placements:
@@ -437,17 +445,15 @@ def test_real_sample_placements_pass_every_rule(real_sample, camera):
 
 
 def test_real_sample_label_matches_placement(real_sample):
-    from streetaug.placement.labels import object_label
-
     s = real_sample
     view = s.cameras["CAM_FRONT"]
-    p = place_objects(s, view, [np.array([1.9, 4.6, 1.6])], np.random.default_rng(0)).placements[0]
+    p = place_objects(s, view, [ObjectBox(np.array([1.9, 4.6, 1.6]))], np.random.default_rng(0)).placements[0]
     T_co = p.T_cam_from_object(view)
     cov = np.zeros((view.height, view.width))
     corners_cam = transform_points(T_co, box_corners_object(p.wlh))
     uv = corners_cam @ view.K.T
     cv2.fillConvexPoly(cov, cv2.convexHull(np.round(uv[:, :2] / uv[:, 2:]).astype(np.int32)), 1.0)
-    lab = object_label(T_co, p.wlh, "vehicle.car", view.K, view.width, view.height, cov, cov,
+    lab = object_label(T_co, p.wlh, "vehicle.car", PinholeCamera(view.K, view.width, view.height), cov, cov,
                        view.T_global_from_cam, p.attribute)
     np.testing.assert_allclose(lab["box_global"]["translation"], p.box.center, atol=1e-6)
     np.testing.assert_allclose(np.abs(np.dot(lab["box_global"]["rotation"], p.box.rotation)), 1.0, atol=1e-9)
@@ -457,10 +463,6 @@ def test_real_sample_label_matches_placement(real_sample):
 
 
 def test_lidarseg_fixture_drivable_and_ground():
-    from streetaug.datasets.lidarseg import read_lidar_points, read_lidarseg_labels
-    from streetaug.datasets.sample import LidarSweep
-    from streetaug.augment.core import make_transform
-
     root = (Path(__file__).parents[2] / ".." / "shared" / "data" / "nuscenes-fixtures").resolve()
     if not root.is_dir():
         pytest.skip(f"lidarseg fixture not found at {root}")
@@ -482,8 +484,6 @@ def test_lidarseg_fixture_drivable_and_ground():
 
 
 def test_points_in_boxes_matches_brute_force():
-    from streetaug.placement.rules import points_in_boxes
-
     rng = np.random.default_rng(0)
     boxes = [box_at_ego(10.0, 2.0, yaw_ego=0.3), box_at_ego(20.0, -3.0, wlh=(2.5, 10.0, 3.0), yaw_ego=-1.0)]
     pts = transform_points(T_GLOBAL_FROM_EGO, np.c_[rng.uniform(0, 30, 20000), rng.uniform(-8, 8, 20000),
@@ -498,21 +498,17 @@ def test_points_in_boxes_matches_brute_force():
 
 @pytest.mark.parametrize("polygons", ["road", None])
 def test_explain_bev_draws_candidates_and_placements(polygons):
-    from streetaug.placement.explain import RULE_COLORS_RGB, draw_placement_bev
-
     pts = ground_grid_ego(0.5)
     s = make_sample(boxes=[box_at_ego(20.0, 2.5)], polygons=polygons, lidar=lidar_sweep(pts, np.full(len(pts), 24)))
     view = s.cameras["CAM_FRONT"]
-    r = place_objects(s, view, [np.array([1.8, 4.5, 1.5])], np.random.default_rng(0))
+    r = place_objects(s, view, [ObjectBox(np.array([1.8, 4.5, 1.5]))], np.random.default_rng(0))
     img = draw_placement_bev(s, view, r)
     assert img.shape == (800, 800, 3) and img.dtype == np.uint8
     colours = {tuple(c) for c in img.reshape(-1, 3)}
     assert RULE_COLORS_RGB[""] in colours and RULE_COLORS_RGB["annotated_boxes"] in colours
 
 
-def test_rule_corners_unoccluded_and_lidar_depth():
-    from streetaug.placement.rules import lidar_depth_image, rule_corners_unoccluded
-
+def test_rule_corners_unoccluded():
     corners = box_corners_object(np.array([W, L, 1.5]))
     R = np.array([[0, -1, 0], [0, 0, -1], [1, 0, 0]], float)  # object x -> cam z
     box = (corners @ R.T + [0.0, 1.5, 20.0])[None]  # top corners at camera y = 0, z = 17.75 / 22.25
@@ -520,17 +516,17 @@ def test_rule_corners_unoccluded_and_lidar_depth():
     occ_y, occ_x = np.meshgrid(np.linspace(-0.5, 0.5, 40), np.linspace(-2.0, 2.0, 80))
     for z_occ, expect in [(10.0, False), (22.25 + 2.5, True)]:
         pts = np.c_[occ_x.ravel(), occ_y.ravel(), np.full(occ_x.size, z_occ)]
-        depth = lidar_depth_image(pts, K, WIDTH, HEIGHT, spread_px=3)
+        depth = densify_lidar_depth(pts, K, WIDTH, HEIGHT)
         assert np.isfinite(depth).sum() > 100 and np.nanmin(depth) == pytest.approx(z_occ, abs=1e-4)
-        assert rule_corners_unoccluded(box, K, depth, 1.0)[0] == expect
+        assert rule_corners_unoccluded(box, CAMERA, depth, 1.0)[0] == expect
     # unknown depth (inf) never occludes
-    assert rule_corners_unoccluded(box, K, np.full((HEIGHT, WIDTH), np.inf, np.float32), 1.0)[0]
+    assert rule_corners_unoccluded(box, CAMERA, np.full((HEIGHT, WIDTH), np.inf, np.float32), 1.0)[0]
 
 
 def test_place_objects_with_occlusion_rule():
     s = _scene()
     cfg = dataclasses.replace(CFG, require_unoccluded_corners=True)
-    r = place_objects(s, s.cameras["CAM_FRONT"], [np.array([1.8, 4.5, 1.5])] * 2, np.random.default_rng(1), cfg)
+    r = place_objects(s, s.cameras["CAM_FRONT"], [ObjectBox(np.array([1.8, 4.5, 1.5]))] * 2, np.random.default_rng(1), cfg)
     assert len(r.placements) == 2 and "corners_unoccluded" in r.report
     _check_all_rules(s, s.cameras["CAM_FRONT"], r.placements, cfg)
 
@@ -540,9 +536,9 @@ def test_real_sample_front_left_sees_no_road_in_range(real_sample):
     so no placement, with the drivable rule as the reason; the road it sees is nearer than 7 m."""
     s = real_sample
     view = s.cameras["CAM_FRONT_LEFT"]
-    r = place_objects(s, view, [np.array([1.9, 4.6, 1.6])], np.random.default_rng(0))
+    r = place_objects(s, view, [ObjectBox(np.array([1.9, 4.6, 1.6]))], np.random.default_rng(0))
     assert r.placements == [] and "drivable" in r.reason
     assert r.report["drivable"] >= 0.95 * CFG.n_candidates
     near = dataclasses.replace(CFG, min_distance_m=5.0, n_candidates=3000)
-    placed = place_objects(s, view, [np.array([1.9, 4.6, 1.6])], np.random.default_rng(0), near).placements
+    placed = place_objects(s, view, [ObjectBox(np.array([1.9, 4.6, 1.6]))], np.random.default_rng(0), near).placements
     assert placed and placed[0].distance_m < 7.0

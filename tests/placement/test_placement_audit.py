@@ -9,22 +9,31 @@ import pytest
 import shapely
 
 from placement_fixtures import (
+    CAMERA,
     EGO_YAW_RAD,
+    HEIGHT,
+    K,
     ROAD_HALF_WIDTH_M,
+    T_EGO_FROM_CAM,
     T_GLOBAL_FROM_EGO,
+    WIDTH,
     box_at_ego,
+    camera_view,
     ground_grid_ego,
     lidar_rings_ego,
     lidar_sweep,
     make_sample,
 )
-from streetaug.augment.core import quat_to_rotation, rotation_to_quat, transform_points
+from streetaug.augment.core import pose_camera_to_transform, quat_to_rotation, rotation_to_quat, transform_points
+from streetaug.augment.core.depth import densify_lidar_depth
 from streetaug.datasets.sample import Box
 from streetaug.placement.audit import AUDITED_RULES, audit_placements, box_hull_xy
 from streetaug.placement.config import PlacementConfig
 from streetaug.placement.drivable import DrivableArea
-from streetaug.placement.place import Placement, object_transforms, place_objects
-from streetaug.placement.rules import box_footprint_rect, footprint_corners
+from streetaug.placement.candidates import object_transforms
+from streetaug.placement.place import ObjectBox, Placement, place_objects
+from streetaug.placement.scene import scene_depth
+from streetaug.placement.rules import box_footprint_rect, footprint_corners, visible_fraction_estimate
 
 CFG = PlacementConfig()
 WLH = np.array([1.8, 4.5, 1.5])
@@ -49,7 +58,7 @@ def _moved(p: Placement, dx_ego: float, dy_ego: float) -> Placement:
 def test_final_placements_pass_the_audit_and_the_audit_can_fail():
     s = _scene()
     view = s.cameras["CAM_FRONT"]
-    r = place_objects(s, view, [WLH] * 3, np.random.default_rng(5))
+    r = place_objects(s, view, [ObjectBox(WLH)] * 3, np.random.default_rng(5))
     assert len(r.placements) == 3
     audits = audit_placements(s, view, r.placements, r.drivable, CFG)
     assert all(a.ok for a in audits), [a.passed for a in audits]
@@ -75,18 +84,18 @@ def test_audit_counts_obstacles_and_lidarseg_points():
     labels = np.full(len(pts), 24)
     s = _scene()
     view = s.cameras["CAM_FRONT"]
-    p = place_objects(s, view, [WLH], np.random.default_rng(0)).placements[0]
+    p = place_objects(s, view, [ObjectBox(WLH)], np.random.default_rng(0)).placements[0]
     local = np.array([[WLH[1] / 2 + 0.9, 0.0, 1.0]] * 3)  # 0.9 m in front of the bumper, 1 m high
     extra = transform_points(p.T_global_from_object, local)
     extra_ego = transform_points(np.linalg.inv(T_GLOBAL_FROM_EGO), extra)
     s2 = make_sample(boxes=s.boxes, lidar=lidar_sweep(np.concatenate([pts, extra_ego]),
                                                       np.r_[labels, np.full(3, 28)]))
-    drivable = place_objects(s2, view, [WLH], np.random.default_rng(0)).drivable
+    drivable = place_objects(s2, view, [ObjectBox(WLH)], np.random.default_rng(0)).drivable
     a = audit_placements(s2, view, [p], drivable, CFG)[0]
     assert a.measured["obstacle_points"] == 3 and not a.passed["lidar_obstacles"]
     assert a.measured["non_drivable_points"] == 3 and not a.passed["lidarseg"]
     # and the placement itself never chooses such a spot
-    r = place_objects(s2, view, [WLH], np.random.default_rng(0))
+    r = place_objects(s2, view, [ObjectBox(WLH)], np.random.default_rng(0))
     assert all(x.ok for x in audit_placements(s2, view, r.placements, r.drivable, CFG))
 
 
@@ -97,7 +106,7 @@ def test_grid_sources_pass_the_audit():
         s = make_sample(polygons=None, lidar=lidar_sweep(pts, lab))
         view = s.cameras["CAM_FRONT"]
         for seed in range(2):
-            r = place_objects(s, view, [WLH] * 2, np.random.default_rng(seed))
+            r = place_objects(s, view, [ObjectBox(WLH)] * 2, np.random.default_rng(seed))
             assert r.placements and r.drivable.source == ("lidarseg" if lab is not None else "lidar-ground")
             assert all(a.ok for a in audit_placements(s, view, r.placements, r.drivable, CFG))
 
@@ -143,7 +152,7 @@ def test_placements_on_a_slope_pass_the_audit_and_touch_the_slope():
     pts[:, 2] = slope_x * pts[:, 0] + slope_y * pts[:, 1] + rng.normal(0, 0.005, len(pts))
     s = make_sample(lidar=lidar_sweep(pts))
     view = s.cameras["CAM_FRONT"]
-    r = place_objects(s, view, [WLH] * 3, np.random.default_rng(2))
+    r = place_objects(s, view, [ObjectBox(WLH)] * 3, np.random.default_rng(2))
     assert len(r.placements) == 3
     assert all(a.ok for a in audit_placements(s, view, r.placements, r.drivable, CFG))
     T_ego_from_global = np.linalg.inv(T_GLOBAL_FROM_EGO)
@@ -171,53 +180,56 @@ def _wall_cam(z_m: float, x_range=(-30.0, 30.0), y_range=(-3.0, 1.5), dx: float 
     return np.c_[xs.ravel(), ys.ravel(), np.full(xs.size, z_m)]
 
 
-def test_lidar_depth_fills_between_wall_beams_but_not_between_ground_rings():
-    from placement_fixtures import HEIGHT, K, WIDTH, T_EGO_FROM_CAM
-    from streetaug.placement.rules import lidar_depth_image
-
-    wall = _wall_cam(5.0, y_range=(-1.0, 1.0))  # rows ~23 px apart at 5 m
-    depth = lidar_depth_image(wall, K, WIDTH, HEIGHT)
-    v0, v1 = int(450 + 1266 * -1.0 / 5) + 4, int(450 + 1266 * 0.9 / 5) - 4
-    assert np.all(depth[v0:v1, 200:1400] == pytest.approx(5.0))
-    # ground rings seen from 1.5 m: 20 m and 26 m returns, 17 px apart, are not joined
-    ground_ego = lidar_rings_ego()
-    cam = transform_points(np.linalg.inv(T_EGO_FROM_CAM), ground_ego)
-    depth = lidar_depth_image(cam, K, WIDTH, HEIGHT)
-    col = depth[:, 800]
-    far_rows = np.flatnonzero(np.isfinite(col) & (col > 20.0))
-    gaps = np.flatnonzero(~np.isfinite(col[far_rows.min():far_rows.max()]))
-    assert len(gaps) > 0  # holes between far rings stay unknown
-
-
 def test_visible_fraction_estimate_counts_image_and_occluders():
-    from placement_fixtures import HEIGHT, K, WIDTH
-    from streetaug.augment.core import pose_camera_to_transform
-    from streetaug.placement.rules import lidar_depth_image, visible_fraction_estimate
-
     T = pose_camera_to_transform(0.0, 1.5, 20.0, 90.0)[None]  # a car side-on, 20 m ahead
-    args = (WLH, K, WIDTH, HEIGHT)
-    assert visible_fraction_estimate(T, *args, None, 1.0)[0] == pytest.approx(1.0)
+    nothing = np.full(CAMERA.shape, np.inf, np.float32)
+    assert visible_fraction_estimate(T, WLH, CAMERA, nothing, 1.0)[0] == pytest.approx(1.0)
     # a wall 8 m away hiding the left half of the image (x < 0 at any depth: u < cx)
-    wall = _wall_cam(8.0, x_range=(-30.0, 0.0))
-    depth = lidar_depth_image(wall, K, WIDTH, HEIGHT)
-    assert visible_fraction_estimate(T, *args, depth, 1.0)[0] == pytest.approx(0.5, abs=0.08)
+    depth = densify_lidar_depth(_wall_cam(8.0, x_range=(-30.0, 0.0)), K, WIDTH, HEIGHT)
+    assert visible_fraction_estimate(T, WLH, CAMERA, depth, 1.0)[0] == pytest.approx(0.5, abs=0.08)
     # the same wall behind the car hides nothing
-    depth_behind = lidar_depth_image(_wall_cam(30.0, x_range=(-30.0, 0.0)), K, WIDTH, HEIGHT)
-    assert visible_fraction_estimate(T, *args, depth_behind, 1.0)[0] == pytest.approx(1.0)
+    depth_behind = densify_lidar_depth(_wall_cam(30.0, x_range=(-30.0, 0.0)), K, WIDTH, HEIGHT)
+    assert visible_fraction_estimate(T, WLH, CAMERA, depth_behind, 1.0)[0] == pytest.approx(1.0)
     # half out of the image on the right
     x_edge = (WIDTH - 0.5 - K[0, 2]) * 20.0 / K[0, 0]
     T_edge = pose_camera_to_transform(x_edge, 1.5, 20.0, 90.0)[None]
-    assert visible_fraction_estimate(T_edge, *args, None, 1.0)[0] == pytest.approx(0.5, abs=0.08)
+    assert visible_fraction_estimate(T_edge, WLH, CAMERA, nothing, 1.0)[0] == pytest.approx(0.5, abs=0.08)
+
+
+def test_placement_judges_occlusion_on_the_renderers_depth():
+    """Without a depth given, placement computes the renderer's (LiDAR densified, ego ground plane in the
+    holes); a given depth is the one it tests against (a wall in it everywhere: nothing is visible)."""
+    s = make_sample(lidar=lidar_sweep(ground_grid_ego(0.5)))
+    view = s.cameras["CAM_FRONT"]
+    points_cam = s.lidar.points_in(view.T_cam_from_global)
+    expected = densify_lidar_depth(points_cam, K, WIDTH, HEIGHT, ground_fill=view.ego_ground_plane_cam)
+    np.testing.assert_array_equal(scene_depth(s, view), expected)
+    r = place_objects(s, view, [ObjectBox(WLH)], np.random.default_rng(0))
+    given = place_objects(s, view, [ObjectBox(WLH)], np.random.default_rng(0), depth_m=expected)
+    np.testing.assert_array_equal(r.placements[0].T_global_from_object, given.placements[0].T_global_from_object)
+    assert r.placements[0].visible_fraction >= PlacementConfig().min_visible_fraction
+    wall = np.full(CAMERA.shape, 3.0, np.float32)
+    hidden = place_objects(s, view, [ObjectBox(WLH)], np.random.default_rng(0), depth_m=wall)
+    assert hidden.placements == [] and hidden.report["in_view"] > 0
+
+
+def test_ego_ground_plane_in_the_camera():
+    normal, offset = camera_view().ego_ground_plane_cam
+    on_ground = transform_points(np.linalg.inv(T_EGO_FROM_CAM), np.array([[12.0, -3.0, 0.0], [30.0, 4.0, 0.0]]))
+    np.testing.assert_allclose(on_ground @ normal + offset, 0.0, atol=1e-12)
+    assert offset == pytest.approx(1.5)  # the camera 1.5 m above the ground
 
 
 def test_no_placement_behind_a_wall_that_fills_the_view():
-    """A LiDAR wall 6 m ahead across the whole view, the map road beyond it: nothing is placed."""
-    from placement_fixtures import T_EGO_FROM_CAM
+    """A LiDAR wall 6 m ahead across the whole view, the map road beyond it: nothing is placed.
 
+    The sweep holds what a LiDAR sees: the ground up to the wall (x_ego < 7.7 m) and the wall, not the
+    ground behind it (whose returns would show through the gaps between the wall's beams in the
+    renderer's depth, as they would in the render)."""
     wall_ego = transform_points(T_EGO_FROM_CAM, _wall_cam(6.0, y_range=(-4.0, 1.5)))
-    s = make_sample(lidar=lidar_sweep(np.concatenate([ground_grid_ego(0.5), wall_ego])))
-    r = place_objects(s, s.cameras["CAM_FRONT"], [WLH], np.random.default_rng(0))
+    s = make_sample(lidar=lidar_sweep(np.concatenate([ground_grid_ego(0.5, x_range=(-10.0, 7.5)), wall_ego])))
+    r = place_objects(s, s.cameras["CAM_FRONT"], [ObjectBox(WLH)], np.random.default_rng(0))
     assert r.placements == [] and r.report["in_view"] > 0 and "in_view" in r.reason
     # without the wall the same seed places
     s2 = make_sample(lidar=lidar_sweep(ground_grid_ego(0.5)))
-    assert place_objects(s2, s2.cameras["CAM_FRONT"], [WLH], np.random.default_rng(0)).placements
+    assert place_objects(s2, s2.cameras["CAM_FRONT"], [ObjectBox(WLH)], np.random.default_rng(0)).placements

@@ -21,11 +21,15 @@ from placement_fixtures import (
     lidar_sweep,
     make_sample,
 )
+from streetaug.augment.assets.procedural import procedural_car
 from streetaug.augment.core import project_points, transform_points
+from streetaug.datasets.bundled import BUNDLED_VERSION, bundled_dataroot
 from streetaug.datasets.errors import DatasetError
+from streetaug.datasets.nuscenes import NuScenesReader
 from streetaug.datasets.nuscenes_map import discretize_arcline_path, read_lanes
 from streetaug.placement.config import PlacementConfig
-from streetaug.placement.place import place_objects
+from streetaug.placement.explain import LANE_COLOR_RGB, RULE_COLORS_RGB, draw_placement_bev
+from streetaug.placement.place import ObjectBox, place_objects
 
 CFG = PlacementConfig()
 WLH = np.array([1.8, 4.5, 1.5])
@@ -113,8 +117,6 @@ REAL = (Path(__file__).parents[2] / ".." / "shared" / "data" / "nuscenes-real").
 
 def test_bundled_maps_have_lanes_the_real_excerpt_has_none():
     """The bundled maps carry the generated streets' four travel lanes; the nuScenes-mini excerpt has none."""
-    from streetaug.datasets.bundled import bundled_dataroot
-
     for path in (bundled_dataroot() / "maps" / "expansion").glob("*.json"):
         lanes = read_lanes(path)
         assert lanes is not None and len(lanes.tokens) % 4 == 0 and len(lanes.tokens) > 0
@@ -123,23 +125,14 @@ def test_bundled_maps_have_lanes_the_real_excerpt_has_none():
 
 
 def test_bundled_scenes_place_along_their_lanes():
-    from streetaug.augment.assets.procedural import procedural_car
-    from streetaug.augment.pipeline import InsertOptions, insert_into_view
-    from streetaug.datasets.bundled import BUNDLED_VERSION, bundled_dataroot
-    from streetaug.datasets.nuscenes import NuScenesReader
-
     reader = NuScenesReader(bundled_dataroot(), BUNDLED_VERSION)
     sample = reader.sample(reader.sample_tokens("sample-sunny")[0])
-    result = insert_into_view(sample, sample.cameras["CAM_FRONT"], [procedural_car(1)], InsertOptions(quality="draft"))
-    (p,) = result.placement.placements
-    assert p.yaw_source == "lane"
+    (p,) = place_objects(sample, sample.cameras["CAM_FRONT"], [procedural_car(1)], np.random.default_rng(0)).placements
+    assert p.yaw_source == "lane" and p.asset_index == 0
 
 
 def test_reader_attaches_lanes_and_placement_follows_them(tmp_path):
     """A copy of a bundled scene whose lanes are replaced by one lane 20 deg off the ego heading, through the view."""
-    from streetaug.datasets.bundled import bundled_dataroot
-    from streetaug.datasets.nuscenes import NuScenesReader
-
     src = bundled_dataroot()
     root = tmp_path / "ds"
     root.mkdir()
@@ -165,7 +158,7 @@ def test_reader_attaches_lanes_and_placement_follows_them(tmp_path):
     sample = NuScenesReader(root, "v1.0-samples").sample(token)
     assert sample.lanes is not None and sample.lanes.tokens == ("lane-1",)
     cfg = dataclasses.replace(CFG, yaw_sigma_deg=0.0, lane_max_distance_m=30.0)  # the whole view takes the lane
-    r = place_objects(sample, view, [WLH], np.random.default_rng(0), cfg)
+    r = place_objects(sample, view, [ObjectBox(WLH)], np.random.default_rng(0), cfg)
     assert r.placements, r.reason
     p = r.placements[0]
     assert p.yaw_source == "lane"
@@ -190,7 +183,7 @@ def test_yaw_follows_lane_direction_including_oncoming_lane():
     cfg = dataclasses.replace(CFG, yaw_sigma_deg=0.0, opposite_heading_probability=0.5)
     sides = []
     for seed in range(12):
-        for p in place_objects(s, view, [WLH], np.random.default_rng(seed), cfg).placements:
+        for p in place_objects(s, view, [ObjectBox(WLH)], np.random.default_rng(seed), cfg).placements:
             y_ego = transform_points(np.linalg.inv(T_GLOBAL_FROM_EGO), p.box.center[None])[0, 1]
             front_cam = (view.T_cam_from_global @ p.T_global_from_object)[:3, 0]
             if p.yaw_source == "lane":
@@ -213,7 +206,7 @@ def test_car_along_a_slanted_lane_faces_along_the_lane_in_the_image():
     lane_dir = (lane[-1, :2] - lane[0, :2]) / np.linalg.norm(lane[-1, :2] - lane[0, :2])  # from the polyline
     n_checked = 0
     for seed in range(4):
-        for p in place_objects(s, view, [WLH], np.random.default_rng(seed), cfg).placements:
+        for p in place_objects(s, view, [ObjectBox(WLH)], np.random.default_rng(seed), cfg).placements:
             assert p.yaw_source == "lane"
             n_checked += 1
             T_co = view.T_cam_from_global @ p.T_global_from_object
@@ -233,17 +226,15 @@ def test_lanes_can_be_switched_off():
     lanes = lanes_from(lane_ego(0.0, np.radians(30.0)))
     s = _wide_road_sample(lanes)
     cfg = dataclasses.replace(CFG, use_lanes=False, yaw_sigma_deg=0.0, opposite_heading_probability=0.0)
-    p = place_objects(s, s.cameras["CAM_FRONT"], [WLH], np.random.default_rng(0), cfg).placements[0]
+    p = place_objects(s, s.cameras["CAM_FRONT"], [ObjectBox(WLH)], np.random.default_rng(0), cfg).placements[0]
     assert p.yaw_source == "ego"
     assert abs(_angle_diff(_heading(p.T_global_from_object), EGO_YAW_RAD)) < 1e-9
 
 
 def test_explain_draws_lanes_and_the_sampled_region():
-    from streetaug.placement.explain import LANE_COLOR_RGB, RULE_COLORS_RGB, draw_placement_bev
-
     s = _wide_road_sample(lanes_from(lane_ego(-2.0)))
     view = s.cameras["CAM_FRONT"]
-    r = place_objects(s, view, [WLH], np.random.default_rng(0))
+    r = place_objects(s, view, [ObjectBox(WLH)], np.random.default_rng(0))
     img = draw_placement_bev(s, view, r)
     colours = {tuple(c) for c in img.reshape(-1, 3)}
     assert LANE_COLOR_RGB in colours and RULE_COLORS_RGB[""] in colours and (120, 110, 0) in colours

@@ -20,9 +20,9 @@ from streetaug.augment.core import read_exr, read_image_rgb
 from streetaug.augment.lighting.sun import sun_direction_global
 from streetaug.augment.scenegen.lidar import points_in_box
 from streetaug.augment.scenegen.make import CAMERA_RIGS, SAMPLE_SCENES, choose_exposure, make_sample_scenes
-from streetaug.augment.scenegen.nuscenes_tables import visibility_token
 from streetaug.augment.scenegen.render import SkyParams, StreetRenderer
-from streetaug.augment.scenegen.street import LABEL_CAR, LABEL_DRIVEABLE, StreetParams, build_street
+from streetaug.augment.scenegen.street import StreetParams, build_street
+from streetaug.datasets.nuscenes_format import LIDARSEG_CAR, LIDARSEG_DRIVEABLE, visibility_token
 from streetaug.datasets.sample import Box
 
 W, H = 320, 180
@@ -133,7 +133,7 @@ def test_lidar_road_points_lie_on_the_ground(dataroot: Path) -> None:
     for name in SAMPLE_SCENES:
         p, labels, _ = _lidar_global(dataroot, t, name)
         assert len(p) == len(labels) > 10000
-        road = labels == LABEL_DRIVEABLE
+        road = labels == LIDARSEG_DRIVEABLE
         assert road.sum() > 1000
         assert np.abs(p[road, 2]).max() < 0.05
         # and nothing else that low near the ego is labelled as something standing
@@ -174,7 +174,7 @@ def test_boxes_contain_their_lidar_points(dataroot: Path) -> None:
             assert a["num_lidar_pts"] == inside.sum()
             inside_any |= points_in_box(box, p, margin_m=0.06)  # range noise sigma = 1 cm
         assert sum(a["num_lidar_pts"] > 0 for a in anns) >= len(anns) - 2
-        cars = labels == LABEL_CAR
+        cars = labels == LIDARSEG_CAR
         assert cars.sum() > 100
         assert inside_any[cars].all(), "car points outside every annotated box"
 
@@ -221,7 +221,7 @@ def test_shadowed_road_is_darker_than_lit_road_in_the_sunny_image(dataroot: Path
     renderer = StreetRenderer(scene, SkyParams(np.array(gt["sun"]["direction_global"]), spec.turbidity, spec.cloud_cover))
     rig = CAMERA_RIGS["CAM_FRONT"]
     res = renderer.render(rig.K(W, H), scene.T_global_from_ego @ rig.T_ego_from_cam(), W, H, spp=1, sky_rays=1, denoise=False)
-    road = res.label == LABEL_DRIVEABLE
+    road = res.label == LIDARSEG_DRIVEABLE
     lit, shaded = road & (res.shadow > 0.99), road & (res.shadow < 0.01)
     assert lit.sum() > 200 and shaded.sum() > 200
     lum = luminance(image)
@@ -229,7 +229,7 @@ def test_shadowed_road_is_darker_than_lit_road_in_the_sunny_image(dataroot: Path
 
 
 def test_exposure_puts_the_road_in_range() -> None:
-    label = np.full((10, 10), LABEL_DRIVEABLE, dtype=np.uint8)
+    label = np.full((10, 10), LIDARSEG_DRIVEABLE, dtype=np.uint8)
     radiance = np.full((10, 10, 3), 7.0)
     k = choose_exposure(radiance, label)
     ldr = (k * 7.0) ** (1 / 2.2)
@@ -294,7 +294,7 @@ def test_map_drivable_area_covers_the_road_points_and_the_ego(dataroot: Path) ->
         assert len(own) == 1
         (path,) = m["arcline_path_3"][own[0]["token"]]
         assert abs(np.angle(np.exp(1j * (path["start_pose"][2] - ego_yaw)))) < 1e-3
-        road_xy = p[labels == LABEL_DRIVEABLE, :2]
+        road_xy = p[labels == LIDARSEG_DRIVEABLE, :2]
         inside = np.array([area.buffer(0.05).contains(Point(xy)) for xy in road_xy[::20]])
         assert inside.all()
         # sidewalk points are outside the drivable area

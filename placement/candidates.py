@@ -1,0 +1,149 @@
+"""Candidate boxes of one object: sampled in the camera's field of view, then stood on the local ground.
+
+Sampling draws, per object and in this order, r ~ U[min, max] (horizontal distance from the camera), an
+azimuth uniform in the camera's field of view, a flip to the opposite heading and N(0, yaw_sigma_deg)
+yaw noise; the heading is the nearest lane's (within ``lane_max_distance_m``) or the ego's.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from streetaug.augment.core import InputError
+from streetaug.datasets.sample import CameraView
+
+from .ground import GroundPlane
+from .rules import box_corners_object, box_footprint_rect, footprint_corners
+from .scene import PlacementScene
+
+
+def object_transforms(
+    bottom_xy: np.ndarray, yaw_rad: np.ndarray, ground_z: np.ndarray, normals: np.ndarray
+) -> np.ndarray:
+    """T_global_from_object (N, 4, 4) for objects standing on planes.
+
+    Args:
+        bottom_xy: (N, 2) global x/y of the bottom centre.
+        yaw_rad: (N,) heading in the global x/y plane (rad, from +x towards +y).
+        ground_z: (N,) ground height at bottom_xy.
+        normals: (N, 3) unit ground normals (z > 0); become the object's +z.
+    """
+    n = np.asarray(normals, dtype=np.float64)
+    n = n / np.linalg.norm(n, axis=1, keepdims=True)
+    h = np.stack([np.cos(yaw_rad), np.sin(yaw_rad), np.zeros_like(yaw_rad)], axis=1)
+    x = h - np.einsum("nd,nd->n", h, n)[:, None] * n
+    x /= np.linalg.norm(x, axis=1, keepdims=True)
+    y = np.cross(n, x)
+    T = np.tile(np.eye(4), (len(n), 1, 1))
+    T[:, :3, 0], T[:, :3, 1], T[:, :3, 2] = x, y, n
+    T[:, :3, 3] = np.concatenate([bottom_xy, np.asarray(ground_z).reshape(-1, 1)], axis=1)
+    return T
+
+
+@dataclass(frozen=True)
+class CameraAzimuthRange:
+    """The horizontal field of view of a camera on the ground.
+
+    Attributes:
+        heading_rad: heading of the optical axis in global x/y (rad, from +x towards +y).
+        left_rad, right_rad: largest angle to the left / right of it that is still in the image.
+    """
+
+    heading_rad: float
+    left_rad: float
+    right_rad: float
+
+
+def camera_azimuth_range(view: CameraView) -> CameraAzimuthRange:
+    """The azimuths (global x/y) the camera of ``view`` sees; candidates are sampled within them."""
+    fwd = view.T_global_from_cam[:3, 2]
+    if np.hypot(fwd[0], fwd[1]) < 1e-3:
+        raise InputError(f"camera {view.channel}: optical axis is vertical; cannot place objects on the ground")
+    fx, cx = view.K[0, 0], view.K[0, 2]
+    return CameraAzimuthRange(float(np.arctan2(fwd[1], fwd[0])), float(np.arctan((cx + 0.5) / fx)),
+                              float(np.arctan((view.width - 0.5 - cx) / fx)))
+
+
+@dataclass(frozen=True)
+class Candidates:
+    """The sampled candidates of one object (global frame).
+
+    Attributes:
+        xy: (n, 2) float64 bottom-centre x/y.
+        yaw_rad: (n,) float64 heading in (-pi, pi].
+        on_lane: (n,) bool whether the heading came from a lane of the map.
+        footprints_xy: (n, 4, 2) flat footprints (:func:`footprint_corners`).
+    """
+
+    xy: np.ndarray
+    yaw_rad: np.ndarray
+    on_lane: np.ndarray
+    footprints_xy: np.ndarray
+
+
+def sample_candidates(scene: PlacementScene, wlh: np.ndarray, rng: np.random.Generator) -> Candidates:
+    """``config.n_candidates`` candidates in the camera's field of view (draws r, azimuth, flip, noise from ``rng``)."""
+    config, n = scene.config, scene.config.n_candidates
+    fov = camera_azimuth_range(scene.view)
+    R_ego = scene.view.T_global_from_ego[:3, :3]
+    yaw_ego = float(np.arctan2(R_ego[1, 0], R_ego[0, 0]))
+    r = rng.uniform(config.min_distance_m, config.max_distance_m, n)
+    az = fov.heading_rad + rng.uniform(-fov.right_rad, fov.left_rad, n)
+    flip = rng.random(n) < config.opposite_heading_probability
+    noise = np.radians(rng.normal(0.0, config.yaw_sigma_deg, n))
+    xy = scene.camera_xy + r[:, None] * np.stack([np.cos(az), np.sin(az)], axis=1)
+    heading = yaw_ego + np.pi * flip
+    on_lane = np.zeros(n, dtype=bool)
+    if scene.lanes is not None:
+        lane_heading, on_lane = scene.lanes.heading_at(xy, config.lane_max_distance_m)
+        heading = np.where(on_lane, lane_heading, heading)
+    yaw = np.mod(heading + noise + np.pi, 2 * np.pi) - np.pi
+    w, l, _ = wlh
+    return Candidates(xy, yaw, on_lane, footprint_corners(xy, yaw, l, w))
+
+
+@dataclass(frozen=True)
+class StoodCandidates:
+    """Candidates standing on their local ground (arrays over the M candidates of one chunk).
+
+    Attributes:
+        index: (M,) int64 their indices among the object's candidates.
+        planes: the local ground plane of each.
+        T_global_from_object: (M, 4, 4) the standing boxes (:func:`object_transforms`).
+        centers: (M, 3) box centres (global); ``footprints_xy`` (M, 4, 2) :func:`box_footprint_rect`.
+        T_cam_from_object: (M, 4, 4); ``corners_cam`` (M, 8, 3) the box corners in the camera frame.
+    """
+
+    index: np.ndarray
+    planes: list[GroundPlane]
+    T_global_from_object: np.ndarray
+    centers: np.ndarray
+    footprints_xy: np.ndarray
+    T_cam_from_object: np.ndarray
+    corners_cam: np.ndarray
+
+    @property
+    def ground_points(self) -> np.ndarray:
+        return np.array([p.point_global for p in self.planes]).reshape(-1, 3)
+
+    @property
+    def ground_normals(self) -> np.ndarray:
+        return np.array([p.normal_global for p in self.planes]).reshape(-1, 3)
+
+
+def stand_candidates(scene: PlacementScene, cands: Candidates, index: np.ndarray, wlh: np.ndarray) -> StoodCandidates:
+    """Stand candidates ``index`` on the ground fitted below them: roll/pitch from the plane, heading kept."""
+    planes = [scene.ground.fit(p) for p in cands.xy[index]]
+    g_point = np.array([p.point_global for p in planes]).reshape(-1, 3)
+    g_normal = np.array([p.normal_global for p in planes]).reshape(-1, 3)
+    T_go = object_transforms(cands.xy[index], cands.yaw_rad[index], g_point[:, 2], g_normal)
+    centers = T_go[:, :3, 3] + 0.5 * wlh[2] * T_go[:, :3, 2]
+    T_co = scene.view.T_cam_from_global[None] @ T_go
+    corners_cam = np.einsum("nij,kj->nki", T_co[:, :3, :3], box_corners_object(wlh)) + T_co[:, None, :3, 3]
+    return StoodCandidates(index, planes, T_go, centers, box_footprint_rect(T_go, wlh), T_co, corners_cam)
+
+
+__all__ = ["CameraAzimuthRange", "Candidates", "StoodCandidates", "camera_azimuth_range", "object_transforms",
+           "sample_candidates", "stand_candidates"]

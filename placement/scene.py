@@ -1,0 +1,100 @@
+"""What placement reads of one camera view of a sample, gathered once: boxes, LiDAR obstacles, ground, depth.
+
+The scene depth is the renderer's (:func:`scene_depth`): placement's occlusion test and the render's depth
+test see the same surfaces.
+"""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass
+
+import numpy as np
+
+from streetaug.augment.core import PinholeCamera
+from streetaug.augment.core.depth import densify_lidar_depth
+from streetaug.datasets.nuscenes_format import LIDARSEG_NON_DRIVABLE
+from streetaug.datasets.nuscenes_map import LaneCenterlines
+from streetaug.datasets.sample import CameraView, Sample
+
+from .config import PlacementConfig
+from .drivable import DrivableArea
+from .ground import LocalGroundFitter
+from .rules import box_footprints, points_in_boxes
+
+
+def scene_depth(sample: Sample, view: CameraView) -> np.ndarray:
+    """The scene depth (H, W) float32 of ``view`` (camera z, metres, inf = unknown), as the renderer sees it.
+
+    The sample's LiDAR densified in the camera with the ego's ground plane where it leaves holes below
+    the horizon (:func:`streetaug.augment.core.depth.densify_lidar_depth`; the plane alone without LiDAR).
+    """
+    lidar = sample.lidar
+    points_cam = np.zeros((0, 3)) if lidar is None else lidar.points_in(view.T_cam_from_global)
+    return densify_lidar_depth(points_cam, view.K, view.width, view.height, ground_fill=view.ego_ground_plane_cam)
+
+
+@dataclass(frozen=True, eq=False)
+class PlacementScene:
+    """What the rules read of one camera view of a sample, gathered once for all objects.
+
+    Attributes:
+        sample, view: the sample and the camera being augmented.
+        config: the thresholds.
+        drivable: where the road is.
+        box_footprints_xy: (B, 4, 2) annotated boxes' footprints (global x/y); ``box_is_dynamic`` (B,) bool.
+        obstacle_points: (P, 3) LiDAR points (global) in no annotated box (grown by 0.1 m).
+        non_drivable_xy: (Q, 2) global x/y of non-drivable lidarseg points.
+        ground: the local ground plane fitter.
+        given_depth_m: (H, W) the caller's scene depth, or None to compute :func:`scene_depth` when needed.
+    """
+
+    sample: Sample
+    view: CameraView
+    config: PlacementConfig
+    drivable: DrivableArea
+    box_footprints_xy: np.ndarray
+    box_is_dynamic: np.ndarray
+    obstacle_points: np.ndarray
+    non_drivable_xy: np.ndarray
+    ground: LocalGroundFitter
+    given_depth_m: np.ndarray | None = None
+
+    @classmethod
+    def of(cls, sample: Sample, view: CameraView, config: PlacementConfig, drivable: DrivableArea,
+           depth_m: np.ndarray | None) -> "PlacementScene":
+        """Gather the boxes, the LiDAR obstacles, the lidarseg classes and the ground of ``sample``."""
+        boxes = list(sample.boxes)
+        box_dyn = np.array([b.is_dynamic for b in boxes], dtype=bool)
+        lidar = sample.lidar
+        obstacles, non_drivable_xy, labels = np.zeros((0, 3)), np.zeros((0, 2)), None
+        if lidar is not None:
+            points = lidar.points_global
+            free = ~points_in_boxes(points, boxes, margin_m=0.1)
+            obstacles = points[free]
+            if lidar.labels is not None:
+                non_drivable_xy = points[np.isin(lidar.labels, LIDARSEG_NON_DRIVABLE)][:, :2]
+                labels = lidar.labels[free]
+        fitter = LocalGroundFitter(obstacles if lidar is not None else None, view.T_global_from_ego, labels, config)
+        return cls(sample, view, config, drivable, box_footprints(boxes), box_dyn, obstacles, non_drivable_xy,
+                   fitter, depth_m)
+
+    @functools.cached_property
+    def camera(self) -> PinholeCamera:
+        return PinholeCamera(self.view.K, self.view.width, self.view.height)
+
+    @functools.cached_property
+    def depth_m(self) -> np.ndarray:
+        """(H, W) float32 the scene depth the occlusion rules test against (computed on first use)."""
+        return scene_depth(self.sample, self.view) if self.given_depth_m is None else self.given_depth_m
+
+    @property
+    def camera_xy(self) -> np.ndarray:
+        return self.view.T_global_from_cam[:2, 3]
+
+    @property
+    def lanes(self) -> LaneCenterlines | None:
+        return self.sample.lanes if self.config.use_lanes else None
+
+
+__all__ = ["PlacementScene", "scene_depth"]
