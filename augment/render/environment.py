@@ -30,7 +30,7 @@ class EnvironmentTables:
     """Derived tables of one camera-frame equirect map (cached properties, built on first use).
 
     Attributes:
-        envmap: (H, W, 3) linear HDR radiance, camera-frame equirect convention (sun excluded).
+        envmap: (H, W, 3) linear HDR radiance, camera-frame equirect convention (sun excluded); read-only.
     """
 
     envmap: np.ndarray
@@ -72,7 +72,9 @@ def environment_tables(envmap: np.ndarray) -> EnvironmentTables:
     key = (data.shape, data.dtype.str, hashlib.blake2b(data, digest_size=16).digest())
     tables = _TABLES.get(key)
     if tables is None:
-        tables = _TABLES[key] = EnvironmentTables(envmap)
+        frozen = data.copy()  # the tables own their map: a caller changing its array later cannot change them
+        frozen.setflags(write=False)
+        tables = _TABLES[key] = EnvironmentTables(frozen)
         while len(_TABLES) > TABLES_CACHE_SIZE:
             _TABLES.popitem(last=False)
     _TABLES.move_to_end(key)
