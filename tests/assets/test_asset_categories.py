@@ -7,7 +7,9 @@ import json
 import pytest
 
 from streetaug.augment.core import InputError
-from streetaug.augment.assets.categories import NUSCENES_OBJECT_CATEGORIES, category_for_asset
+from streetaug.augment.assets.categories import BUILTIN_MAPPING_PATH, NUSCENES_OBJECT_CATEGORIES, category_for_asset
+from streetaug.augment.assets.loader import load_asset
+from streetaug.datasets.nuscenes_format import CATEGORY_NAMES
 
 
 @pytest.mark.parametrize("name,category", [
@@ -53,16 +55,12 @@ def test_bad_mapping_file_is_a_clear_error(tmp_path, doc, match):
 
 
 def test_builtin_categories_are_nuscenes_names():
-    from streetaug.augment.assets.categories import BUILTIN_MAPPING_PATH
-
     doc = json.loads(BUILTIN_MAPPING_PATH.read_text())
     assert all(r["category"] in NUSCENES_OBJECT_CATEGORIES for r in doc["rules"])
     assert doc["default"] == "vehicle.car"
 
 
 def test_loader_takes_the_category_from_the_file_name(tmp_path):
-    from streetaug.augment.assets.loader import load_asset
-
     obj = "\n".join(["v 0 0 0", "v 4 0 0", "v 4 0 2", "v 0 0 2", "v 0 1.5 0", "v 4 1.5 0", "v 4 1.5 2", "v 0 1.5 2",
                      "f 1 2 3", "f 1 3 4", "f 5 7 6", "f 5 8 7", "f 1 5 6", "f 1 6 2", "f 4 3 7", "f 4 7 8",
                      "f 1 4 8", "f 1 8 5", "f 2 6 7", "f 2 7 3"]) + "\n"
@@ -72,3 +70,9 @@ def test_loader_takes_the_category_from_the_file_name(tmp_path):
     assert load_asset(tmp_path / "sedan.obj", front_axis="+x", use_cache=False).category == "vehicle.car"
     assert load_asset(tmp_path / "sedan.obj", front_axis="+x", category="vehicle.trailer",
                       use_cache=False).category == "vehicle.trailer"
+
+
+def test_object_categories_are_the_nuscenes_table_without_background_classes():
+    """Assets import only the core, so their category list is checked against the datasets' table here."""
+    background = ("noise", "flat.", "static.", "vehicle.ego")
+    assert NUSCENES_OBJECT_CATEGORIES == tuple(c for c in CATEGORY_NAMES if not c.startswith(background))

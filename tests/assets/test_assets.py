@@ -11,10 +11,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from streetaug.augment.assets import loader as loader_mod
+from streetaug.augment.assets import references
 from streetaug.augment.assets.asset import Asset, Material
+from streetaug.augment.assets.car_body import body_part, sedan_spec, van_spec
+from streetaug.augment.assets.car_wheels import wheel
 from streetaug.augment.assets.loader import axis_rotation, list_assets, load_asset
+from streetaug.augment.assets.mesh_parts import signed_volume
 from streetaug.augment.assets.procedural import paint_palette, procedural_car, procedural_car_variants
+from streetaug.augment.assets.references import read_gltf_json
 from streetaug.augment.assets.select import select_assets
 from streetaug.augment.assets.validate import validate_asset, validate_asset_report
 from streetaug.augment.core import InputError
@@ -228,7 +232,7 @@ def test_kenney_default_axes_put_the_front_backwards_and_scale_option():
 
 def test_kenney_materials_read_exact_factors():
     sedan = load_asset(CARS / "sedan.glb" if CARS.is_dir() else _kenney()[0], front_axis="-z")
-    gltf = loader_mod._read_gltf_json(CARS / "sedan.glb")
+    gltf = read_gltf_json(CARS / "sedan.glb")
     by_name = {m["name"]: m for m in gltf["materials"]}
     for mat in sedan.materials:
         if mat.name in by_name and "baseColorFactor" in by_name[mat.name]["pbrMetallicRoughness"]:
@@ -410,7 +414,7 @@ def test_loader_option_errors(tmp_path):
 
 def test_large_files_are_refused(tmp_path, monkeypatch):
     path = _write_obj(tmp_path / "cube.obj", _CUBE_V, _CUBE_F)
-    monkeypatch.setattr(loader_mod, "MAX_FILE_BYTES", 10)
+    monkeypatch.setattr(references, "MAX_FILE_BYTES", 10)
     with pytest.raises(InputError, match="200 MB"):
         load_asset(path, use_cache=False)
 
@@ -492,13 +496,11 @@ def test_gltf_texture_is_linearised_and_uv_keeps_gltf_convention(tmp_path):
 
 
 def test_procedural_body_and_tyres_are_closed_surfaces():
-    from streetaug.augment.assets import procedural as proc
-
-    for spec in (proc._sedan(), proc._van()):
-        part = proc._body_part(spec)
-        tyre = proc._wheel(np.array([0.0, 0.8, 0.3]), 1.0, 0.3, 0.2)[0]
+    for spec in (sedan_spec(), van_spec()):
+        part = body_part(spec)
+        tyre = wheel(np.array([0.0, 0.8, 0.3]), 1.0, 0.3, 0.2)[0]
         for F in (part.faces, tyre.faces):
             edges = np.sort(np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]), axis=1)
             _, counts = np.unique(edges, axis=0, return_counts=True)
             assert (counts == 2).all()  # every edge shared by exactly two triangles: watertight
-        assert proc._signed_volume(part.vertices, part.faces) > 0.5 * spec.length * spec.width * spec.height * 0.5
+        assert signed_volume(part.vertices, part.faces) > 0.5 * spec.length * spec.width * spec.height * 0.5

@@ -1,0 +1,326 @@
+"""The body of a procedural car: body types (dimensions, side profile), the lofted body and its materials.
+
+The body is a loft along x of rounded cross-sections (superellipses in y-z whose width narrows
+above the belt line: the "tumblehome"), between a side-profile roof curve ``z_top(x)`` and an
+underbody curve ``z_bot(x)`` that rises into wheel arches; its plan-view width rounds off at both
+ends, closing the surface.  Materials are assigned per face from its position and normal
+(windscreen / side windows / rear window with pillars in between, bumpers, grille, head and tail
+lights).  Distances ``d`` run from the nose (0) to the rear (``length``); the object frame has x front.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.interpolate import PchipInterpolator
+
+from .mesh_parts import MeshPart, grid_faces, signed_volume, weld_vertices
+from .validate import face_normals, smooth_vertex_normals
+
+# Material slots of a procedural car (indices into its material table).
+PAINT, GLASS, TRIM, TYRE, RIM, HEADLIGHT, TAILLIGHT = range(7)
+
+
+@dataclass(frozen=True)
+class BodySpec:
+    """Dimensions (metres) and side profile of a body type.
+
+    ``top`` / ``bottom`` are control points (distance from the nose d, height z) of the roof line
+    and the underbody (without arches); d runs from 0 (front) to ``length`` (rear).  ``d_ws``,
+    ``d_roof_front``, ``d_roof_back``, ``d_rear`` mark windscreen base, windscreen top, roof end
+    and rear-window base; ``pillars`` are the d of the B (and C) pillars between side windows.
+    """
+
+    length: float
+    width: float
+    height: float
+    wheel_radius: float
+    front_overhang: float
+    rear_overhang: float
+    belt_front: float
+    belt_rear: float
+    d_ws: float
+    d_roof_front: float
+    d_roof_back: float
+    d_rear: float
+    pillars: tuple[float, ...]
+    top: tuple[tuple[float, float], ...]
+    bottom: tuple[tuple[float, float], ...]
+    tumblehome: float  # fraction by which the roof is narrower than the belt line
+    plan_exponent: float  # superellipse exponent of the plan view (larger = squarer corners)
+
+
+def sedan_spec() -> BodySpec:
+    L, H = 4.60, 1.45
+    return BodySpec(
+        length=L, width=1.80, height=H, wheel_radius=0.32, front_overhang=0.92, rear_overhang=1.00,
+        belt_front=0.90, belt_rear=0.98, d_ws=1.55, d_roof_front=2.25, d_roof_back=3.20, d_rear=3.85,
+        pillars=(2.75,),
+        top=((0.0, 0.58), (0.06, 0.70), (0.30, 0.78), (1.55, 0.90), (2.25, H - 0.02), (2.60, H), (3.20, H - 0.03),
+             (3.85, 1.00), (4.45, 0.98), (4.56, 0.90), (L, 0.72)),
+        bottom=((0.0, 0.42), (0.12, 0.28), (0.55, 0.20), (L - 0.6, 0.21), (L - 0.12, 0.30), (L, 0.45)),
+        tumblehome=0.22, plan_exponent=4.0,
+    )
+
+
+def hatchback_spec() -> BodySpec:
+    L, H = 4.10, 1.50
+    return BodySpec(
+        length=L, width=1.75, height=H, wheel_radius=0.31, front_overhang=0.82, rear_overhang=0.68,
+        belt_front=0.92, belt_rear=1.00, d_ws=1.35, d_roof_front=2.00, d_roof_back=3.25, d_rear=3.92,
+        pillars=(2.55,),
+        top=((0.0, 0.58), (0.06, 0.70), (0.28, 0.79), (1.35, 0.92), (2.00, H - 0.02), (2.50, H), (3.25, H - 0.05),
+             (3.92, 1.02), (4.04, 0.95), (L, 0.78)),
+        bottom=((0.0, 0.42), (0.12, 0.28), (0.50, 0.20), (L - 0.5, 0.22), (L - 0.10, 0.32), (L, 0.48)),
+        tumblehome=0.20, plan_exponent=4.0,
+    )
+
+
+def suv_spec() -> BodySpec:
+    L, H = 4.70, 1.75
+    return BodySpec(
+        length=L, width=1.90, height=H, wheel_radius=0.37, front_overhang=0.92, rear_overhang=0.98,
+        belt_front=1.08, belt_rear=1.14, d_ws=1.40, d_roof_front=2.10, d_roof_back=4.35, d_rear=4.62,
+        pillars=(2.75, 3.75),
+        top=((0.0, 0.72), (0.06, 0.88), (0.30, 0.98), (1.40, 1.08), (2.10, H - 0.02), (2.60, H), (4.35, H - 0.03),
+             (4.62, 1.10), (L, 0.95)),
+        bottom=((0.0, 0.52), (0.15, 0.36), (0.60, 0.28), (L - 0.6, 0.30), (L - 0.12, 0.38), (L, 0.52)),
+        tumblehome=0.17, plan_exponent=5.0,
+    )
+
+
+def van_spec() -> BodySpec:
+    L, H = 5.00, 1.95
+    return BodySpec(
+        length=L, width=2.00, height=H, wheel_radius=0.34, front_overhang=0.95, rear_overhang=1.05,
+        belt_front=1.10, belt_rear=1.12, d_ws=0.85, d_roof_front=1.70, d_roof_back=4.90, d_rear=4.96,
+        pillars=(2.30, 3.60),
+        top=((0.0, 0.72), (0.06, 0.88), (0.25, 0.98), (0.85, 1.10), (1.70, H - 0.03), (2.30, H), (4.85, H - 0.02),
+             (4.97, H - 0.12), (L, H - 0.30)),
+        bottom=((0.0, 0.48), (0.15, 0.32), (0.55, 0.24), (L - 0.55, 0.26), (L - 0.12, 0.34), (L, 0.48)),
+        tumblehome=0.10, plan_exponent=6.0,
+    )
+
+
+BODY_SPECS = {"sedan": sedan_spec, "hatchback": hatchback_spec, "suv": suv_spec, "van": van_spec}
+BODY_WEIGHTS = {"sedan": 0.38, "hatchback": 0.22, "suv": 0.30, "van": 0.10}
+
+
+def jitter_spec(spec: BodySpec, rng: np.random.Generator) -> BodySpec:
+    """Scale a spec by a few percent (length, width, height independently)."""
+    sl, sw, sh = rng.uniform(0.96, 1.04, size=3)
+
+    def scale_pts(pts: tuple[tuple[float, float], ...]) -> tuple[tuple[float, float], ...]:
+        return tuple((d * sl, z * sh) for d, z in pts)
+
+    return BodySpec(
+        length=spec.length * sl, width=spec.width * sw, height=spec.height * sh,
+        wheel_radius=spec.wheel_radius * float(np.sqrt(sl * sh)),
+        front_overhang=spec.front_overhang * sl, rear_overhang=spec.rear_overhang * sl,
+        belt_front=spec.belt_front * sh, belt_rear=spec.belt_rear * sh,
+        d_ws=spec.d_ws * sl, d_roof_front=spec.d_roof_front * sl, d_roof_back=spec.d_roof_back * sl,
+        d_rear=spec.d_rear * sl, pillars=tuple(p * sl for p in spec.pillars),
+        top=scale_pts(spec.top), bottom=scale_pts(spec.bottom),
+        tumblehome=spec.tumblehome, plan_exponent=spec.plan_exponent,
+    )
+
+
+def axle_distances(spec: BodySpec) -> tuple[float, float]:
+    return spec.front_overhang, spec.length - spec.rear_overhang
+
+
+def loft_stations(spec: BodySpec) -> np.ndarray:
+    """Sorted distances from the nose d (S,) for the loft, dense at the ends and over the arches,
+    with stations on every window / pillar boundary so material edges are straight."""
+    L = spec.length
+    t = np.linspace(0.0, 1.0, 29)
+    d = [L * (1 - np.cos(np.pi * t)) / 2]  # cosine spacing: dense at both ends
+    d.append(np.linspace(0.0, L, 34))
+    ra = spec.wheel_radius + 0.05
+    for dw in axle_distances(spec):
+        d.append(dw + ra * np.cos(np.linspace(np.pi, 0.0, 13)))
+    edges = [spec.d_ws, spec.d_roof_front, spec.d_roof_back, spec.d_rear, *side_window_edges(spec)]
+    d.append(np.array(edges))
+    d = np.unique(np.clip(np.concatenate(d), 0.0, L))
+    keep = np.concatenate([[True], np.diff(d) > 0.02])
+    d = d[keep]
+    d[-1] = L
+    return d
+
+
+def side_window_edges(spec: BodySpec) -> list[float]:
+    """d of the side-window edges: front (A pillar foot), pillar sides, rear."""
+    edges = [spec.d_ws + 0.10, spec.d_rear - 0.10]
+    for dp in spec.pillars:
+        edges += [dp - 0.06, dp + 0.06]
+    return edges
+
+
+def body_profiles(spec: BodySpec, d: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Roof line z_top, underbody z_bot (with arches), plan half width and belt height at stations d."""
+    top = PchipInterpolator(*np.array(spec.top).T)(d)
+    bot = PchipInterpolator(*np.array(spec.bottom).T)(d)
+    r = spec.wheel_radius
+    ra = r + 0.05
+    for dw in axle_distances(spec):
+        inside = np.abs(d - dw) < ra
+        arch = r + np.sqrt(np.clip(ra**2 - (d - dw) ** 2, 0.0, None))
+        bot = np.where(inside, np.maximum(bot, arch), bot)
+    bot = np.minimum(bot, top - 0.08)
+    xi = np.clip(np.abs(2.0 * d / spec.length - 1.0), 0.0, 1.0)
+    p = spec.plan_exponent
+    half_w = 0.5 * spec.width * (1.0 - xi**p) ** (1.0 / p)
+    belt = np.interp(d, [spec.d_ws, spec.d_rear], [spec.belt_front, spec.belt_rear])
+    return top, bot, half_w, belt
+
+
+# Superellipse exponents of the cross-section: lower half boxier, upper half rounder.
+_N_LOW, _N_UP = 5.0, 3.2
+# Rows per half section, bottom to top: underbody, lower side up to the bumper line, up to the belt
+# line, side glass, roof (or windscreen / bonnet).  Row edges lie on those lines at every station, so
+# material boundaries along them are straight, not staircased.
+_SEG_ROWS = (3, 3, 6, 4, 6)
+_RAIL = 0.07  # roof rail height above the side glass (m)
+
+
+def _bumper_line(spec: BodySpec) -> float:
+    return 0.47 * spec.belt_front
+
+
+def _angle_for_height(z: np.ndarray, zc: np.ndarray, hz: np.ndarray) -> np.ndarray:
+    """Superellipse angle in [-pi/2, pi/2] of the section point at height z."""
+    f = np.clip((z - zc) / hz, -1.0, 1.0)
+    n = np.where(f > 0, _N_UP, _N_LOW)
+    return np.sign(f) * np.arcsin(np.abs(f) ** (n / 2.0))
+
+
+def _section_angles(spec: BodySpec, top, bot, belt) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Angles (S, K) of one half section from the bottom centre (-pi/2) up to (excluding) the top,
+    with the segment id (K,) and row position in its segment (K,) of every row."""
+    zc, hz = (top + bot) / 2, (top - bot) / 2
+    eps = 1e-3
+    a_q = np.full_like(top, -np.pi / 4)
+    a_bump = np.clip(_angle_for_height(np.full_like(top, _bumper_line(spec)), zc, hz), -np.pi / 4 + eps, None)
+    a_belt = np.clip(_angle_for_height(belt, zc, hz), a_bump + eps, np.pi / 2 - 3 * eps)
+    a_rail = np.clip(_angle_for_height(np.maximum(top - _RAIL, belt), zc, hz), a_belt + eps, np.pi / 2 - eps)
+    a_top = np.full_like(top, np.pi / 2)
+
+    def lin(a0, a1, n):
+        t = np.linspace(0.0, 1.0, n, endpoint=False)
+        return a0[:, None] + (a1 - a0)[:, None] * t[None, :]
+
+    r = _SEG_ROWS
+    lower = np.concatenate([lin(-a_top, a_q, r[0]), lin(a_q, a_bump, r[1])], axis=1)
+    aligned = np.concatenate([lin(a_bump, a_belt, r[2]), lin(a_belt, a_rail, r[3]), lin(a_rail, a_top, r[4])], axis=1)
+    uniform = lin(a_bump, a_top, aligned.shape[1])
+    w = np.clip((top - belt - 0.05) / 0.15, 0.0, 1.0)[:, None]  # no cabin (bonnet, boot): even rows
+    angles = np.concatenate([lower, w * aligned + (1.0 - w) * uniform], axis=1)
+    seg = np.concatenate([np.full(n, k) for k, n in enumerate(r)])
+    pos = np.concatenate([np.arange(n) for n in r])
+    return angles, seg, pos
+
+
+def body_part(spec: BodySpec) -> MeshPart:
+    d = loft_stations(spec)
+    top, bot, half_w, belt = body_profiles(spec, d)
+    zc, hz = (top + bot) / 2, (top - bot) / 2
+    right, seg, pos = _section_angles(spec, top, bot, belt)  # y < 0 side, bottom -> top
+    # Full loop: bottom centre -> right side (y < 0) -> top centre -> left side (y > 0) -> back.
+    phi = np.concatenate([right, np.full((len(d), 1), np.pi / 2), np.pi - right[:, ::-1][:, :-1]], axis=1)
+    seg = np.concatenate([seg, [len(_SEG_ROWS) - 1], seg[::-1][:-1]])
+    pos = np.concatenate([pos, [_SEG_ROWS[-1]], pos[::-1][:-1]])
+    c, s = np.cos(phi), np.sin(phi)
+    n_exp = np.where(s > 0, _N_UP, _N_LOW)
+    ys = -np.sign(c) * np.abs(c) ** (2.0 / n_exp)
+    zs = np.sign(s) * np.abs(s) ** (2.0 / n_exp)
+    z = zc[:, None] + hz[:, None] * zs
+    taper = tumblehome_taper(spec, z, belt[:, None])
+    y = half_w[:, None] * ys * taper
+    x = spec.length / 2 - d
+    V = np.stack([np.broadcast_to(x[:, None], y.shape), y, z], axis=-1).reshape(-1, 3)
+    n_sec = phi.shape[1]
+    F = grid_faces(len(d), n_sec, wrap_cols=True)
+    n_quads = len(F) // 2
+    quad_mat = body_materials(spec, V, F[:n_quads], F[n_quads:], seg, pos, n_sec)
+    fm = np.concatenate([quad_mat, quad_mat])
+    V, F, keep = weld_vertices(V, F)
+    fm = fm[keep]
+    if signed_volume(V, F) < 0:
+        F = F[:, ::-1].copy()
+    return MeshPart(V, F, fm, smooth_vertex_normals(V, F))
+
+
+def tumblehome_taper(spec: BodySpec, z: np.ndarray, belt: np.ndarray) -> np.ndarray:
+    """Tumblehome: width factor (<= 1) of the section at height z (the cabin leans inwards)."""
+    cabin_h = spec.height - 0.5 * (spec.belt_front + spec.belt_rear)
+    return 1.0 - spec.tumblehome * np.clip((z - belt) / cabin_h, 0.0, 1.0) ** 1.1
+
+
+def body_materials(spec: BodySpec, V: np.ndarray, tri_a: np.ndarray, tri_b: np.ndarray, seg: np.ndarray,
+                    pos: np.ndarray, n_sec: int) -> np.ndarray:
+    """Material per loft quad (triangles ``tri_a``, ``tri_b``) from its position, normal and section row.
+
+    ``seg`` / ``pos``: per section vertex, the row segment (0 underbody, 1 lower side, 2 up to the
+    belt line, 3 side glass, 4 roof) and the row index inside it.
+    """
+    na, aa = face_normals(V, tri_a)
+    nb, ab = face_normals(V, tri_b)
+    n = na * aa[:, None] + nb * ab[:, None]
+    n = n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
+    cen = (V[tri_a].sum(axis=1) + V[tri_b].sum(axis=1)) / 6.0
+    x, y, z = cen.T
+    # Outward normal: the loft winding may be inverted; fix the sign by the section centre.
+    outward = np.sign(np.einsum("ij,ij->i", n[:, 1:], np.stack([y, z - 0.7], 1)) + 1e-12)
+    n = n * outward[:, None]
+    d = spec.length / 2 - x
+    _, _, _, belt = body_profiles(spec, d)
+    ay = np.abs(y)
+    c0 = tri_a[:, 0] % n_sec
+    c1 = (c0 + 1) % n_sec
+    # The quad's lower row (its two columns are mirror-symmetric on the left / right halves).
+    lower_first = (seg[c0] < seg[c1]) | ((seg[c0] == seg[c1]) & (pos[c0] <= pos[c1]))
+    kind = np.where(lower_first, seg[c0], seg[c1])
+    row = np.where(lower_first, pos[c0], pos[c1])
+    kind_hi = np.maximum(seg[c0], seg[c1])
+    mat = np.full(len(tri_a), PAINT, dtype=np.int64)
+
+    # Greenhouse: side glass = the glass rows between the window edges; windscreen / rear window =
+    # forward / backward facing quads above the belt, inside the pillars (measured from the full width).
+    e = side_window_edges(spec)
+    in_side_x = (d > e[0]) & (d < e[1])
+    for dp in spec.pillars:
+        in_side_x &= np.abs(d - dp) > 0.06
+    side = (kind == 3) & (kind_hi == 3) & in_side_x & (np.abs(n[:, 1]) > 0.3)
+    full_hw = 0.5 * spec.width * tumblehome_taper(spec, z, belt)
+    above_belt = kind >= 3
+    windscreen = (above_belt & (n[:, 0] > 0.3) & (ay < full_hw - 0.13)
+                  & (d > spec.d_ws - 0.02) & (d < spec.d_roof_front + 0.02))
+    rear = (above_belt & (n[:, 0] < -0.3) & (ay < full_hw - 0.16) & (d > spec.d_roof_back - 0.02)
+            & (z > belt + 0.04))
+    mat[side | windscreen | rear] = GLASS
+
+    # Trim: underbody (and inner arches), bumpers below the bumper line, grille.
+    d_front, d_rear_axle = axle_distances(spec)
+    ra = spec.wheel_radius + 0.05
+    under = (n[:, 2] < -0.55) | (kind == 0)
+    bumper = (kind <= 1) & ((d < d_front - ra - 0.02) | (d > d_rear_axle + ra + 0.02))
+    front = (d < 0.45) & (n[:, 0] > 0.25)
+    grille = front & (kind == 2) & (row <= 1) & (ay < 0.22 * spec.width)
+    mat[under | bumper | grille] = TRIM
+
+    # Lights: head lights in the lowest rows above the bumper line at the front corners,
+    # tail lights just under the belt line at the rear corners.
+    head = front & (kind == 2) & (row <= 1) & (ay > 0.25 * spec.width) & (ay < 0.47 * spec.width)
+    tail = ((d > spec.length - 0.40) & (n[:, 0] < -0.35) & (kind == 2) & (row >= 3) & (row <= 4)
+            & (ay > 0.30 * spec.width))
+    mat[head & ~under] = HEADLIGHT
+    mat[tail & ~under] = TAILLIGHT
+    return mat
+
+
+__all__ = [
+    "BODY_SPECS", "BODY_WEIGHTS", "BodySpec", "GLASS", "HEADLIGHT", "PAINT", "RIM", "TAILLIGHT", "TRIM", "TYRE",
+    "axle_distances", "body_materials", "body_part", "body_profiles", "hatchback_spec", "jitter_spec",
+    "loft_stations", "sedan_spec", "side_window_edges", "suv_spec", "tumblehome_taper", "van_spec",
+]
