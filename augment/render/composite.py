@@ -108,8 +108,7 @@ def object_layers(fg: Foreground | None, sh: ShadowMap | None, scene_depth_m: np
     ratio = np.ones((H, W, 3), np.float32)
     box = None
     if fg is not None:
-        h, w = fg.alpha.shape
-        box = PixelBox(fg.x0, fg.y0, fg.x0 + w, fg.y0 + h)
+        box = fg.box
         sl = box.slices
         vis = depth_visibility(fg.depth_m, scene_depth_m[sl])
         coverage[sl] = fg.alpha
@@ -118,10 +117,8 @@ def object_layers(fg: Foreground | None, sh: ShadowMap | None, scene_depth_m: np
         obj_depth[sl] = fg.depth_m
         rad_premult[sl] = fg.radiance_premult
     if sh is not None:
-        h, w = sh.ratio_rgb.shape[:2]
-        shadow_box = PixelBox(sh.x0, sh.y0, sh.x0 + w, sh.y0 + h)
-        ratio[shadow_box.slices] = sh.ratio_rgb
-        box = shadow_box if box is None else box.union(shadow_box)
+        ratio[sh.box.slices] = sh.ratio_rgb
+        box = sh.box if box is None else box.union(sh.box)
     return ObjectLayers(coverage, vis_full, mask, obj_depth, rad_premult, ratio, box)
 
 

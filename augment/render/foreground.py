@@ -38,15 +38,14 @@ class Foreground:
     """The rendered object over its pixel box.
 
     Attributes:
-        x0, y0: top-left pixel of the box in the image (the box is ``alpha.shape`` big).
+        box: the object's pixel box in the image (every array below is ``(box.height, box.width, ...)``).
         radiance_premult: (h, w, 3) float32 linear radiance x coverage (premultiplied).
         alpha: (h, w) float32 coverage in [0, 1] (glass that shows the scene behind lowers it).
         depth_m: (h, w) float32 camera-frame z of the nearest hit, inf where the object is absent.
         stats: rays cast per stage and sample counts.
     """
 
-    x0: int
-    y0: int
+    box: PixelBox
     radiance_premult: np.ndarray
     alpha: np.ndarray
     depth_m: np.ndarray
@@ -182,7 +181,7 @@ def _resolve_pixels(traced: CameraSamples, counts: np.ndarray, box: PixelBox, R:
     stats = {"rays": dict(ctx.rays), "raycast_s": ctx.raycast_s, "pixels": int(P), "camera_samples": int(len(pix)),
              "edge_samples": int(n_edge), "box": box.as_list()}
     return Foreground(
-        x0=box.x0, y0=box.y0,
+        box=box,
         radiance_premult=rad_px.reshape(h, w, 3).astype(np.float32),
         alpha=np.clip(alpha_px, 0.0, 1.0).reshape(h, w).astype(np.float32),
         depth_m=depth_px.reshape(h, w).astype(np.float32),

@@ -50,14 +50,13 @@ class ShadowMap:
     """Ratio map over a pixel box.
 
     Attributes:
-        x0, y0: top-left pixel of the box (its :func:`streetaug.augment.render.footprint.shadow_pixel_box`).
+        box: the pixels the map covers (:func:`streetaug.augment.render.footprint.shadow_pixel_box`).
         ratio_rgb: (h, w, 3) float32 per-channel ratio S in [0, 1], 1 = unchanged.
         stats: rays cast, pixels evaluated.
         foot_ratio: (3,) mean ratio on the ground under the object (used by the bounce model).
     """
 
-    x0: int
-    y0: int
+    box: PixelBox
     ratio_rgb: np.ndarray
     stats: dict = field(default_factory=dict)
     foot_ratio: np.ndarray | None = None
@@ -91,8 +90,8 @@ class GroundShadow:
         g_cam = g @ R.T + t
         uv, z = self.camera.project(g_cam)
         front = z > 1e-3
-        u = uv[:, 0] - self.shadow.x0
-        v = uv[:, 1] - self.shadow.y0
+        u = uv[:, 0] - self.shadow.box.x0
+        v = uv[:, 1] - self.shadow.box.y0
         h, w = self.shadow.ratio_rgb.shape[:2]
         inside = front & (u >= 0) & (u <= w - 1) & (v >= 0) & (v <= h - 1)
         sel = ok[inside]
@@ -143,7 +142,7 @@ def render_shadow(camera: PinholeCamera, box: PixelBox | None, depth_m: np.ndarr
     E = E_sky + E_sun
     stats: dict = {"rays": {}, "box": box.as_list()}
     if luminance(E) <= 0:
-        return ShadowMap(x0=box.x0, y0=box.y0, ratio_rgb=np.ones((box.height, box.width, 3), np.float32), stats=stats)
+        return ShadowMap(box=box, ratio_rgb=np.ones((box.height, box.width, 3), np.float32), stats=stats)
     E_safe = np.where(E > 0, E, np.inf)
     sky = _sky_occlusion(geo, box, light, prep, bounce, settings, rng, stats, E_safe)
     # -- sun: full resolution where the object's shadow can fall, refined at the shadow's edges.
@@ -155,7 +154,7 @@ def render_shadow(camera: PinholeCamera, box: PixelBox | None, depth_m: np.ndarr
     stats["foot_ratio"] = s_foot.tolist()
     ratio = np.clip(1.0 - sky.deficit - sun_def + sky.bounce_gain * s_foot.astype(np.float32)[None, None], 0.0, 1.0)
     ratio = np.where(ratio > 1.0 - 1e-4, 1.0, ratio).astype(np.float32)
-    return ShadowMap(x0=box.x0, y0=box.y0, ratio_rgb=ratio, stats=stats, foot_ratio=s_foot)
+    return ShadowMap(box=box, ratio_rgb=ratio, stats=stats, foot_ratio=s_foot)
 
 
 @dataclass(frozen=True)
