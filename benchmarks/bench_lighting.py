@@ -63,11 +63,10 @@ from streetaug.augment.core import (  # noqa: E402
     pixel_rays,
     transform_points,
 )
-from streetaug.augment.lighting.estimate import estimate_lighting  # noqa: E402
+from streetaug.augment.lighting.api import estimate_lighting, estimate_sample_lighting, estimate_views_lighting  # noqa: E402
 from streetaug.augment.lighting.exposure import auto_exposure_ev  # noqa: E402
 from streetaug.augment.lighting.levels import L3_GRID  # noqa: E402
 from streetaug.augment.lighting.light import DistantLight  # noqa: E402
-from streetaug.augment.lighting.multiview import estimate_sample_lighting, estimate_views_lighting  # noqa: E402
 from streetaug.augment.lighting.volume import sample_world_equirect  # noqa: E402
 from streetaug.augment.evaluation.metrics import env_log_error, psnr_db  # noqa: E402
 from streetaug.augment.scenegen.ground_truth import GroundTruthScene, ground_truth_light, read_ground_truth  # noqa: E402

@@ -67,7 +67,6 @@ from streetaug.augment.core import (  # noqa: E402
 )
 from streetaug.augment.core import write_image_rgb, write_json_atomic  # noqa: E402
 from streetaug.augment.lighting.sky import sky_radiance, sun_irradiance  # noqa: E402
-from streetaug.augment.lighting.skynet import data as D  # noqa: E402
 from streetaug.augment.lighting.skynet.dome import (  # noqa: E402
     angle_deg,
     camera_from_angles,
@@ -77,6 +76,7 @@ from streetaug.augment.lighting.skynet.dome import (  # noqa: E402
     panorama_to_dome,
     render_perspective,
 )
+from streetaug.augment.lighting.skynet.inputs import quantize_ldr  # noqa: E402
 from streetaug.augment.lighting.skynet.model import SkyModel, SkyNetConfig  # noqa: E402
 from streetaug.augment.lighting.skynet.predict import (  # noqa: E402
     decode_sky,
@@ -86,8 +86,9 @@ from streetaug.augment.lighting.skynet.predict import (  # noqa: E402
     refine_sky,
     sky_to_light,
 )
-from streetaug.augment.lighting.skynet.synth import splat_direction  # noqa: E402
 from streetaug.augment.lighting.skynet.weights import LIGHT_WEIGHTS, SKY_WEIGHTS, packaged_weights  # noqa: E402
+from streetaug.augment.training import data as D  # noqa: E402
+from streetaug.augment.training.synth import splat_direction  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 HDRI = D.default_hdri_dir()
@@ -253,7 +254,7 @@ def section_reconstruction(panos, gt, sky_model) -> dict:
             dome = D.expose_dome(panorama_to_dome(panos[name], H, W, np.radians(yaw)), None)
             g = _rz(np.radians(yaw)).T @ gt[name]
             rec = decode_sky(encode_dome(dome, sky_model), sky_model)
-            par = parametric_fit(D.quantize_ldr(dome))
+            par = parametric_fit(quantize_ldr(dome))
             for rows, pred in ((rows_l, rec), (rows_p, par)):
                 rows["mse"].append(float(np.mean((np.log1p(np.maximum(pred, 0)) - np.log1p(dome)) ** 2)))
                 rows["err"].append(float(angle_deg(find_peak(pred), g)))
@@ -282,7 +283,7 @@ def make_views(pano, gt_dir, quick=False):
 
 
 def section_single_image(panos, gt, models, quick=False) -> tuple[dict, list]:
-    from streetaug.augment.lighting.estimate import estimate_lighting_from_image
+    from streetaug.augment.lighting.api import estimate_lighting_from_image
 
     K = intrinsics_from_fov(VIEW_W, VIEW_H, VIEW_FOV)
     rows = []

@@ -24,17 +24,10 @@ import numpy as np
 from .volume import LogGrid
 
 LEVELS = ("L0", "L1", "L2", "L3")
-LEVEL_CHOICES = (*LEVELS, "auto")
 AUTO_TOLERANCE = 0.05
 L3_GRID = LogGrid(shape=(128, 128, 32), half_extent_xy_m=150.0, z_min_m=-4.0, z_max_m=76.0)
 L2_GRID = LogGrid(shape=(64, 64, 24), half_extent_xy_m=40.0, z_min_m=-4.0, z_max_m=36.0, log_scale_xy_m=3.0)
 WALL_RHO = 0.25  # assumed albedo of occluders when predicting the light they reflect
-
-
-def check_level(level: str) -> str:
-    if level not in LEVEL_CHOICES:
-        raise ValueError(f"level must be one of {', '.join(LEVEL_CHOICES)}, got {level!r}")
-    return level
 
 
 @dataclass(frozen=True)

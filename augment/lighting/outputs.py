@@ -9,14 +9,16 @@ import cv2
 import numpy as np
 
 from ..core import (
+    camera_dir_to_lonlat,
     camera_envmap_directions,
     check_shape,
     equirect_solid_angles,
     hdr_to_ldr_uint8,
     luminance,
+    sample_equirect,
 )
 from ..core import write_exr, write_image_rgb, write_json_atomic
-from .estimate import LightingEstimate
+from .types import LightingEstimate
 
 LIGHTING_SCHEMA = "streetaug.lighting/1"
 DEFAULT_QUERY_POINT_CAM = (0.0, 1.5, 15.0)  # ground 15 m ahead of a camera 1.5 m above it
@@ -45,8 +47,6 @@ def diffuse_sphere(env: np.ndarray, size: int, albedo: float = 0.8) -> np.ndarra
 
 def mirror_sphere(env: np.ndarray, size: int) -> np.ndarray:
     """Mirror sphere (size, size, 3) radiance: reflection of the view ray (+z) about the normal."""
-    from ..core import camera_dir_to_lonlat, sample_equirect
-
     normals, inside = _sphere_normals(size)
     view = np.array([0.0, 0.0, 1.0])  # ray from the camera into the scene
     n = normals.reshape(-1, 3)
@@ -126,7 +126,7 @@ def write_lighting_outputs(
     if extra_timing_s:
         timing.update(extra_timing_s)
     files = {"envmap_camera": "envmap_camera.exr", "preview": "preview.png"}
-    hybrid = getattr(estimate, "hybrid", None)
+    hybrid = estimate.hybrid
     if save_hybrid and hybrid is not None and hybrid.params is not None:
         hybrid.save(out / "hybrid", extra={
             "T_vol_from_camera": np.asarray(estimate.T_vol_from_cam).tolist(),

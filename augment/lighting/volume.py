@@ -32,10 +32,16 @@ import numpy as np
 import torch
 
 from ..core import (
+    InputError,
     camera_envmap_directions,
     check_shape,
     equirect_pixel_lonlat,
     lonlat_to_world_dir,
+    read_exr,
+    read_json,
+    write_bytes_atomic,
+    write_exr,
+    write_json_atomic,
 )
 
 N_CHANNELS = 8
@@ -410,8 +416,6 @@ class HybridLighting:
 
         Empty voxels (alpha 0) do not affect the radiance; they load back as :func:`empty_params` voxels.
         """
-        from ..core import write_bytes_atomic, write_exr, write_json_atomic
-
         out = Path(out_dir)
         write_exr(out / "sky_world.exr", self.sky_world.detach().numpy().astype(np.float32))
         files = {"sky_world": "sky_world.exr"}
@@ -447,8 +451,6 @@ class HybridLighting:
     @staticmethod
     def load(in_dir: str | Path) -> "HybridLighting":
         """Read what :meth:`save` wrote (raises ``InputError`` naming the file and field on bad input)."""
-        from ..core import InputError, read_exr, read_json
-
         d = Path(in_dir)
         doc = read_json(d / "hybrid.json")
         if doc.get("schema") != VOLUME_SCHEMA:

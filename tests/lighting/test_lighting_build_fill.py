@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from streetaug.augment.lighting.build import DistantSun, ViewObservation, _ego_forward, build_volume
+from streetaug.augment.lighting.build import DistantSun, build_volume
+from streetaug.augment.lighting.observe import ViewObservation, ego_forward_vol
 from streetaug.augment.lighting.fill import lateral_offsets_m, street_axis_xy, street_extrusion
 from streetaug.augment.lighting.volume import HybridLighting, LogGrid
 from streetaug.augment.core import make_transform, yaw_to_quat
@@ -56,7 +57,7 @@ def test_ego_forward_in_the_volume_frame():
         T_global_from_cam = T_global_from_ego @ make_transform(yaw_to_quat(np.radians(90.0)), [0.0, 1.0, 1.5])
 
     T_vol_from_cam = make_transform(yaw_to_quat(np.radians(90.0)), [0.0, 0.0, 1.5])  # volume = ego yawed
-    f = _ego_forward(View(), T_vol_from_cam)
+    f = ego_forward_vol(View(), T_vol_from_cam)
     assert np.allclose(f, [1.0, 0.0, 0.0], atol=1e-9)
 
 

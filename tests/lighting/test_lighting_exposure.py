@@ -10,7 +10,7 @@ import pytest
 
 from streetaug.augment.core import hdr_to_ldr, hdr_to_ldr_uint8, ldr_uint8_to_hdr
 from streetaug.augment.lighting.exposure import auto_exposure_ev, exposure_ratios
-from streetaug.augment.lighting.multiview import estimate_views_lighting
+from streetaug.augment.lighting.api import estimate_views_lighting
 from streetaug.datasets.bundled import BUNDLED_VERSION, bundled_dataroot
 from streetaug.datasets.nuscenes import NuScenesReader
 

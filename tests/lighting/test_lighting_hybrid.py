@@ -21,17 +21,18 @@ from streetaug.augment.core import (
     yaw_to_quat,
 )
 from streetaug.augment.core import InputError, read_exr
-from streetaug.augment.lighting.build import (
-    ViewObservation,
-    build_sky_dome,
-    extend_facades,
-    structure_heights,
+from streetaug.augment.lighting.api import (
+    estimate_lighting,
+    estimate_lighting_from_image,
+    estimate_sample_lighting,
+    estimate_views_lighting,
 )
-from streetaug.augment.lighting.estimate import estimate_lighting, estimate_lighting_from_image
+from streetaug.augment.lighting.build import structure_heights
 from streetaug.augment.lighting.levels import L3_GRID, HeightMap, choose_level, predicted_errors, region_points
-from streetaug.augment.lighting.multiview import estimate_sample_lighting, estimate_views_lighting
+from streetaug.augment.lighting.observe import ViewObservation, extend_facades
 from streetaug.augment.lighting.outputs import write_lighting_outputs
 from streetaug.augment.lighting.sky import make_sky_light
+from streetaug.augment.lighting.skydome import build_sky_dome
 from streetaug.augment.lighting.sun import sun_direction_global
 from streetaug.augment.lighting.volume import HybridLighting
 from streetaug.datasets.sample import CameraView, LidarSweep

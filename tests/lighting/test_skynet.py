@@ -15,7 +15,6 @@ import torch
 
 from streetaug.augment.core import hdr_to_ldr, intrinsics_from_fov, luminance
 from streetaug.augment.core import InputError
-from streetaug.augment.lighting.skynet import data as D
 from streetaug.augment.lighting.skynet.dome import (
     angle_deg,
     camera_from_angles,
@@ -28,6 +27,7 @@ from streetaug.augment.lighting.skynet.dome import (
     peak_centroid,
     render_perspective,
 )
+from streetaug.augment.lighting.skynet.inputs import VIEW_SIZE, view_rays
 from streetaug.augment.lighting.skynet.model import SkyModel, SkyNetConfig
 from streetaug.augment.lighting.skynet.predict import (
     SkyVector,
@@ -39,7 +39,6 @@ from streetaug.augment.lighting.skynet.predict import (
     sky_to_light,
     split_sun,
 )
-from streetaug.augment.lighting.skynet.synth import SynthSky, random_sky, random_waves, splat_direction
 from streetaug.augment.lighting.skynet.weights import (
     SKY_WEIGHTS,
     load_state,
@@ -47,6 +46,8 @@ from streetaug.augment.lighting.skynet.weights import (
     read_weights,
     save_weights,
 )
+from streetaug.augment.training import data as D
+from streetaug.augment.training.synth import SynthSky, random_sky, random_waves, splat_direction
 
 HDRI = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "hdri"
 needs_hdri = pytest.mark.skipif(not (HDRI / "index.json").is_file(), reason=f"{HDRI} (real HDR panoramas) not present")
@@ -357,7 +358,8 @@ class TestLightAndRefine:
 
 @needs_hdri
 def test_train_sky_one_step_smoke(tmp_path):
-    from streetaug.augment.lighting.skynet.train import SkyTrainConfig, load_sky_model, train_sky
+    from streetaug.augment.lighting.skynet.weights import load_sky_model
+    from streetaug.augment.training.train import SkyTrainConfig, train_sky
 
     cfg = SkyTrainConfig(steps=1, batch=2, n_synth=3, threads=1, ckpt_every=1, val_every=1,
                          out=str(tmp_path / "sky.pt"), cache_dir=str(tmp_path), hdri_dir=str(HDRI))
@@ -371,7 +373,8 @@ def test_train_sky_one_step_smoke(tmp_path):
 def test_train_light_two_steps_then_resume(tmp_path):
     """The image predictor trains through the shared loop, checkpoints, and a rerun resumes instead of redoing."""
     from streetaug.augment.lighting.skynet.model import LightNet
-    from streetaug.augment.lighting.skynet.train import LightTrainConfig, load_light_model, train_light
+    from streetaug.augment.lighting.skynet.weights import load_light_model
+    from streetaug.augment.training.train import LightTrainConfig, train_light
 
     cfg = LightTrainConfig(steps=2, batch=2, n_streets=0, n_crops=4, mix=(0.0, 0.5, 0.5), threads=1, ckpt_every=1,
                            val_every=1, out=str(tmp_path / "light.pt"), cache_dir=str(tmp_path), hdri_dir=str(HDRI))
@@ -389,7 +392,7 @@ def test_train_light_two_steps_then_resume(tmp_path):
 @needs_hdri
 def test_light_loss_smoke(models):
     from streetaug.augment.lighting.skynet.model import LightNet
-    from streetaug.augment.lighting.skynet.train import LightBatches, light_losses
+    from streetaug.augment.training.train import LightBatches, light_losses
 
     panos = D.load_panoramas(HDRI, ("city",))
     rng = np.random.default_rng(0)
@@ -405,7 +408,7 @@ def test_light_loss_smoke(models):
 def test_mirrored_view_is_consistent():
     v = D.synthetic_sky_view(np.random.default_rng(4), (32, 128))
     f = D.flip_view(v)
-    rays, rays_f = D.view_rays(v.K, v.R_heading_from_cam, 96, 160), D.view_rays(f.K, f.R_heading_from_cam, 96, 160)
+    rays, rays_f = view_rays(v.K, v.R_heading_from_cam, 96, 160), view_rays(f.K, f.R_heading_from_cam, 96, 160)
     # pixel (i, j) of the mirror sees the mirror image (heading y -> -y) of what pixel (w-1-i, j) saw
     np.testing.assert_allclose(rays_f, rays[:, :, ::-1] * np.array([1.0, -1.0, 1.0])[:, None, None], atol=1e-6)
     np.testing.assert_array_equal(f.dome, v.dome[:, ::-1])
@@ -416,9 +419,9 @@ def test_sky_mask_keeps_a_sky_darkening_towards_the_top():
     """Facing away from a low sun the sky is darkest at the top of the image; it must still count as sky."""
     from streetaug.augment.lighting.skynet.predict import simple_sky_mask
 
-    h, w = D.VIEW_SIZE
+    h, w = VIEW_SIZE
     K = intrinsics_from_fov(w, h, 70.0)
-    rays_h = D.view_rays(K, heading_from_camera(np.array([0.0, -1.0, 0.0])), h, w).transpose(1, 2, 0).astype(np.float64)
+    rays_h = view_rays(K, heading_from_camera(np.array([0.0, -1.0, 0.0])), h, w).transpose(1, 2, 0).astype(np.float64)
     el = np.degrees(np.arcsin(rays_h[..., 2]))
     x = np.arange(w)[None, :] * np.ones((h, 1))
     # LDR 0.8 at the horizon down to 0.5 at the top row, a mild ripple along it; dark ground

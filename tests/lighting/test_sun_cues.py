@@ -5,14 +5,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from streetaug.augment.core import hdr_to_ldr, intrinsics_from_fov, luminance
+from streetaug.augment.core import PinholeCamera, hdr_to_ldr, intrinsics_from_fov, luminance
 from streetaug.augment.lighting import sky as S
 from streetaug.augment.lighting.skynet.dome import angle_deg, camera_from_angles, dome_directions, heading_from_camera
 from streetaug.augment.lighting.skynet.sun_cues import (
     clear_sky_log_rgb,
     detect_sun_disc,
     glare_extent_deg,
-    image_rays_cam,
     in_view_sky_loglik,
     sky_fit_loglik,
 )
@@ -35,7 +34,7 @@ def _render(sun_world, yaw_deg=0.0, pitch_deg=0.0, turbidity=3.0, cloud_cover=0.
     """
     K = intrinsics_from_fov(W, H, FOV)
     R = camera_from_angles(np.radians(yaw_deg), np.radians(pitch_deg), 0.0)
-    d = image_rays_cam(K, H, W).reshape(-1, 3) @ R.T
+    d = PinholeCamera(K, W, H).rays().reshape(-1, 3) @ R.T
     rad = S.sky_radiance(d, sun_world, turbidity, cloud_cover)
     if glare and sun_world[2] > 0 and cloud_cover < 0.5:
         e = S.sun_irradiance(sun_world, turbidity, cloud_cover)
@@ -114,7 +113,7 @@ def test_detector_ignores_blown_out_sky_and_sky_between_buildings(cloud_cover, o
 
 def _fit(image, K, up, candidates_h):
     R = heading_from_camera(up)
-    rays_h = image_rays_cam(K, *image.shape[:2]) @ R.T
+    rays_h = PinholeCamera(K, image.shape[1], image.shape[0]).rays() @ R.T
     mask = rays_h[..., 2] > np.sin(np.radians(2.0))  # all of the sky (the test image has no occluders)
     return sky_fit_loglik(image, rays_h, mask, candidates_h)
 
@@ -166,7 +165,7 @@ def test_glare_extent_is_the_radius_of_the_clipped_region_under_the_direction():
     yy, xx = np.mgrid[:96, :160]
     image[(xx - 40) ** 2 + (yy - 30) ** 2 <= 4] = 255  # a compact blob (radius ~2 px ~ 1 deg)
     image[60:66, :] = 255  # a band of clipped horizon glow across the whole image
-    rays = image_rays_cam(K, 96, 160)
+    rays = PinholeCamera(K, 160, 96).rays()
     blob = glare_extent_deg(image, K, rays[30, 40])
     band = glare_extent_deg(image, K, rays[62, 80])
     assert blob is not None and blob < 3.0

@@ -1,7 +1,10 @@
 """The learned sky model and single-image sky predictor (issue 5; see ``MODEL_CARD.md`` beside this file).
 
-Modules: :mod:`.dome` (sky-dome geometry, panoramas, peaks), :mod:`.synth` (procedural training skies),
-:mod:`.model` (networks), :mod:`.weights` (safe weight files), :mod:`.data` and :mod:`.train` (training
-data and loops of ``streetaug train-sky`` / ``train-light``), :mod:`.predict` (inference API:
-``predict_sky``, ``refine_sky``, ``sky_to_light``).  Importing this package does not import torch.
+Modules: :mod:`.dome` (sky-dome geometry, panoramas, peaks), :mod:`.model` (networks), :mod:`.weights` (safe
+weight files and the shipped models' loaders), :mod:`.inputs` (the predictor's input view and rays),
+:mod:`.sun_cues` (explicit sun cues: disc, clear-sky fit), :mod:`.predict` (inference API: ``predict_sky``,
+``refine_sky``, ``sky_to_light``, ``estimate_sky_light``). Training lives in :mod:`streetaug.augment.training`.
+Importing this package does not import torch.
 """
+
+__all__: list[str] = []  # a namespace of modules: import them directly (they import torch)

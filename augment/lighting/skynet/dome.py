@@ -28,8 +28,7 @@ import cv2
 import numpy as np
 from scipy import ndimage
 
-from ...core import check_shape, lonlat_to_world_dir, luminance, world_dir_to_lonlat
-from ...core import InputError
+from ...core import InputError, check_shape, lonlat_to_world_dir, luminance, sample_equirect, world_dir_to_lonlat
 
 PEAK_PERCENTILE = 98.0  # the peak region: luminance >= this percentile (as shared/data/hdri/index.json)
 
@@ -167,8 +166,6 @@ def render_perspective(pano_world: np.ndarray, K: np.ndarray, R_world_from_cam: 
 
     K (3, 3): pixel centres at integers; R_world_from_cam (3, 3): OpenCV camera to world.
     """
-    from ...core import sample_equirect
-
     s = max(int(supersample), 1)
     off = (np.arange(s) + 0.5) / s - 0.5
     u, v = np.meshgrid((np.arange(width)[:, None] + off[None]).ravel(), (np.arange(height)[:, None] + off[None]).ravel())

@@ -25,11 +25,17 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
+import torch
+import torch.nn.functional as F
 
-from ...core import check_shape, ldr_uint8_to_hdr, luminance, camera_envmap_directions
+from ...core import camera_envmap_directions, check_shape, ldr_uint8_to_hdr, luminance, pixel_rays
+from ..evidence import sky_mask
 from ..light import DistantLight, SunLight
 from .dome import dome_directions, dome_pixel_size_rad, dome_solid_angles, heading_from_camera, sample_dome
+from .inputs import VIEW_SIZE, quantize_ldr, resize_view, view_rays
 from .model import direction_cone_deg
+from .sun_cues import detect_sun_disc, glare_extent_deg, in_view_sky_loglik, sky_fit_loglik
+from .weights import load_light_model, load_sky_model
 
 VISIBILITY_MIN = 0.3  # below: no sun is reported (overcast, night, hidden)
 UNCERTAINTY_MAX_DEG = 35.0  # above (68 % cone): the direction is too uncertain to report a sun
@@ -113,29 +119,16 @@ class SkyPrediction:
 
 def get_models(sky_weights: str | Path | None = None, light_weights: str | Path | None = None):
     """(sky model, image predictor), loaded once per process (thread-safe) and kept in eval mode."""
-    from .train import load_light_model, load_sky_model
-
     key = (str(sky_weights), str(light_weights))
     with _lock:
         if key not in _models:
-            import torch
-
             torch.set_grad_enabled(True)
             _models[key] = (load_sky_model(sky_weights), load_light_model(light_weights))
         return _models[key]
 
 
-def _torch():
-    import torch
-
-    return torch
-
-
 def encode_dome(dome_hdr: np.ndarray, sky_model=None) -> SkyVector:
     """Sky vector of an HDR dome (H, W, 3) on its LDR's scale (the encoder sees ``hdr_to_ldr(dome)``)."""
-    from .data import quantize_ldr
-
-    torch = _torch()
     model = sky_model or get_models()[0]
     check_shape(dome_hdr, (model.cfg.height, model.cfg.width, 3), "dome")
     ldr = torch.from_numpy(quantize_ldr(dome_hdr).transpose(2, 0, 1)[None].copy())
@@ -150,7 +143,6 @@ def _decode_log(sky_model, log_int, direction, latent):
 
 def decode_sky(sky: SkyVector, sky_model=None) -> np.ndarray:
     """HDR dome (H, W, 3) float32 (heading frame) decoded from a sky vector."""
-    torch = _torch()
     model = sky_model or get_models()[0]
     li = torch.from_numpy(np.log1p(np.maximum(sky.intensity_rgb, 0.0))[None]).float()
     d = torch.from_numpy(np.asarray(sky.direction)[None]).float()
@@ -180,8 +172,6 @@ def simple_sky_mask(ldr: np.ndarray, rays_h: np.ndarray) -> np.ndarray:
     the sky darkens towards the top of the image, and a higher percentile (40 until v2) left no sky to fit.
     ``ldr`` (h, w, 3) float in [0, 1]; ``rays_h`` (h, w, 3) heading-frame unit rays.
     """
-    from ..estimate import sky_mask
-
     elevation = np.arcsin(np.clip(rays_h[..., 2], -1.0, 1.0))
     return sky_mask(ldr, elevation, min_elevation_deg=2.0, min_lum=0.25, bright_percentile=10.0, max_grad=0.15)
 
@@ -192,6 +182,44 @@ def _posterior_direction(p: np.ndarray, bins: np.ndarray) -> np.ndarray:
     near = bins @ mode >= np.cos(np.radians(20.0))
     d = (p[near, None] * bins[near]).sum(axis=0)
     return d / np.linalg.norm(d)
+
+
+def _clear_sky_posterior(small: np.ndarray, rays_h: np.ndarray, Ks: np.ndarray, R_heading_from_cam: np.ndarray,
+                         p: np.ndarray, bins: np.ndarray) -> np.ndarray:
+    """The network's direction distribution ``p`` (n,) over ``bins`` (n, 3) (heading frame) to the power
+    ``CNN_WEIGHT``, times the clear-sky fit's likelihood on the view ``small`` (h, w, 3) uint8 (rays ``rays_h``
+    (h, w, 3), intrinsics ``Ks``) and the "not on bright unclipped pixels in view" term; normalised."""
+    ldr_s = small.astype(np.float64) / 255.0
+    mask = simple_sky_mask(ldr_s, rays_h)
+    loglik, _ = sky_fit_loglik(small, rays_h, mask, bins, temperature=FIT_TEMPERATURE)
+    # the sun would clip the pixel it sits on: bright unclipped pixels above the horizon are not it
+    no_sun = ((ldr_s.max(axis=-1) < SATURATED_LDR) & (luminance(ldr_s) > 0.25)
+              & (rays_h[..., 2] > np.sin(np.radians(-1.0))))
+    loglik = loglik + in_view_sky_loglik(bins, R_heading_from_cam, Ks, no_sun, IN_VIEW_PENALTY)
+    logp = CNN_WEIGHT * np.log(np.maximum(p, 1e-12)) + loglik
+    p = np.exp(logp - logp.max())
+    return p / p.sum()
+
+
+def _decide(sky: SkyVector, R: np.ndarray, vis_used: float, unc: float, cue: str, sky_model) -> SkyPrediction:
+    """Report the sun if visible enough, certain enough and above the horizon; else a diffuse sky (the peak's
+    intensity lowered to the surrounding sky)."""
+    direction = sky.direction
+    direction_cam = R.T @ direction
+    reasons = []
+    if vis_used < VISIBILITY_MIN:
+        reasons.append(f"sun visibility {vis_used:.2f} < {VISIBILITY_MIN}")
+    if unc > UNCERTAINTY_MAX_DEG:
+        reasons.append(f"direction uncertainty {unc:.0f} deg > {UNCERTAINTY_MAX_DEG:.0f}")
+    if direction[2] < -0.02:
+        reasons.append("peak below the horizon")
+    if not reasons:
+        reason = f"sun from the image ({cue}): visibility {vis_used:.2f}, 68% cone {unc:.0f} deg"
+        return SkyPrediction(sky, sky, R, direction_cam, vis_used, direction_cam, vis_used, unc, True, reason)
+    dome = decode_sky(sky, sky_model)
+    diffuse = replace(sky, intensity_rgb=_diffuse_intensity(dome, direction))
+    reason = f"no reliable sun in the image ({cue}: " + "; ".join(reasons) + "): diffuse sky"
+    return SkyPrediction(diffuse, sky, R, None, 0.0, direction_cam, vis_used, unc, False, reason)
 
 
 def predict_sky(image_rgb: np.ndarray, K: np.ndarray, up_cam: np.ndarray | None = None,
@@ -212,10 +240,6 @@ def predict_sky(image_rgb: np.ndarray, K: np.ndarray, up_cam: np.ndarray | None 
             glare); a cone still <= ``GLARE_MAX_UNCERTAINTY_DEG`` there counts as a seen sun
             (visibility >= ``GLARE_VISIBILITY``).  False: the network alone.
     """
-    from .data import VIEW_SIZE, resize_view, view_rays
-    from .sun_cues import detect_sun_disc, glare_extent_deg, in_view_sky_loglik, sky_fit_loglik
-
-    torch = _torch()
     image_rgb = np.asarray(image_rgb)
     check_shape(image_rgb, ("H", "W", 3), "image_rgb")
     if image_rgb.dtype != np.uint8:
@@ -247,17 +271,7 @@ def predict_sky(image_rgb: np.ndarray, K: np.ndarray, up_cam: np.ndarray | None 
         cue = f"sun disc at pixel ({disc.pixel_xy[0]:.0f}, {disc.pixel_xy[1]:.0f})"
     else:
         if use_cues:
-            ldr_s = small.astype(np.float64) / 255.0
-            rays_h = rays[0].numpy().transpose(1, 2, 0).astype(np.float64)
-            mask = simple_sky_mask(ldr_s, rays_h)
-            loglik, _ = sky_fit_loglik(small, rays_h, mask, bins, temperature=FIT_TEMPERATURE)
-            # the sun would clip the pixel it sits on: bright unclipped pixels above the horizon are not it
-            no_sun = ((ldr_s.max(axis=-1) < SATURATED_LDR) & (luminance(ldr_s) > 0.25)
-                      & (rays_h[..., 2] > np.sin(np.radians(-1.0))))
-            loglik = loglik + in_view_sky_loglik(bins, R, Ks, no_sun, IN_VIEW_PENALTY)
-            logp = CNN_WEIGHT * np.log(np.maximum(p, 1e-12)) + loglik
-            p = np.exp(logp - logp.max())
-            p /= p.sum()
+            p = _clear_sky_posterior(small, rays[0].numpy().transpose(1, 2, 0).astype(np.float64), Ks, R, p, bins)
             direction = _posterior_direction(p, bins)
             cue = "network x clear-sky fit"
         unc = direction_cone_deg(p, bins, direction)
@@ -271,23 +285,7 @@ def predict_sky(image_rgb: np.ndarray, K: np.ndarray, up_cam: np.ndarray | None 
             vis_used = max(vis, GLARE_VISIBILITY)  # the fitted sun sits in a compact clipped glare: seen
     t3 = time.perf_counter()
     sky = SkyVector(np.expm1(o["log_int"][0].double().numpy()), direction, o["latent"][0].double().numpy())
-    direction_cam = R.T @ direction
-    reasons = []
-    if vis_used < VISIBILITY_MIN:
-        reasons.append(f"sun visibility {vis_used:.2f} < {VISIBILITY_MIN}")
-    if unc > UNCERTAINTY_MAX_DEG:
-        reasons.append(f"direction uncertainty {unc:.0f} deg > {UNCERTAINTY_MAX_DEG:.0f}")
-    if direction[2] < -0.02:
-        reasons.append("peak below the horizon")
-    confident = not reasons
-    if confident:
-        reason = f"sun from the image ({cue}): visibility {vis_used:.2f}, 68% cone {unc:.0f} deg"
-        out = SkyPrediction(sky, sky, R, direction_cam, vis_used, direction_cam, vis_used, unc, True, reason)
-    else:
-        dome = decode_sky(sky, sky_model)
-        diffuse = replace(sky, intensity_rgb=_diffuse_intensity(dome, direction))
-        reason = f"no reliable sun in the image ({cue}: " + "; ".join(reasons) + "): diffuse sky"
-        out = SkyPrediction(diffuse, sky, R, None, 0.0, direction_cam, vis_used, unc, False, reason)
+    out = _decide(sky, R, vis_used, unc, cue, sky_model)
     timing = {"prepare": t1 - t0, "network": t2 - t1, "cues": t3 - t2, "total": time.perf_counter() - t0}
     return replace(out, timing_s=timing)
 
@@ -295,10 +293,8 @@ def predict_sky(image_rgb: np.ndarray, K: np.ndarray, up_cam: np.ndarray | None 
 # ----------------------------------------------------------------------------- refinement
 
 
-def _grid_sample_dome(torch, log_dome, dirs_h):
+def _grid_sample_dome(log_dome, dirs_h):
     """Bilinear lookup (N, 3) of a (1, 3, H, W) dome at heading-frame directions (N, 3) (torch, differentiable)."""
-    import torch.nn.functional as F
-
     H, W = log_dome.shape[2:]
     padded = torch.cat([log_dome[..., -1:], log_dome, log_dome[..., :1]], dim=3)  # wrap in longitude
     lon = torch.atan2(dirs_h[:, 1], dirs_h[:, 0])
@@ -332,7 +328,6 @@ def refine_sky(sky: SkyVector, image_rgb: np.ndarray, K: np.ndarray, sky_mask: n
     Returns the refined sky vector (same frame).  Unsaturated sky pixels are fitted in ``log1p`` HDR;
     saturated ones (LDR >= 0.97) only push the sky up to at least their value.
     """
-    torch = _torch()
     image_rgb = np.asarray(image_rgb)
     check_shape(image_rgb, ("H", "W", 3), "image_rgb")
     sky_mask = np.asarray(sky_mask, dtype=bool)
@@ -350,8 +345,6 @@ def refine_sky(sky: SkyVector, image_rgb: np.ndarray, K: np.ndarray, sky_mask: n
     if len(jj) > REFINE_MAX_PIXELS:  # deterministic subsample
         sel = np.linspace(0, len(jj) - 1, REFINE_MAX_PIXELS).astype(np.int64)
         jj, ii = jj[sel], ii[sel]
-    from ...core import pixel_rays
-
     rays_h = pixel_rays(np.asarray(K, dtype=np.float64), np.stack([ii, jj], 1).astype(np.float64)) @ R.T
     above = rays_h[:, 2] > 0.0
     if above.sum() < 10:
@@ -378,7 +371,7 @@ def refine_sky(sky: SkyVector, image_rgb: np.ndarray, K: np.ndarray, sky_mask: n
     for _ in range(int(steps)):
         d = torch.nn.functional.normalize(d_raw, dim=1)
         log_dome = _decode_log(sky_model, li.clamp(min=0.0), d, z)
-        pred = _grid_sample_dome(torch, log_dome, dirs_t)
+        pred = _grid_sample_dome(log_dome, dirs_t)
         err = pred - target
         fit = torch.where(saturated[:, None], torch.relu(-err), err) ** 2
         loss = fit.mean() + prior_weight * (((z - z0) ** 2).mean() + 0.1 * ((li - li0) ** 2).mean())

@@ -27,8 +27,9 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from ...core import ldr_uint8_to_hdr, luminance, pixel_rays, scale_intrinsics
+from ...core import PinholeCamera, ldr_uint8_to_hdr, luminance, scale_intrinsics
 from .. import sky as _sky
+from ..evidence import sky_mask
 
 DISC_WIDTH_PX = 400  # the disc detector works on the image resized to this width
 SATURATED = 0.97  # LDR (max channel) at or above which a pixel counts as clipped
@@ -46,15 +47,6 @@ FIT_BAND_DEG = 3.0  # the nuisance is a free log offset per channel and elevatio
 FIT_N_EFF = 30.0  # independent pixels' worth of evidence in a fully covered, perfectly fitted sky
 FIT_LOSS_FLOOR = 0.2  # the evidence is divided by (floor + best loss): a poorly fitting sky says less
 FIT_FULL_COVERAGE = 0.25  # fraction of the image's pixels fitted for the full evidence (fewer: proportionally less)
-
-
-# ----------------------------------------------------------------------------- rays
-
-
-def image_rays_cam(K: np.ndarray, height: int, width: int) -> np.ndarray:
-    """(height, width, 3) float64 unit camera-frame rays of the pixel centres (integers) of an image with K."""
-    u, v = np.meshgrid(np.arange(width, dtype=np.float64), np.arange(height, dtype=np.float64))
-    return pixel_rays(np.asarray(K, dtype=np.float64), np.stack([u.ravel(), v.ravel()], axis=1)).reshape(height, width, 3)
 
 
 # ----------------------------------------------------------------------------- sun in view
@@ -106,8 +98,6 @@ def detect_sun_disc(image_rgb: np.ndarray, K: np.ndarray, up_cam: np.ndarray) ->
         K: (3, 3) intrinsics of ``image_rgb`` (pixel centres at integers).
         up_cam: (3,) unit gravity up, camera frame.
     """
-    from ..estimate import sky_mask
-
     H0, W0 = image_rgb.shape[:2]
     s = min(1.0, DISC_WIDTH_PX / W0)
     w, h = max(int(round(W0 * s)), 8), max(int(round(H0 * s)), 8)
@@ -118,7 +108,7 @@ def detect_sun_disc(image_rgb: np.ndarray, K: np.ndarray, up_cam: np.ndarray) ->
     hot = ((ldr.max(axis=-1) >= SATURATED) & (ldr.min(axis=-1) >= 0.8)).astype(np.uint8)
     if not hot.any():
         return None
-    rays = image_rays_cam(Ks, h, w)
+    rays = PinholeCamera(Ks, w, h).rays()
     up = np.asarray(up_cam, dtype=np.float64) / np.linalg.norm(up_cam)
     lum = luminance(ldr)
     sky = sky_mask(ldr, np.arcsin(np.clip(rays @ up, -1.0, 1.0)), min_elevation_deg=0.0, min_lum=0.2,
@@ -142,26 +132,8 @@ def detect_sun_disc(image_rgb: np.ndarray, K: np.ndarray, up_cam: np.ndarray) ->
             continue
         if not DISC_MIN_RADIUS_DEG <= np.degrees(r) <= DISC_MAX_RADIUS_DEG:
             continue
-        ang = np.arccos(np.clip(rays @ d, -1.0, 1.0))
-        # round around the core: the clipped region ends near the disc in most directions
-        sector_m = _ring_sectors(rays[m], d)
-        extent = np.array([ang[m][sector_m == k].max() if np.any(sector_m == k) else 0.0 for k in range(8)])
-        if np.sum(extent <= 1.6 * r + np.radians(0.5)) < 6:
-            continue
-        # bounded by glare, not by occluders (a patch of sky between trees or buildings)
-        ring0 = (ang >= r) & (ang < 1.5 * r + np.radians(0.5)) & (hot == 0)
-        if ring0.sum() < 4 or np.mean(lum[ring0] < 0.5) > 0.1:
-            continue
-        ring1 = (ang >= 1.2 * r + np.radians(0.3)) & (ang < 2.0 * r + np.radians(1.0))
-        ring3 = (ang >= 2.0 * r + np.radians(4.0)) & (ang < 2.0 * r + np.radians(16.0)) & sky
-        if ring1.sum() < 4 or ring3.sum() < 10:
-            continue
-        halo = float(lum[ring1].mean())
-        beyond = float(np.median(lum[ring3]))
-        sector = _ring_sectors(rays[ring1], d)
-        lit = np.array([lum[ring1][sector == k].mean() >= beyond + 0.5 * DISC_MIN_FALLOFF
-                        for k in range(8) if np.any(sector == k)])
-        if halo - beyond < DISC_MIN_FALLOFF or len(lit) < 4 or lit.mean() < 0.75:
+        halo = _glare_halo(rays, hot, lum, sky, m, d, r)
+        if halo is None:
             continue
         ys, xs = np.nonzero(core)
         clipped = bool(xs.min() == 0 or ys.min() == 0 or xs.max() == w - 1 or ys.max() == h - 1)
@@ -174,6 +146,36 @@ def detect_sun_disc(image_rgb: np.ndarray, K: np.ndarray, up_cam: np.ndarray) ->
     ys, xs = np.nonzero(core)
     pix = np.array([(xs.mean() + 0.5) / sx - 0.5, (ys.mean() + 0.5) / sy - 0.5])
     return SunDisc(d, pix, float(np.degrees(r)), float(unc), halo, clipped)
+
+
+def _glare_halo(rays: np.ndarray, hot: np.ndarray, lum: np.ndarray, sky: np.ndarray, blob: np.ndarray,
+                d: np.ndarray, r: float) -> float | None:
+    """The mean LDR luminance of the glare ring around a clipped ``blob`` (h, w) bool whose inscribed disc has
+    the centre ``d`` (3,) (camera frame) and radius ``r`` (rad), if the blob passes the roundness, bounded-by-glare
+    and glow tests of :func:`detect_sun_disc`; else None. ``rays`` (h, w, 3), ``hot`` / ``sky`` (h, w) masks,
+    ``lum`` (h, w) LDR luminance."""
+    ang = np.arccos(np.clip(rays @ d, -1.0, 1.0))
+    # round around the core: the clipped region ends near the disc in most directions
+    sector_m = _ring_sectors(rays[blob], d)
+    extent = np.array([ang[blob][sector_m == k].max() if np.any(sector_m == k) else 0.0 for k in range(8)])
+    if np.sum(extent <= 1.6 * r + np.radians(0.5)) < 6:
+        return None
+    # bounded by glare, not by occluders (a patch of sky between trees or buildings)
+    ring0 = (ang >= r) & (ang < 1.5 * r + np.radians(0.5)) & (hot == 0)
+    if ring0.sum() < 4 or np.mean(lum[ring0] < 0.5) > 0.1:
+        return None
+    ring1 = (ang >= 1.2 * r + np.radians(0.3)) & (ang < 2.0 * r + np.radians(1.0))
+    ring3 = (ang >= 2.0 * r + np.radians(4.0)) & (ang < 2.0 * r + np.radians(16.0)) & sky
+    if ring1.sum() < 4 or ring3.sum() < 10:
+        return None
+    halo = float(lum[ring1].mean())
+    beyond = float(np.median(lum[ring3]))
+    sector = _ring_sectors(rays[ring1], d)
+    lit = np.array([lum[ring1][sector == k].mean() >= beyond + 0.5 * DISC_MIN_FALLOFF
+                    for k in range(8) if np.any(sector == k)])
+    if halo - beyond < DISC_MIN_FALLOFF or len(lit) < 4 or lit.mean() < 0.75:
+        return None
+    return halo
 
 
 def _ring_sectors(rays: np.ndarray, d: np.ndarray) -> np.ndarray:
@@ -237,6 +239,27 @@ def clear_sky_log_rgb(dirs_h: np.ndarray, sun_dirs_h: np.ndarray, turbidity: flo
     return np.stack([np.log(np.maximum(M[c, 0] * X + M[c, 1] * Y + M[c, 2] * Z, floor)) for c in range(3)], axis=-1)
 
 
+def _nuisance_residual(r0: np.ndarray, onehot: np.ndarray | None, haze: np.ndarray, c: np.float32) -> np.ndarray:
+    """The residual (N, M, 3) of log sky pixels minus the clear-sky model ``r0`` (N, M, 3) after removing the
+    nuisance, fitted by 3 rounds of Cauchy-reweighted least squares (clouds are outliers): a free offset per
+    elevation band (``onehot`` (N, bands) membership), or, without bands, an exposure plus a horizon haze
+    ``b >= 0`` times ``haze`` (N, 1, 1); per candidate and channel."""
+    wts = np.ones_like(r0)
+    for _ in range(3):
+        if onehot is not None:  # per band, candidate and channel: the weighted mean residual
+            n = len(r0)
+            sw = onehot.T @ wts.reshape(n, -1)
+            sr = onehot.T @ (wts * r0).reshape(n, -1)
+            r = r0 - (onehot @ (sr / np.maximum(sw, 1e-6))).reshape(r0.shape)
+        else:
+            sw, sh, shh = wts.sum(0), (wts * haze).sum(0), (wts * haze * haze).sum(0)
+            sr, shr = (wts * r0).sum(0), (wts * haze * r0).sum(0)
+            b = np.maximum((sw * shr - sh * sr) / np.maximum(sw * shh - sh * sh, 1e-6), 0.0)
+            r = r0 - ((sr - b * sh) / sw)[None] - b[None] * haze
+        wts = 1.0 / (1.0 + (r / c) ** 2)
+    return r
+
+
 def sky_fit_loglik(image_small: np.ndarray, rays_h: np.ndarray, sky_mask: np.ndarray, sun_dirs_h: np.ndarray,
                    turbidities: tuple[float, ...] = FIT_TURBIDITIES, temperature: float = 1.0,
                    max_pixels: int = FIT_MAX_PIXELS, band_deg: float | None = FIT_BAND_DEG) -> tuple[np.ndarray, dict]:
@@ -284,6 +307,7 @@ def sky_fit_loglik(image_small: np.ndarray, rays_h: np.ndarray, sky_mask: np.nda
     y = np.log(np.maximum(ldr_uint8_to_hdr(image_small.reshape(-1, 3)[idx][None])[0].astype(np.float64), 1e-5))
     y = y.astype(np.float32)
     elevation = np.arcsin(np.clip(d[:, 2], 0.0, 1.0))
+    onehot = None
     if band_deg is not None:
         band = np.floor(np.degrees(elevation) / band_deg).astype(np.int64)
         _, band = np.unique(band, return_inverse=True)
@@ -296,20 +320,8 @@ def sky_fit_loglik(image_small: np.ndarray, rays_h: np.ndarray, sky_mask: np.nda
     haze = np.exp(-elevation / np.radians(FIT_HAZE_SCALE_DEG)).astype(np.float32)
     haze = haze[:, None, None]
     for T in turbidities:
-        r0 = y[:, None, :] - clear_sky_log_rgb(d, sun_dirs_h, T, geometry)  # (N, M, 3)
-        wts = np.ones_like(r0)
-        for _ in range(3):  # weighted LS of the nuisance, re-weighted (Cauchy, IRLS): clouds are outliers
-            if band_deg is not None:  # per band, candidate and channel: the weighted mean residual
-                n = len(r0)
-                sw = onehot.T @ wts.reshape(n, -1)
-                sr = onehot.T @ (wts * r0).reshape(n, -1)
-                r = r0 - (onehot @ (sr / np.maximum(sw, 1e-6))).reshape(r0.shape)
-            else:
-                sw, sh, shh = wts.sum(0), (wts * haze).sum(0), (wts * haze * haze).sum(0)
-                sr, shr = (wts * r0).sum(0), (wts * haze * r0).sum(0)
-                b = np.maximum((sw * shr - sh * sr) / np.maximum(sw * shh - sh * sh, 1e-6), 0.0)
-                r = r0 - ((sr - b * sh) / sw)[None] - b[None] * haze
-            wts = 1.0 / (1.0 + (r / c) ** 2)
+        r = _nuisance_residual(y[:, None, :] - clear_sky_log_rgb(d, sun_dirs_h, T, geometry),
+                               onehot if band_deg is not None else None, haze, c)
         loss = np.log1p((r / c) ** 2).sum(axis=(0, 2), dtype=np.float64) / len(idx)
         better = loss < best
         best = np.where(better, loss, best)
@@ -366,5 +378,5 @@ def glare_extent_deg(image_small: np.ndarray, K_small: np.ndarray, d_cam: np.nda
     ids = np.unique(patch[patch > 0])
     if len(ids) == 0:
         return None
-    rays = image_rays_cam(K_small, h, w)[np.isin(labels, ids)]
+    rays = PinholeCamera(K_small, w, h).rays()[np.isin(labels, ids)]
     return float(np.degrees(np.arccos(np.clip(rays @ (d / np.linalg.norm(d)), -1.0, 1.0)).max()))

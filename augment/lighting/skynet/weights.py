@@ -18,6 +18,7 @@ import torch
 import torch.nn as nn
 
 from ...core import InputError, atomic_path
+from .model import LightNet, LightNetConfig, SkyModel, SkyNetConfig
 
 WEIGHTS_FORMAT = "streetaug.skynet/1"
 SKY_WEIGHTS = "sky_model_v1.pt"
@@ -104,3 +105,21 @@ def load_state(model: nn.Module, payload: dict, path: str | Path) -> nn.Module:
             raise InputError(f"{path}: parameter {name!r} contains NaN or Inf (corrupt or diverged training)")
     model.load_state_dict({k: v.to(own[k].dtype) for k, v in state.items()})
     return model
+
+
+def load_sky_model(path: str | Path | None = None) -> SkyModel:
+    """The sky model from a weights file (default: the package's), in eval mode."""
+    path = Path(path) if path else packaged_weights(SKY_WEIGHTS)
+    payload = read_weights(path, "sky")
+    model = SkyModel(SkyNetConfig.from_dict(payload["config"]))
+    load_state(model, payload, path)
+    return model.eval()
+
+
+def load_light_model(path: str | Path | None = None) -> LightNet:
+    """The image -> sky-vector predictor from a weights file (default: the package's), in eval mode."""
+    path = Path(path) if path else packaged_weights(LIGHT_WEIGHTS)
+    payload = read_weights(path, "light")
+    model = LightNet(LightNetConfig.from_dict(payload["config"]))
+    load_state(model, payload, path)
+    return model.eval()

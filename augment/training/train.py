@@ -30,7 +30,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from ...core import atomic_path, write_json_atomic
+from ..core import atomic_path, write_json_atomic
 from .data import (
     PANORAMA_SUN_VISIBILITY,
     TRAIN_PANORAMAS,
@@ -48,9 +48,17 @@ from .data import (
     synthetic_sky_pool,
     views_batch,
 )
-from .dome import angle_deg, find_peak, panorama_to_dome
-from .model import LightNet, LightNetConfig, SkyModel, SkyNetConfig, count_parameters
-from .weights import LIGHT_VERSION, LIGHT_WEIGHTS, SKY_WEIGHTS, packaged_weights, read_weights, load_state, save_weights
+from ..lighting.skynet.dome import angle_deg, find_peak, panorama_to_dome
+from ..lighting.skynet.model import LightNet, LightNetConfig, SkyModel, SkyNetConfig, count_parameters
+from ..lighting.skynet.weights import (
+    LIGHT_VERSION,
+    LIGHT_WEIGHTS,
+    SKY_WEIGHTS,
+    load_light_model,
+    load_sky_model,
+    packaged_weights,
+    save_weights,
+)
 
 SUNNY_VISIBILITY = 0.2  # views whose sun visibility exceeds this supervise the direction with the L1 loss
 PEAK_LOSS_WEIGHT = 20.0  # extra HDR-loss weight at the sky model's true peak
@@ -264,24 +272,6 @@ def train_sky(cfg: SkyTrainConfig, log=print) -> dict:
 
 
 # ----------------------------------------------------------------------------- image predictor
-
-
-def load_sky_model(path: str | Path | None = None) -> SkyModel:
-    """The sky model from a weights file (default: the package's), in eval mode."""
-    path = Path(path) if path else packaged_weights(SKY_WEIGHTS)
-    payload = read_weights(path, "sky")
-    model = SkyModel(SkyNetConfig.from_dict(payload["config"]))
-    load_state(model, payload, path)
-    return model.eval()
-
-
-def load_light_model(path: str | Path | None = None) -> LightNet:
-    """The image -> sky-vector predictor from a weights file (default: the package's), in eval mode."""
-    path = Path(path) if path else packaged_weights(LIGHT_WEIGHTS)
-    payload = read_weights(path, "light")
-    model = LightNet(LightNetConfig.from_dict(payload["config"]))
-    load_state(model, payload, path)
-    return model.eval()
 
 
 def soft_direction_targets(target: torch.Tensor, bin_dirs: torch.Tensor, bin_omega: torch.Tensor,

@@ -1,4 +1,4 @@
-"""Training and evaluation data the project makes itself: synthetic skies, real panoramas, camera views.
+"""Training and evaluation data of the learned sky (:mod:`streetaug.augment.lighting.skynet`), made by the project: synthetic skies, real panoramas, camera views.
 
 * Sky model: domes of synthetic skies (:mod:`.synth`, cached as one ``.npz`` under the cache folder)
   and of the real training panoramas (``shared/data/hdri``), with azimuth rotation, mirror flips,
@@ -23,9 +23,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from ...core import hdr_to_ldr, intrinsics_from_fov, luminance, scale_intrinsics
-from ...core import InputError, atomic_path
-from .dome import (
+from ..core import InputError, PinholeCamera, atomic_path, hdr_to_ldr, intrinsics_from_fov, luminance, make_transform
+from ..lighting.skynet.dome import (
     camera_from_angles,
     dome_directions,
     find_peak,
@@ -34,7 +33,11 @@ from .dome import (
     panorama_to_dome,
     render_perspective,
 )
-from .model import PEAK_DISC_THRESHOLD
+from ..lighting.skynet.inputs import VIEW_SIZE, quantize_ldr, resize_view, view_rays
+from ..lighting.skynet.model import PEAK_DISC_THRESHOLD
+from ..scenegen.make import choose_exposure
+from ..scenegen.render import StreetRenderer
+from ..scenegen.street import StreetParams, build_street
 from .synth import random_sky
 
 TRAIN_PANORAMAS = ("city", "dawn", "forest", "night")
@@ -44,7 +47,6 @@ PANORAMA_SUN_VISIBILITY = {"city": 0.0, "dawn": 0.0, "forest": 0.5, "night": 0.0
                            "venice": 0.0}
 DOME_MEDIAN_TARGET = 0.25  # sky-model exposure: the dome's median luminance -> this (LDR ~0.53) at EV 0
 VIEW_KEY_VALUE = 0.18  # camera auto-exposure: geometric mean luminance of a view -> this
-VIEW_SIZE = (96, 160)  # (h, w) of the image predictor's input
 CACHE_VERSION = 2  # 2: camera pitch sign fixed in dome.camera_from_angles (street and crop views)
 
 
@@ -59,7 +61,7 @@ def default_hdri_dir() -> Path:
     env = os.environ.get("STREETAUG_HDRI")
     if env:
         return Path(env)
-    return Path(__file__).resolve().parents[3].parent / "shared" / "data" / "hdri"
+    return Path(__file__).resolve().parents[2].parent / "shared" / "data" / "hdri"
 
 
 def load_panoramas(hdri_dir: str | Path, names: tuple[str, ...]) -> dict[str, np.ndarray]:
@@ -71,11 +73,6 @@ def load_panoramas(hdri_dir: str | Path, names: tuple[str, ...]) -> dict[str, np
 
 
 # ----------------------------------------------------------------------------- per-sample helpers
-
-
-def quantize_ldr(hdr: np.ndarray) -> np.ndarray:
-    """Linear HDR -> LDR float32 in [0, 1] through the contract's response, rounded to 8 bits."""
-    return (np.round(hdr_to_ldr(hdr) * 255.0) / 255.0).astype(np.float32)
 
 
 def white_balance_gains(rng: np.random.Generator, sigma: float = 0.08) -> np.ndarray:
@@ -269,9 +266,7 @@ def synthetic_sky_view(rng: np.random.Generator, dome_hw: tuple[int, int]) -> Vi
     K, yaw, pitch, roll = random_camera(rng, sky_bias=0.35)
     R_world_from_cam = camera_from_angles(yaw, pitch, roll)
     h, w = VIEW_SIZE
-    u, v = np.meshgrid(np.arange(w), np.arange(h))
-    rays = np.stack([u, v, np.ones_like(u)], -1).reshape(-1, 3).astype(np.float64) @ np.linalg.inv(K).T
-    d = rays / np.linalg.norm(rays, axis=1, keepdims=True) @ R_world_from_cam.T
+    d = PinholeCamera(K, w, h).rays().reshape(-1, 3) @ R_world_from_cam.T
     rad = sky.radiance(d)
     below = d[:, 2] < 0
     if below.any():  # textured ground: the sky model's ground x a low-frequency albedo variation
@@ -294,11 +289,6 @@ def synthetic_sky_view(rng: np.random.Generator, dome_hw: tuple[int, int]) -> Vi
 
 def _street_chunk(args: tuple[int, int, int, int, int]) -> list[View]:
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-    from streetaug.augment.core import make_transform
-    from streetaug.augment.scenegen.make import choose_exposure
-    from streetaug.augment.scenegen.render import StreetRenderer
-    from streetaug.augment.scenegen.street import StreetParams, build_street
-
     seed, start, stop, H, W = args
     out = []
     h, w = VIEW_SIZE
@@ -396,21 +386,6 @@ def flip_view(v: View) -> View:
     sun = None if v.sun_dir_heading is None else Fh @ v.sun_dir_heading
     return View(np.ascontiguousarray(v.ldr[:, ::-1]), K, Fh @ v.R_heading_from_cam @ Fc,
                 np.ascontiguousarray(v.dome[:, ::-1]), v.visibility, sun)
-
-
-def view_rays(K: np.ndarray, R_heading_from_cam: np.ndarray, height: int, width: int) -> np.ndarray:
-    """(3, height, width) float32 unit heading-frame rays of the pixel centres of an image with intrinsics K."""
-    u, v = np.meshgrid(np.arange(width, dtype=np.float64), np.arange(height, dtype=np.float64))
-    rays = np.stack([u, v, np.ones_like(u)], -1).reshape(-1, 3) @ np.linalg.inv(K).T
-    rays = rays / np.linalg.norm(rays, axis=1, keepdims=True) @ np.asarray(R_heading_from_cam).T
-    return np.ascontiguousarray(rays.reshape(height, width, 3).transpose(2, 0, 1), dtype=np.float32)
-
-
-def resize_view(image_rgb: np.ndarray, K: np.ndarray, height: int, width: int) -> tuple[np.ndarray, np.ndarray]:
-    """Image resized to (height, width) (area filter) and its intrinsics (pixel centres at integers)."""
-    H0, W0 = image_rgb.shape[:2]
-    small = cv2.resize(np.ascontiguousarray(image_rgb), (width, height), interpolation=cv2.INTER_AREA)
-    return small, scale_intrinsics(K, width / W0, height / H0)
 
 
 def views_batch(views: list[View]) -> dict[str, np.ndarray]:

@@ -24,9 +24,9 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.special import ndtri
 
-from ...core import luminance
-from ..sky import sky_horizontal_irradiance, sky_radiance, sun_irradiance
-from .dome import dome_directions, dome_solid_angles
+from ..core import equirect_pixel_lonlat, lonlat_to_world_dir, luminance
+from ..lighting.sky import sky_horizontal_irradiance, sky_radiance, sun_irradiance
+from ..lighting.skynet.dome import dome_directions, dome_solid_angles
 
 SUN_HALF_ANGLE_RAD = float(np.radians(0.2665))
 N_WAVES = 48
@@ -130,8 +130,6 @@ class SynthSky:
 
     def envmap_world(self, height: int, width: int) -> np.ndarray:
         """Radiance (height, width, 3) float32 in the world equirect convention, sun excluded."""
-        from ...core import equirect_pixel_lonlat, lonlat_to_world_dir
-
         d = lonlat_to_world_dir(*equirect_pixel_lonlat(height, width)).reshape(-1, 3)
         return self.radiance(d).reshape(height, width, 3).astype(np.float32)
 

@@ -1,0 +1,172 @@
+"""What each camera tells about the scene: its pixels unprojected into the volume frame with their radiance.
+
+Frames: the *volume frame* (z up, metres; see :mod:`.volume`); radiance on the reference camera's radiometric
+scale (other cameras' pixels are divided by their exposure ratio). :func:`observe_view` works on a <= 480 px
+wide copy of the image: linear HDR pixels, a dense depth (LiDAR densified with the ground plane below the
+horizon; without LiDAR a street canyon: the ground and two facades ``CANYON_HALF_WIDTH_M`` either side),
+extended *up* each image column to the sky line (vertical facades: non-sky pixels above the highest depth keep
+its depth), a sky mask; pixels are unprojected to volume-frame points with their radiance and viewing direction.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import cv2
+import numpy as np
+
+from ...datasets.sample import CameraView
+from ..core import PinholeCamera, check_shape, ldr_uint8_to_hdr, transform_points
+from ..core.depth import densify_lidar_depth
+from .evidence import PreparedImage, downscale_image, image_sky_mask, prepare_image
+from .volume import LogGrid
+
+WORK_WIDTH = 480
+CANYON_HALF_WIDTH_M = 12.0  # without LiDAR: facades this far either side of the camera's street axis
+SATURATED_LDR = 0.97
+
+
+@dataclass(frozen=True)
+class ViewObservation:
+    """What one camera tells about the scene, in the volume frame on the reference radiometric scale.
+
+    Attributes:
+        channel: camera channel.
+        points: (M, 3) float64 unprojected pixels (depth known, inside the scene), volume frame, metres.
+        radiance: (M, 3) float32 their linear radiance (reference scale).
+        view_dirs: (M, 3) float64 unit directions from the points towards the camera.
+        capped: (M,) bool, the point's image column is structure up to the image's top edge.
+        far_dirs: (F, 3) float64 unit directions of pixels at infinity (sky; callers add what lies beyond the volume).
+        far_radiance: (F, 3) float32 their radiance.
+        far_is_sky: (F,) bool, True for sky pixels (False: distant scenery).
+        far_saturated: (F,) bool, the pixel is clipped (its radiance is a lower bound).
+        camera_centre: (3,) camera centre in the volume frame.
+        ego_forward: (3,) unit forward axis of the ego vehicle in the volume frame (the street's direction), or None.
+    """
+
+    channel: str
+    points: np.ndarray
+    radiance: np.ndarray
+    view_dirs: np.ndarray
+    capped: np.ndarray
+    far_dirs: np.ndarray
+    far_radiance: np.ndarray
+    far_is_sky: np.ndarray
+    far_saturated: np.ndarray
+    camera_centre: np.ndarray
+    ego_forward: np.ndarray | None = None
+
+
+def extend_facades(depth_m: np.ndarray, sky: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Depth (H, W) with each column's non-sky pixels above its highest known depth set to that depth, and
+    the (W,) bool columns whose structure reaches the image's top edge (their true top is not seen).
+
+    Vertical-facade prior: for a level camera, a vertical wall has the same camera-z all the way up.
+    """
+    finite = np.isfinite(depth_m)
+    H, W = depth_m.shape
+    has = finite.any(axis=0)
+    top = np.where(has, finite.argmax(axis=0), H)
+    top_depth = depth_m[np.minimum(top, H - 1), np.arange(W)]
+    rows = np.arange(H)[:, None]
+    above = (rows < top[None, :]) & ~sky & has[None, :]
+    # stop at the first sky pixel met going up from the top depth
+    sky_above = np.where(sky & (rows < top[None, :]), rows, -1).max(axis=0)
+    above &= rows > sky_above[None, :]
+    out = depth_m.copy()
+    out[above] = np.broadcast_to(top_depth[None, :], depth_m.shape)[above]
+    capped = np.isfinite(out[0]) & ~sky[0]
+    return out, capped
+
+
+
+def canyon_depth(K: np.ndarray, width: int, height: int, T_vol_from_cam: np.ndarray,
+                 half_width_m: float = CANYON_HALF_WIDTH_M) -> np.ndarray:
+    """Camera-z depth (H, W) float32 of a street canyon without LiDAR: the ground z = 0 and two vertical walls
+    at y = +-``half_width_m`` (volume frame, parallel to its x axis), whichever a pixel's ray meets first."""
+    rays = PinholeCamera(K, width, height).rays(unit=False)  # camera z = 1
+    T = np.asarray(T_vol_from_cam)
+    d = rays @ T[:3, :3].T
+    o = T[:3, 3]
+    t = np.full((height, width), np.inf)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        for axis, value in ((2, 0.0), (1, half_width_m), (1, -half_width_m)):
+            ti = (value - o[axis]) / d[..., axis]
+            t = np.where((ti > 0) & np.isfinite(ti), np.minimum(t, ti), t)
+    return t.astype(np.float32)  # t along rays with camera z = 1 is the z-depth
+
+
+def observe_view(view: CameraView, T_vol_from_cam: np.ndarray, exposure_ratio: float, lidar_points_cam: np.ndarray | None,
+                 ground_plane_cam: tuple[np.ndarray, float], work_width: int = WORK_WIDTH,
+                 work: PreparedImage | None = None) -> ViewObservation:
+    """Unproject one camera's image (see module doc, step 1).
+
+    Args:
+        view: a ``CameraView`` (image, K, channel).
+        T_vol_from_cam: (4, 4) camera -> volume frame.
+        exposure_ratio: this image's scale / the reference scale (pixels are divided by it).
+        lidar_points_cam: (N, 3) LiDAR points in this camera's frame, or None.
+        ground_plane_cam: (normal (3,), offset d) of the ground ``n . p + d = 0`` in the camera frame.
+        work: the L1 fit's prepared image of this view (reused for the sky mask), or None.
+    """
+    image = np.asarray(view.image)
+    check_shape(image, ("H", "W", 3), "image")
+    small, Ks = downscale_image(image, view.K, work_width)
+    h, w = small.shape[:2]
+    normal, offset = ground_plane_cam
+    up_cam = np.asarray(T_vol_from_cam)[2, :3]  # volume +z in the camera frame
+    if work is None:
+        work = prepare_image(image, view.K, up_cam / np.linalg.norm(up_cam), lidar_points_cam)
+    sky = image_sky_mask(work)
+    if sky.shape != (h, w):
+        sky = cv2.resize(sky.astype(np.uint8), (w, h), interpolation=cv2.INTER_NEAREST) > 0
+    if lidar_points_cam is not None and len(lidar_points_cam):
+        depth = densify_lidar_depth(lidar_points_cam, Ks, w, h, ground_fill=(normal, offset))
+    else:
+        depth = canyon_depth(Ks, w, h, T_vol_from_cam)
+    depth = np.where(sky, np.inf, depth)
+    depth, capped_cols = extend_facades(depth, sky)
+    hdr = ldr_uint8_to_hdr(small).astype(np.float32) / np.float32(exposure_ratio)
+    ldr_max = small.max(axis=-1) / 255.0
+    rays = PinholeCamera(Ks, w, h).rays(unit=False)  # z = 1
+    near = np.isfinite(depth)
+    R = np.asarray(T_vol_from_cam)[:3, :3]
+    centre = np.asarray(T_vol_from_cam)[:3, 3]
+    p_vol = transform_points(T_vol_from_cam, rays[near] * depth[near][:, None])
+    view_dirs = centre[None] - p_vol
+    view_dirs /= np.maximum(np.linalg.norm(view_dirs, axis=1, keepdims=True), 1e-9)
+    far = ~near
+    d_far = rays[far] @ R.T
+    d_far /= np.linalg.norm(d_far, axis=1, keepdims=True)
+    capped = np.broadcast_to(capped_cols[None, :], (h, w))[near]
+    return ViewObservation(
+        channel=view.channel, points=p_vol, radiance=hdr[near], view_dirs=view_dirs, capped=capped,
+        far_dirs=d_far, far_radiance=hdr[far], far_is_sky=sky[far], far_saturated=ldr_max[far] >= SATURATED_LDR,
+        camera_centre=centre, ego_forward=ego_forward_vol(view, T_vol_from_cam),
+    )
+
+
+def ego_forward_vol(view: CameraView, T_vol_from_cam: np.ndarray) -> np.ndarray:
+    """The ego's forward axis (3,) in the volume frame (the street's direction)."""
+    T_ge, T_gc = view.T_global_from_ego, view.T_global_from_cam
+    R = np.asarray(T_vol_from_cam)[:3, :3] @ np.asarray(T_gc)[:3, :3].T @ np.asarray(T_ge)[:3, :3]
+    return R[:, 0]
+
+
+
+def restrict_to_grid(obs: ViewObservation, grid: LogGrid) -> ViewObservation:
+    """Move the points outside the grid's box to the observation's pixels "at infinity" (distant scenery)."""
+    lo, hi = grid.bounds()
+    inside = ((obs.points >= lo) & (obs.points <= hi)).all(axis=1)
+    if inside.all():
+        return obs
+    d = obs.points[~inside] - obs.camera_centre
+    d /= np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-9)
+    n_out = int((~inside).sum())
+    return replace(
+        obs, points=obs.points[inside], radiance=obs.radiance[inside], view_dirs=obs.view_dirs[inside],
+        capped=obs.capped[inside], far_dirs=np.concatenate([obs.far_dirs, d]),
+        far_radiance=np.concatenate([obs.far_radiance, obs.radiance[~inside]]),
+        far_is_sky=np.concatenate([obs.far_is_sky, np.zeros(n_out, bool)]),
+        far_saturated=np.concatenate([obs.far_saturated, np.zeros(n_out, bool)]),
+    )
