@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 import shapely
+from scipy.spatial import cKDTree
 from shapely.geometry import MultiPolygon, Polygon, box
 from shapely.strtree import STRtree
 
@@ -167,9 +168,7 @@ class LaneCenterlines:
     resolution_m: float = 0.5
 
     @functools.cached_property
-    def _tree(self):
-        from scipy.spatial import cKDTree
-
+    def _tree(self) -> cKDTree:
         return cKDTree(self.points_xy)
 
     def __len__(self) -> int:

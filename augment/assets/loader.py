@@ -155,7 +155,7 @@ _PartT = tuple[np.ndarray, np.ndarray, np.ndarray | None, np.ndarray | None, Mat
 
 
 def _trimesh_load(path: Path):
-    import trimesh
+    import trimesh  # heavy: deferred until a mesh file is read
 
     try:
         return trimesh.load(str(path), force="scene", process=False)
@@ -164,7 +164,7 @@ def _trimesh_load(path: Path):
 
 
 def _load_gltf_parts(path: Path, gltf: dict) -> list[_PartT]:
-    import trimesh
+    import trimesh  # heavy: deferred until a mesh file is read
 
     scene = _trimesh_load(path)
     exact = _gltf_materials_by_name(gltf)
@@ -214,7 +214,7 @@ def _texture(image, srgb: bool) -> np.ndarray | None:
 
 def _material_from_trimesh(mat, exact: dict[str, dict], index: int) -> Material:
     """Material of a trimesh visual: exact glTF factors when the JSON has them, else trimesh's."""
-    from trimesh.visual.material import PBRMaterial, SimpleMaterial
+    from trimesh.visual.material import PBRMaterial, SimpleMaterial  # heavy: deferred until a mesh file is read
 
     name = getattr(mat, "name", None) or f"material{index}"
     if isinstance(mat, PBRMaterial):
@@ -255,7 +255,7 @@ def _grey_paint(name: str = "paint") -> Material:
 
 
 def _load_obj_parts(path: Path, mtl: dict[str, dict]) -> list[_PartT]:
-    import trimesh
+    import trimesh  # heavy: deferred until a mesh file is read
 
     scene = _trimesh_load(path)
     cache: dict[str, Material] = {}
@@ -300,7 +300,7 @@ def _material_from_mtl(name: str, entry: dict | None, mat_obj) -> Material:
 
 
 def _load_ply_parts(path: Path) -> list[_PartT]:
-    import trimesh
+    import trimesh  # heavy: deferred until a mesh file is read
 
     scene = _trimesh_load(path)
     parts = []

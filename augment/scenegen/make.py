@@ -8,7 +8,9 @@ byte-identical files.
 
 from __future__ import annotations
 
+import argparse
 import datetime as dt
+import time
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -16,6 +18,7 @@ import numpy as np
 
 from streetaug.augment.core import (
     GAMMA,
+    PinholeCamera,
     hdr_to_ldr_uint8,
     luminance,
     make_transform,
@@ -26,11 +29,11 @@ from streetaug.augment.core import (
 )
 from streetaug.augment.core import encode_image_rgb, write_bytes_atomic, write_exr
 from streetaug.augment.core.raycast import RayScene
-from streetaug.augment.lighting.sun import sun_direction_global
+from streetaug.augment.lighting.sun import SunPosition, sun_direction_global
 from streetaug.datasets.nuscenes_format import LIDARSEG_DRIVEABLE, content_token, visibility_token
 from streetaug.datasets.sample import Box
 
-from .lidar import T_ego_from_lidar, points_in_box, simulate_lidar
+from .lidar import LidarScan, T_ego_from_lidar, points_in_box, simulate_lidar
 from .nuscenes_tables import NuScenesTables, dumps
 from .render import SkyParams, StreetRenderer
 from .street import StreetParams, StreetScene, build_street
@@ -164,15 +167,16 @@ def choose_exposure(radiance: np.ndarray, label: np.ndarray) -> float:
     return float(np.float32(k))
 
 
-def object_visibility(scene: StreetScene, rays: RayScene, cams: list[tuple[np.ndarray, np.ndarray, int, int]]) -> np.ndarray:
-    """Approximate visible fraction (n_objects,) of each object: over the cameras (K, T_global_from_cam, W, H),
+def object_visibility(scene: StreetScene, rays: RayScene, cams: list[tuple[PinholeCamera, np.ndarray]]) -> np.ndarray:
+    """Approximate visible fraction (n_objects,) of each object: over the cameras (camera, T_global_from_cam),
     the best fraction of its vertices inside the image that no other surface hides."""
     out = np.zeros(len(scene.objects))
     obj_of_vertex = np.full(len(scene.vertices_global), -1)
     obj_faces = scene.face_object >= 0
     obj_of_vertex[scene.faces[obj_faces].reshape(-1)] = np.repeat(scene.face_object[obj_faces], 3)
     vid = np.nonzero(obj_of_vertex >= 0)[0]
-    for K, T_global_from_cam, W, H in cams:
+    for camera, T_global_from_cam in cams:
+        K, W, H = camera.K, camera.width, camera.height
         p_cam = transform_points(np.linalg.inv(T_global_from_cam), scene.vertices_global[vid])
         z = p_cam[:, 2]
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -192,32 +196,55 @@ def object_visibility(scene: StreetScene, rays: RayScene, cams: list[tuple[np.nd
     return out
 
 
-def _make_scene(spec: SceneSpec, out_dir: Path, tables: NuScenesTables, width: int, height: int, seed: int,
-                spp: int, sky_rays: int) -> list[Path]:
-    written: list[Path] = []
-    ts = spec.timestamp_us
-    sun = sun_direction_global(spec.location, ts)
-    T_global_from_street = make_transform(yaw_to_quat(np.radians(spec.heading_deg)), [*spec.origin_xy, 0.0])
-    scene = build_street(StreetParams(seed=seed * 7919 + spec.street_seed, drive_on_left=spec.drive_on_left),
-                         T_global_from_street)
-    sky = SkyParams(sun.direction_global, spec.turbidity, spec.cloud_cover, 0.15, float(np.radians(spec.sun_half_angle_deg)))
-    renderer = StreetRenderer(scene, sky)
-    T_global_from_ego = scene.T_global_from_ego
+@dataclass(frozen=True)
+class RenderedCamera:
+    """One rendered camera of a generated scene.
 
+    Attributes:
+        channel: e.g. ``CAM_FRONT``.
+        camera: intrinsics and image size.
+        T_global_from_cam: (4, 4) camera (OpenCV) -> global.
+        file: the written image (relative to the dataroot); ``sample_data_token`` its row.
+        meta: the camera's entry of ``lighting.json`` (sample_data token, sun and up directions in the camera).
+    """
+
+    channel: str
+    camera: PinholeCamera
+    T_global_from_cam: np.ndarray
+    file: str
+    sample_data_token: str
+    meta: dict
+
+
+@dataclass(frozen=True)
+class RenderedCameras:
+    """The cameras of a scene and the exposure k they share (set by CAM_FRONT, rendered first)."""
+
+    cameras: list[RenderedCamera]
+    k_exposure: float
+
+
+def _register_scene(spec: SceneSpec, scene: StreetScene, tables: NuScenesTables) -> str:
+    """Add the log, scene and sample rows and the map (road polygons, lanes); returns the sample token."""
     sample_token = content_token("sample", spec.name)
     log_token = tables.add_log(spec.name, spec.logfile, spec.location, spec.local_time[:10])
     scene_token = tables.add_scene(spec.name, spec.description, log_token, sample_token)
-    tables.add_sample(sample_token, scene_token, ts)
+    tables.add_sample(sample_token, scene_token, spec.timestamp_us)
     for poly in scene.drivable_polygons_global:
         tables.add_map_polygon(spec.location, log_token, poly)
     for start_xy, end_xy, width_m in scene.lanes_global:
         tables.add_map_lane(spec.location, start_xy, end_xy, width_m)
+    return sample_token
 
-    # cameras: CAM_FRONT first, it sets the exposure of all cameras of the scene
+
+def _render_cameras(spec: SceneSpec, renderer: StreetRenderer, sun_direction_global: np.ndarray, out_dir: Path,
+                    tables: NuScenesTables, sample_token: str, width: int, height: int, seed: int, spp: int,
+                    sky_rays: int) -> RenderedCameras:
+    """Render and write every camera of ``spec`` (CAM_FRONT first: it sets the exposure of all)."""
+    T_global_from_ego = renderer.scene.T_global_from_ego
     channels = sorted(spec.cameras, key=lambda c: c != "CAM_FRONT")
     k_exposure = None
-    cams_for_visibility = []
-    cam_meta = {}
+    cameras = []
     for ci, channel in enumerate(channels):
         rig = CAMERA_RIGS[channel]
         K = rig.K(width, height)
@@ -227,56 +254,83 @@ def _make_scene(spec: SceneSpec, out_dir: Path, tables: NuScenesTables, width: i
         if k_exposure is None:
             k_exposure = choose_exposure(res.radiance, res.label)
         image = hdr_to_ldr_uint8(res.radiance * k_exposure)
-        cam_ts = ts + rig.time_offset_us
+        cam_ts = spec.timestamp_us + rig.time_offset_us
         filename = f"samples/{channel}/{spec.logfile}__{channel}__{cam_ts}.jpg"
         write_bytes_atomic(out_dir / filename, encode_image_rgb(image, ".jpg", JPEG_QUALITY))
-        written.append(out_dir / filename)
         sd_tok = tables.add_sample_data(spec.name, channel, "camera", sample_token, cam_ts, filename, width, height,
                                         T_ego_from_cam, T_global_from_ego, K)
-        cams_for_visibility.append((K, T_global_from_cam, width, height))
-        sun_cam = rotate_vectors(np.linalg.inv(T_global_from_cam), sun.direction_global[None])[0]
-        cam_meta[channel] = {"sample_data_token": sd_tok, "sun_direction_camera": _unit(sun_cam).tolist(),
-                             "up_direction_camera": _unit(rotate_vectors(np.linalg.inv(T_global_from_cam), np.array([[0.0, 0.0, 1.0]]))[0]).tolist()}
+        T_cam_from_global = np.linalg.inv(T_global_from_cam)
+        sun_cam = rotate_vectors(T_cam_from_global, sun_direction_global[None])[0]
+        up_cam = rotate_vectors(T_cam_from_global, np.array([[0.0, 0.0, 1.0]]))[0]
+        meta = {"sample_data_token": sd_tok, "sun_direction_camera": _unit(sun_cam).tolist(),
+                "up_direction_camera": _unit(up_cam).tolist()}
+        cameras.append(RenderedCamera(channel, PinholeCamera(K, width, height), T_global_from_cam, filename, sd_tok,
+                                      meta))
+    return RenderedCameras(cameras, k_exposure)
 
-    # LiDAR + lidarseg
+
+@dataclass(frozen=True)
+class WrittenLidar:
+    """The keyframe sweep as written: its files (relative to the dataroot) and its points in the global frame.
+
+    Attributes:
+        files: the ``.pcd.bin`` and the lidarseg label file.
+        scan: the simulated sweep.
+        points_global: (N, 3) float64 the stored float32 points, in the global frame.
+    """
+
+    files: list[str]
+    scan: LidarScan
+    points_global: np.ndarray
+
+
+def _write_lidar(spec: SceneSpec, renderer: StreetRenderer, out_dir: Path, tables: NuScenesTables,
+                 sample_token: str, seed: int) -> WrittenLidar:
+    """Simulate, write and register LIDAR_TOP and its lidarseg labels."""
+    T_global_from_ego = renderer.scene.T_global_from_ego
     T_global_from_lidar = T_global_from_ego @ T_ego_from_lidar()
-    scan = simulate_lidar(scene, T_global_from_lidar, seed=seed, rays=renderer.rays)
-    lidar_file = f"samples/LIDAR_TOP/{spec.logfile}__LIDAR_TOP__{ts}.pcd.bin"
+    scan = simulate_lidar(renderer.scene, T_global_from_lidar, seed=seed, rays=renderer.rays)
+    lidar_file = f"samples/LIDAR_TOP/{spec.logfile}__LIDAR_TOP__{spec.timestamp_us}.pcd.bin"
     write_bytes_atomic(out_dir / lidar_file, scan.to_pcd_bin())
-    written.append(out_dir / lidar_file)
-    lidar_sd = tables.add_sample_data(spec.name, "LIDAR_TOP", "lidar", sample_token, ts, lidar_file, 0, 0,
-                                      T_ego_from_lidar(), T_global_from_ego, None)
+    lidar_sd = tables.add_sample_data(spec.name, "LIDAR_TOP", "lidar", sample_token, spec.timestamp_us, lidar_file,
+                                      0, 0, T_ego_from_lidar(), T_global_from_ego, None)
     seg_file = tables.add_lidarseg(lidar_sd)
     write_bytes_atomic(out_dir / seg_file, scan.labels.astype(np.uint8).tobytes())
-    written.append(out_dir / seg_file)
-
-    # annotations: objects the LiDAR hits (as nuScenes); points counted from the written float32 points
+    # points counted from the written float32 points
     points_sensor = np.frombuffer(scan.to_pcd_bin(), dtype=np.float32).reshape(-1, 5)[:, :3].astype(np.float64)
-    points_global = transform_points(T_global_from_lidar, points_sensor)
-    visibility = object_visibility(scene, renderer.rays, cams_for_visibility)
+    return WrittenLidar([lidar_file, seg_file], scan, transform_points(T_global_from_lidar, points_sensor))
+
+
+def _annotate(spec: SceneSpec, renderer: StreetRenderer, lidar: WrittenLidar, cameras: RenderedCameras,
+              tables: NuScenesTables, sample_token: str) -> int:
+    """Add a ``sample_annotation`` for every object the LiDAR hits (as nuScenes); returns their number."""
+    scene = renderer.scene
+    visibility = object_visibility(scene, renderer.rays, [(c.camera, c.T_global_from_cam) for c in cameras.cameras])
     n_ann = 0
     for i, box in enumerate(scene.objects):
         # count with the box exactly as stored (mm / 1e-10 rounding), as the devkit would
         stored = Box(np.round(box.center, 3), np.round(box.wlh, 3), np.round(box.rotation, 10), box.category)
-        n_pts = int(points_in_box(stored, points_global).sum())
-        if n_pts == 0 and not np.any(scan.object_index == i):
+        n_pts = int(points_in_box(stored, lidar.points_global).sum())
+        if n_pts == 0 and not np.any(lidar.scan.object_index == i):
             continue  # annotate what the LiDAR sees (range noise can put a far object's few hits just outside)
         attr = scene.object_attributes[i]
         tables.add_annotation(spec.name, i, sample_token, box.category, box.center, box.wlh, box.rotation, attr,
                               n_pts, visibility_token(visibility[i]))
         n_ann += 1
+    return n_ann
 
-    # ground-truth lighting, on the images' radiometric scale
-    gt_dir = out_dir / "ground_truth" / spec.name
-    env = sky.envmap_world(*ENVMAP_SIZE) * np.float32(k_exposure)
-    write_exr(gt_dir / "envmap_world.exr", env)
-    written.append(gt_dir / "envmap_world.exr")
+
+def _ground_truth(spec: SceneSpec, renderer: StreetRenderer, sun: SunPosition, cameras: RenderedCameras,
+                  sample_token: str, n_annotations: int, render: dict) -> dict:
+    """The scene's ``lighting.json`` document (every radiance on the images' scale, x k)."""
+    sky, k_exposure = renderer.sky, cameras.k_exposure
+    cam_meta = {c.channel: c.meta for c in cameras.cameras}
     sun_e = renderer.sun_e
-    lighting = {
+    return {
         "schema": "streetaug.sample_lighting/1",
         "scene": spec.name,
         "location": spec.location,
-        "timestamp_us": ts,
+        "timestamp_us": spec.timestamp_us,
         "local_time": spec.local_time,
         "sample_token": sample_token,
         "exposure_k": k_exposure,
@@ -299,12 +353,32 @@ def _make_scene(spec: SceneSpec, out_dir: Path, tables: NuScenesTables, width: i
                          "convention": "world z-up equirect: lon = atan2(dy, dx) (0 = east), lat = asin(dz); global frame",
                          "includes_sun": False},
         "files": {"envmap_world": "envmap_world.exr"},
-        "n_annotations": n_ann,
-        "render": {"width": width, "height": height, "spp": spp, "sky_rays": sky_rays, "seed": seed},
+        "n_annotations": n_annotations,
+        "render": render,
     }
+
+
+def _make_scene(spec: SceneSpec, out_dir: Path, tables: NuScenesTables, width: int, height: int, seed: int,
+                spp: int, sky_rays: int) -> list[Path]:
+    """Generate one scene: street -> camera images -> LiDAR -> annotations -> ground-truth lighting."""
+    sun = sun_direction_global(spec.location, spec.timestamp_us)
+    T_global_from_street = make_transform(yaw_to_quat(np.radians(spec.heading_deg)), [*spec.origin_xy, 0.0])
+    scene = build_street(StreetParams(seed=seed * 7919 + spec.street_seed, drive_on_left=spec.drive_on_left),
+                         T_global_from_street)
+    sky = SkyParams(sun.direction_global, spec.turbidity, spec.cloud_cover, 0.15, float(np.radians(spec.sun_half_angle_deg)))
+    renderer = StreetRenderer(scene, sky)
+    sample_token = _register_scene(spec, scene, tables)
+    cameras = _render_cameras(spec, renderer, sun.direction_global, out_dir, tables, sample_token, width, height,
+                              seed, spp, sky_rays)
+    lidar = _write_lidar(spec, renderer, out_dir, tables, sample_token, seed)
+    n_ann = _annotate(spec, renderer, lidar, cameras, tables, sample_token)
+    gt_dir = out_dir / "ground_truth" / spec.name
+    write_exr(gt_dir / "envmap_world.exr", sky.envmap_world(*ENVMAP_SIZE) * np.float32(cameras.k_exposure))
+    render = {"width": width, "height": height, "spp": spp, "sky_rays": sky_rays, "seed": seed}
+    lighting = _ground_truth(spec, renderer, sun, cameras, sample_token, n_ann, render)
     write_bytes_atomic(gt_dir / "lighting.json", dumps(_round_floats(lighting)))
-    written.append(gt_dir / "lighting.json")
-    return written
+    return ([out_dir / c.file for c in cameras.cameras] + [out_dir / f for f in lidar.files]
+            + [gt_dir / "envmap_world.exr", gt_dir / "lighting.json"])
 
 
 def _unit(v: np.ndarray) -> np.ndarray:
@@ -388,9 +462,6 @@ def _readme(names: list[str], width: int, height: int, seed: int) -> str:
 
 def main(argv: list[str] | None = None) -> None:
     """``python -m streetaug.augment.scenegen.make OUT_DIR [--size WxH] [--seed N] [--names a,b]``."""
-    import argparse
-    import time
-
     ap = argparse.ArgumentParser(description=main.__doc__)
     ap.add_argument("out_dir", type=Path)
     ap.add_argument("--size", default="1600x900")

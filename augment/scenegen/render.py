@@ -20,6 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from streetaug.augment.core import (
+    PinholeCamera,
     check_shape,
     equirect_pixel_lonlat,
     equirect_solid_angles,
@@ -262,33 +263,11 @@ class StreetRenderer:
         check_shape(T_global_from_cam, (4, 4), "T_global_from_cam")
         if spp < 1 or sky_rays < 1:
             raise ValueError(f"spp and sky_rays must be >= 1, got {spp}, {sky_rays}")
-        rng = np.random.default_rng(seed)
+        camera = PinholeCamera(K, width, height)
         n_pix = width * height
-        g = int(round(np.sqrt(spp)))
-        strata = g * g == spp
-        jitter = rng.uniform(size=(spp, n_pix, 2)).astype(np.float32)
-        if strata:
-            cells = np.array([[(k % g), (k // g)] for k in range(spp)], dtype=np.float32)
-            jitter = (cells[:, None, :] + jitter) / g
-        jitter -= 0.5
-
-        Kinv = np.linalg.inv(K)
-        R = T_global_from_cam[:3, :3]
-        origin = T_global_from_cam[:3, 3]
-        jj, ii = np.divmod(np.arange(n_pix), width)
-        direct = np.zeros((n_pix, 3))  # albedo/pi * E_sun, averaged over samples
-        albedo_sum = np.zeros((n_pix, 3))
-        e_sky_sum = np.zeros((n_pix, 3))
-        hit_count = np.zeros(n_pix)
-        emitted = np.zeros((n_pix, 3))  # sky, sun disc, glass reflections
-        normal_sum = np.zeros((n_pix, 3))
-        depth = np.full(n_pix, np.inf)
-        label = np.zeros(n_pix, dtype=np.uint8)
-        shadow = np.full(n_pix, np.nan)
-        sun_rad = self.sun_disc_radiance()
-        cos_disc = np.cos(max(self.sky.sun_half_angle_rad, np.radians(0.2665)))
-        face_label = self.scene.face_label
-
+        jitter = _primary_jitter(np.random.default_rng(seed), spp, n_pix)
+        pixels_uv = camera.pixel_grid().reshape(-1, 2)
+        acc = _PixelSums.zeros(n_pix)
         chunk = max(1, CHUNK_SAMPLES // spp)
         for start in range(0, n_pix, chunk):
             px = np.arange(start, min(start + chunk, n_pix))
@@ -297,61 +276,116 @@ class StreetRenderer:
             rot_sun, rot_sky = crng.uniform(size=len(px)), crng.uniform(size=len(px))
             jit_sun, jit_sky = crng.uniform(size=len(px)), crng.uniform(size=len(px))
             for s in range(spp):
-                uv = np.stack([ii[px] + jitter[s, px, 0], jj[px] + jitter[s, px, 1]], axis=1).astype(np.float64)
-                d_cam = np.c_[uv, np.ones(len(px))] @ Kinv.T
-                d_cam /= np.linalg.norm(d_cam, axis=1, keepdims=True)
-                d = d_cam @ R.T
-                hits = self.rays.intersect(np.tile(origin, (len(px), 1)), d)
-                miss = ~hits.hit
-                if miss.any():
-                    sky = self.sky.radiance(d[miss])
-                    if np.any(self.sun_e > 0):
-                        sky = sky + (d[miss] @ self.sun_dir >= cos_disc)[:, None] * sun_rad[None]
-                    emitted[px[miss]] += sky
-                h = np.nonzero(hits.hit)[0]
-                if len(h) == 0:
-                    continue
-                ph = px[h]
-                face = hits.face[h]
-                p = self.rays.hit_points(hits)[h]
-                n = self._oriented_normals(face, d[h])
-                p_street = transform_points(self.T_street_from_global, p)
-                n_street = n @ self.T_street_from_global[:3, :3].T
-                albedo, gloss = surface_albedo(self.scene.materials, self.scene.face_material[face], p_street, n_street)
-                vis = self._sun_visibility(p, n, crng, _spiral(s, sun_rays, spp * sun_rays, rot_sun[h], jit_sun[h]))
-                direct[ph] += albedo / np.pi * self.sun_e[None] * vis[:, None]
-                albedo_sum[ph] += albedo
-                e_sky_sum[ph] += self._sky_gather(p, n, _spiral(s, sky_rays, spp * sky_rays, rot_sky[h], jit_sky[h]), crng)
-                hit_count[ph] += 1
-                normal_sum[ph] += n
-                g_sel = gloss > 0
-                if g_sel.any():
-                    gi = np.nonzero(g_sel)[0]
-                    emitted[ph[gi]] += gloss[gi, None] * self._glass_reflection(p[gi], n[gi], d[h][gi], crng)
-                if s == 0:
-                    depth[ph] = (hits.t[h] * d_cam[h, 2])
-                    label[ph] = face_label[face]
-                    cos = n @ self.sun_dir
-                    shadow[ph] = np.where(cos > 0, vis / np.maximum(cos, 1e-9), 0.0)
+                uv = pixels_uv[px] + jitter[s, px]
+                sun_samples = _spiral(s, sun_rays, spp * sun_rays, rot_sun, jit_sun)
+                sky_samples = _spiral(s, sky_rays, spp * sky_rays, rot_sky, jit_sky)
+                self._render_sample(camera, T_global_from_cam, px, uv, s == 0, sun_samples, sky_samples, crng, acc)
+        return self._resolve(acc, spp, width, height, denoise)
 
-        hit_any = hit_count > 0
-        e_sky = np.where(hit_any[:, None], e_sky_sum / np.maximum(hit_count, 1)[:, None], 0.0)
+    def _render_sample(self, camera: PinholeCamera, T_global_from_cam: np.ndarray, px: np.ndarray, uv: np.ndarray,
+                       first: bool, sun_samples: list[tuple[np.ndarray, np.ndarray]],
+                       sky_samples: list[tuple[np.ndarray, np.ndarray]], rng: np.random.Generator,
+                       acc: "_PixelSums") -> None:
+        """Trace one primary sample through pixels ``px`` (at ``uv`` (P, 2)) and add its light to ``acc``.
+
+        ``sun_samples`` / ``sky_samples``: the (u1, u2) pairs of (P,) arrays of this sample for all the
+        pixels; the first sample (``first``) also sets depth, label and shadow.
+        """
+        d_cam = camera.rays(uv)
+        d = d_cam @ T_global_from_cam[:3, :3].T
+        hits = self.rays.intersect(np.tile(T_global_from_cam[:3, 3], (len(px), 1)), d)
+        miss = ~hits.hit
+        if miss.any():
+            sky = self.sky.radiance(d[miss])
+            if np.any(self.sun_e > 0):
+                cos_disc = np.cos(max(self.sky.sun_half_angle_rad, np.radians(0.2665)))
+                sky = sky + (d[miss] @ self.sun_dir >= cos_disc)[:, None] * self.sun_disc_radiance()[None]
+            acc.emitted[px[miss]] += sky
+        h = np.nonzero(hits.hit)[0]
+        if len(h) == 0:
+            return
+        ph = px[h]
+        face = hits.face[h]
+        p = self.rays.hit_points(hits)[h]
+        n = self._oriented_normals(face, d[h])
+        p_street = transform_points(self.T_street_from_global, p)
+        n_street = n @ self.T_street_from_global[:3, :3].T
+        albedo, gloss = surface_albedo(self.scene.materials, self.scene.face_material[face], p_street, n_street)
+        vis = self._sun_visibility(p, n, rng, [(u1[h], u2[h]) for u1, u2 in sun_samples])
+        acc.direct[ph] += albedo / np.pi * self.sun_e[None] * vis[:, None]
+        acc.albedo_sum[ph] += albedo
+        acc.e_sky_sum[ph] += self._sky_gather(p, n, [(u1[h], u2[h]) for u1, u2 in sky_samples], rng)
+        acc.hit_count[ph] += 1
+        acc.normal_sum[ph] += n
+        g_sel = gloss > 0
+        if g_sel.any():
+            gi = np.nonzero(g_sel)[0]
+            acc.emitted[ph[gi]] += gloss[gi, None] * self._glass_reflection(p[gi], n[gi], d[h][gi], rng)
+        if first:
+            acc.depth[ph] = (hits.t[h] * d_cam[h, 2])
+            acc.label[ph] = self.scene.face_label[face]
+            cos = n @ self.sun_dir
+            acc.shadow[ph] = np.where(cos > 0, vis / np.maximum(cos, 1e-9), 0.0)
+
+    @staticmethod
+    def _resolve(acc: "_PixelSums", spp: int, width: int, height: int, denoise: bool) -> RenderResult:
+        """The image from the per-pixel sums: sky irradiance (denoised) x albedo + sun + emitted, over ``spp``."""
+        hit_any = acc.hit_count > 0
+        e_sky = np.where(hit_any[:, None], acc.e_sky_sum / np.maximum(acc.hit_count, 1)[:, None], 0.0)
         if denoise:
-            normals_px = normal_sum / np.maximum(np.linalg.norm(normal_sum, axis=1, keepdims=True), 1e-9)
-            depth_px = np.where(hit_any, depth, np.nan)
+            normals_px = acc.normal_sum / np.maximum(np.linalg.norm(acc.normal_sum, axis=1, keepdims=True), 1e-9)
+            depth_px = np.where(hit_any, acc.depth, np.nan)
             # pixels whose centre sample missed: use a far depth so they do not blend with neighbours
             depth_px = np.where(np.isfinite(depth_px), depth_px, 1e6)
             e_sky = atrous_denoise(
                 e_sky.reshape(height, width, 3), normals_px.reshape(height, width, 3),
                 depth_px.reshape(height, width), hit_any.reshape(height, width),
             ).reshape(-1, 3)
-        radiance = (direct + albedo_sum / np.pi * e_sky + emitted) / spp
+        radiance = (acc.direct + acc.albedo_sum / np.pi * e_sky + acc.emitted) / spp
         return RenderResult(
             radiance=radiance.reshape(height, width, 3).astype(np.float32),
-            depth_m=depth.reshape(height, width).astype(np.float32),
-            label=label.reshape(height, width),
-            shadow=shadow.reshape(height, width).astype(np.float32),
+            depth_m=acc.depth.reshape(height, width).astype(np.float32),
+            label=acc.label.reshape(height, width),
+            shadow=acc.shadow.reshape(height, width).astype(np.float32),
         )
+
+
+def _primary_jitter(rng: np.random.Generator, spp: int, n_pix: int) -> np.ndarray:
+    """(spp, n_pix, 2) float32 sub-pixel offsets in [-0.5, 0.5) (stratified when ``spp`` is a square)."""
+    g = int(round(np.sqrt(spp)))
+    jitter = rng.uniform(size=(spp, n_pix, 2)).astype(np.float32)
+    if g * g == spp:
+        cells = np.array([[(k % g), (k // g)] for k in range(spp)], dtype=np.float32)
+        jitter = (cells[:, None, :] + jitter) / g
+    jitter -= 0.5
+    return jitter
+
+
+@dataclass(frozen=True)
+class _PixelSums:
+    """Per-pixel sums over a render's primary samples (arrays of n_pix rows, filled in place).
+
+    Attributes:
+        direct: (P, 3) albedo / pi x sun irradiance; ``albedo_sum`` (P, 3); ``e_sky_sum`` (P, 3) sky irradiance;
+        hit_count: (P,) samples that hit the scene; ``emitted`` (P, 3) sky, sun disc, glass reflections;
+        normal_sum: (P, 3); ``depth`` (P,) camera z of the first sample; ``label`` (P,) uint8; ``shadow`` (P,).
+    """
+
+    direct: np.ndarray
+    albedo_sum: np.ndarray
+    e_sky_sum: np.ndarray
+    hit_count: np.ndarray
+    emitted: np.ndarray
+    normal_sum: np.ndarray
+    depth: np.ndarray
+    label: np.ndarray
+    shadow: np.ndarray
+
+    @classmethod
+    def zeros(cls, n_pix: int) -> "_PixelSums":
+        return cls(np.zeros((n_pix, 3)), np.zeros((n_pix, 3)), np.zeros((n_pix, 3)), np.zeros(n_pix),
+                   np.zeros((n_pix, 3)), np.zeros((n_pix, 3)), np.full(n_pix, np.inf), np.zeros(n_pix, dtype=np.uint8),
+                   np.full(n_pix, np.nan))
 
 
 def atrous_denoise(

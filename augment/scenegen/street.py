@@ -19,6 +19,8 @@ from streetaug.datasets.nuscenes_format import (LIDARSEG_CAR, LIDARSEG_DRIVEABLE
                                                 LIDARSEG_TERRAIN, LIDARSEG_TRAFFICCONE, LIDARSEG_VEGETATION)
 from streetaug.datasets.sample import Box
 
+from .primitives import box_solid, frustum, icosphere, prism, quad, rect_xy, wheel_cylinder
+
 ROAD_HALF_WIDTH_M = 8.0  # kerb to kerb 16 m: 2 x (2 lanes of 2.8 m + a 2.4 m parking strip)
 LANE_WIDTH_M = 2.8
 SIDEWALK_WIDTH_M = 4.0
@@ -135,103 +137,6 @@ class StreetScene:
         return n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
 
 
-# ----------------------------------------------------------------------------- mesh primitives
-
-
-def _quad(p0, p1, p2, p3) -> tuple[np.ndarray, np.ndarray]:
-    """A planar quad (counter-clockwise seen from its front side) as 4 vertices and 2 triangles."""
-    return np.array([p0, p1, p2, p3], dtype=np.float64), np.array([[0, 1, 2], [0, 2, 3]])
-
-
-def _frustum(bottom_xy: np.ndarray, top_xy: np.ndarray, z0: float, z1: float, with_bottom: bool = False):
-    """A closed solid between two horizontal quads (each (4, 2), counter-clockwise seen from above).
-
-    Returns vertices (8, 3) and triangles (10 or 12, 3) with outward counter-clockwise winding.
-    """
-    v = np.concatenate(
-        [np.c_[bottom_xy, np.full(4, z0)], np.c_[top_xy, np.full(4, z1)]], axis=0
-    )
-    tris = [[4, 5, 6], [4, 6, 7]]  # top
-    for i in range(4):
-        j = (i + 1) % 4
-        tris += [[i, j, 4 + j], [i, 4 + j, 4 + i]]
-    if with_bottom:
-        tris += [[0, 2, 1], [0, 3, 2]]
-    return v, np.array(tris)
-
-
-def _rect_xy(cx: float, cy: float, length: float, width: float, yaw: float) -> np.ndarray:
-    """Corners (4, 2) of a rectangle centred at (cx, cy), length along the yaw direction, CCW."""
-    c, s = np.cos(yaw), np.sin(yaw)
-    local = np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]]) * [length / 2, width / 2]
-    return local @ np.array([[c, s], [-s, c]]) + [cx, cy]
-
-
-def _box(cx, cy, length, width, z0, z1, yaw=0.0, with_bottom=False):
-    r = _rect_xy(cx, cy, length, width, yaw)
-    return _frustum(r, r, z0, z1, with_bottom)
-
-
-def _prism(cx: float, cy: float, radius: float, z0: float, z1: float, n: int = 8):
-    """Vertical n-gon cylinder, open at the bottom."""
-    a = 2 * np.pi * np.arange(n) / n
-    ring = np.c_[cx + radius * np.cos(a), cy + radius * np.sin(a)]
-    v = np.concatenate([np.c_[ring, np.full(n, z0)], np.c_[ring, np.full(n, z1)], [[cx, cy, z1]]])
-    tris = []
-    for i in range(n):
-        j = (i + 1) % n
-        tris += [[i, j, n + j], [i, n + j, n + i], [n + i, n + j, 2 * n]]
-    return v, np.array(tris)
-
-
-def _wheel(cx: float, cy: float, cz: float, radius: float, width: float, n: int = 10):
-    """Cylinder with its axis along y (a wheel), closed at both ends."""
-    a = 2 * np.pi * np.arange(n) / n
-    xz = np.c_[cx + radius * np.cos(a), cz + radius * np.sin(a)]
-    left = np.c_[xz[:, 0], np.full(n, cy + width / 2), xz[:, 1]]
-    right = np.c_[xz[:, 0], np.full(n, cy - width / 2), xz[:, 1]]
-    v = np.concatenate([left, right, [[cx, cy + width / 2, cz], [cx, cy - width / 2, cz]]])
-    tris = []
-    for i in range(n):
-        j = (i + 1) % n
-        tris += [[i, n + i, n + j], [i, n + j, j], [2 * n, j, i], [2 * n + 1, n + i, n + j]]
-    return v, np.array(tris)
-
-
-def _icosphere(center: np.ndarray, radius: float, rng: np.random.Generator, subdiv: int = 1, jitter: float = 0.15):
-    """A lumpy low-poly sphere (tree crown): icosahedron subdivided ``subdiv`` times, radii jittered."""
-    t = (1 + 5**0.5) / 2
-    v = np.array(
-        [[-1, t, 0], [1, t, 0], [-1, -t, 0], [1, -t, 0], [0, -1, t], [0, 1, t],
-         [0, -1, -t], [0, 1, -t], [t, 0, -1], [t, 0, 1], [-t, 0, -1], [-t, 0, 1]], dtype=np.float64
-    )
-    f = np.array(
-        [[0, 11, 5], [0, 5, 1], [0, 1, 7], [0, 7, 10], [0, 10, 11], [1, 5, 9], [5, 11, 4], [11, 10, 2],
-         [10, 7, 6], [7, 1, 8], [3, 9, 4], [3, 4, 2], [3, 2, 6], [3, 6, 8], [3, 8, 9], [4, 9, 5],
-         [2, 4, 11], [6, 2, 10], [8, 6, 7], [9, 8, 1]]
-    )
-    for _ in range(subdiv):
-        verts = list(v)
-        cache: dict[tuple[int, int], int] = {}
-
-        def mid(a: int, b: int) -> int:
-            key = (min(a, b), max(a, b))
-            if key not in cache:
-                cache[key] = len(verts)
-                verts.append((verts[a] + verts[b]) / 2)
-            return cache[key]
-
-        nf = []
-        for a, b, c in f:
-            ab, bc, ca = mid(a, b), mid(b, c), mid(c, a)
-            nf += [[a, ab, ca], [b, bc, ab], [c, ca, bc], [ab, bc, ca]]
-        v, f = np.array(verts), np.array(nf)
-    v = v / np.linalg.norm(v, axis=1, keepdims=True)
-    v = v * (radius * (1 + jitter * rng.uniform(-1, 1, len(v))))[:, None]
-    v[:, 2] *= 0.85
-    return v + center, f
-
-
 # ----------------------------------------------------------------------------- builder
 
 
@@ -301,19 +206,19 @@ def _add_ground(b: _MeshBuilder) -> None:
     x0, x1 = ROAD_X_RANGE_M
     hw = ROAD_HALF_WIDTH_M
     g = GROUND_HALF_SIZE_M
-    b.add(_quad([-g, -g, GROUND_Z_M], [g, -g, GROUND_Z_M], [g, g, GROUND_Z_M], [-g, g, GROUND_Z_M]), M_TERRAIN)
-    b.add(_quad([x0, -hw, 0], [x1, -hw, 0], [x1, hw, 0], [x0, hw, 0]), M_ASPHALT)
+    b.add(quad([-g, -g, GROUND_Z_M], [g, -g, GROUND_Z_M], [g, g, GROUND_Z_M], [-g, g, GROUND_Z_M]), M_TERRAIN)
+    b.add(quad([x0, -hw, 0], [x1, -hw, 0], [x1, hw, 0], [x0, hw, 0]), M_ASPHALT)
     h, w = KERB_HEIGHT_M, SIDEWALK_WIDTH_M
     for side in (-1, 1):
         y_in, y_out = side * hw, side * (hw + w)
         top = [[x0, y_in, h], [x1, y_in, h], [x1, y_out, h], [x0, y_out, h]]
         if side < 0:
             top = top[::-1]
-        b.add(_quad(*top), M_SIDEWALK)
+        b.add(quad(*top), M_SIDEWALK)
         kerb = [[x0, y_in, 0], [x1, y_in, 0], [x1, y_in, h], [x0, y_in, h]]
         if side > 0:
             kerb = [kerb[1], kerb[0], kerb[3], kerb[2]]
-        b.add(_quad(*kerb), M_KERB)
+        b.add(quad(*kerb), M_KERB)
 
 
 def _add_lane_marks(b: _MeshBuilder) -> None:
@@ -321,7 +226,7 @@ def _add_lane_marks(b: _MeshBuilder) -> None:
     x0, x1 = ROAD_X_RANGE_M
 
     def strip(xa, xb, ya, yb, m):
-        b.add(_quad([xa, ya, z], [xb, ya, z], [xb, yb, z], [xa, yb, z]), m)
+        b.add(quad([xa, ya, z], [xb, ya, z], [xb, yb, z], [xa, yb, z]), m)
 
     for yc in (-0.14, 0.14):  # double yellow centre line
         strip(x0, x1, yc - 0.06, yc + 0.06, M_PAINT_YELLOW)
@@ -361,7 +266,7 @@ def _add_buildings(b: _MeshBuilder, rng: np.random.Generator) -> None:
             )
             y_in = side * (y_front + setback)
             y_out = side * (y_front + setback + depth)
-            b.add(_box(x + length / 2, (y_in + y_out) / 2, length, depth, 0.0, height), m)
+            b.add(box_solid(x + length / 2, (y_in + y_out) / 2, length, depth, 0.0, height), m)
             x += length + rng.choice([0.0, 0.0, rng.uniform(2.0, 6.0)])
             k += 1
     # a few far blocks that close the view at the ends of the street
@@ -370,7 +275,7 @@ def _add_buildings(b: _MeshBuilder, rng: np.random.Generator) -> None:
         m = SurfaceMaterial(f"far_block_{j}", colour, LIDARSEG_MANMADE, "facade", gloss=0.2)
         yc = rng.uniform(-60.0, 60.0) if xc > 0 else 0.0
         yc = yc + np.sign(yc + 1e-9) * 25.0
-        b.add(_box(xc, yc, 40.0, 30.0, 0.0, rng.uniform(25.0, 60.0)), m)
+        b.add(box_solid(xc, yc, 40.0, 30.0, 0.0, rng.uniform(25.0, 60.0)), m)
 
 
 def _add_street_furniture(b: _MeshBuilder, rng: np.random.Generator) -> None:
@@ -378,16 +283,16 @@ def _add_street_furniture(b: _MeshBuilder, rng: np.random.Generator) -> None:
     y_tree = ROAD_HALF_WIDTH_M + 2.2
     for side in (-1, 1):
         for x in np.arange(-90.0, 300.0, 32.0) + rng.uniform(0, 12):
-            b.add(_prism(x, side * y_pole, 0.11, KERB_HEIGHT_M, 8.0), M_POLE)
-            b.add(_box(x, side * (y_pole - 0.9), 0.12, 1.9, 7.75, 7.9), M_POLE)  # arm over the road
-            b.add(_box(x, side * (y_pole - 1.75), 0.35, 0.7, 7.6, 7.8, with_bottom=True), M_LAMP)
+            b.add(prism(x, side * y_pole, 0.11, KERB_HEIGHT_M, 8.0), M_POLE)
+            b.add(box_solid(x, side * (y_pole - 0.9), 0.12, 1.9, 7.75, 7.9), M_POLE)  # arm over the road
+            b.add(box_solid(x, side * (y_pole - 1.75), 0.35, 0.7, 7.6, 7.8, with_bottom=True), M_LAMP)
         x = -95.0 + rng.uniform(0, 10)
         while x < 300.0:
             trunk_h = rng.uniform(2.0, 3.0)
-            b.add(_prism(x, side * y_tree, 0.16, KERB_HEIGHT_M, trunk_h + 1.0, n=6), M_TRUNK)
+            b.add(prism(x, side * y_tree, 0.16, KERB_HEIGHT_M, trunk_h + 1.0, n=6), M_TRUNK)
             r = rng.uniform(1.6, 2.5)
             center = np.array([x, side * y_tree, trunk_h + r * 0.8])
-            b.add(_icosphere(center, r, rng), M_FOLIAGE)
+            b.add(icosphere(center, r, rng), M_FOLIAGE)
             x += rng.uniform(11.0, 24.0)
 
 
@@ -399,24 +304,24 @@ def car_parts(length: float, width: float, height: float, paint: SurfaceMaterial
     """
     l, w, h = length, width, height
     body_z0, body_z1 = 0.28, 0.56 * h + 0.1
-    body_bottom = _rect_xy(0.0, 0.0, l, w, 0.0)
-    body_top = _rect_xy(0.0, 0.0, l - 0.25, w - 0.06, 0.0)
-    parts = [((_frustum(body_bottom, body_top, body_z0, body_z1, with_bottom=True)), paint)]
-    cab_bottom = _rect_xy(-0.06 * l, 0.0, 0.60 * l, w - 0.14, 0.0)
-    cab_top = _rect_xy(-0.10 * l, 0.0, 0.38 * l, w - 0.34, 0.0)
-    parts.append((_frustum(cab_bottom, cab_top, body_z1, h - 0.02), M_CAR_GLASS))
-    roof = _rect_xy(-0.10 * l, 0.0, 0.38 * l - 0.02, w - 0.36, 0.0)
-    parts.append((_frustum(roof, roof * [0.99, 0.99], h - 0.02, h), paint))
+    body_bottom = rect_xy(0.0, 0.0, l, w, 0.0)
+    body_top = rect_xy(0.0, 0.0, l - 0.25, w - 0.06, 0.0)
+    parts = [((frustum(body_bottom, body_top, body_z0, body_z1, with_bottom=True)), paint)]
+    cab_bottom = rect_xy(-0.06 * l, 0.0, 0.60 * l, w - 0.14, 0.0)
+    cab_top = rect_xy(-0.10 * l, 0.0, 0.38 * l, w - 0.34, 0.0)
+    parts.append((frustum(cab_bottom, cab_top, body_z1, h - 0.02), M_CAR_GLASS))
+    roof = rect_xy(-0.10 * l, 0.0, 0.38 * l - 0.02, w - 0.36, 0.0)
+    parts.append((frustum(roof, roof * [0.99, 0.99], h - 0.02, h), paint))
     # head and tail lights: small boxes sunk into the (slanted) front and rear faces of the body
     lz0, lz1 = body_z1 - 0.2, body_z1 - 0.08
     inset = 0.125 * (lz1 - body_z0) / (body_z1 - body_z0)
     for sx, m in ((1, M_HEADLIGHT), (-1, M_TAILLIGHT)):
         for sy in (-1, 1):
-            parts.append((_box(sx * (l / 2 - inset + 0.02), sy * (w / 2 - 0.25), 0.06, 0.3, lz0, lz1), m))
+            parts.append((box_solid(sx * (l / 2 - inset + 0.02), sy * (w / 2 - 0.25), 0.06, 0.3, lz0, lz1), m))
     r = 0.32
     for sx in (-1, 1):
         for sy in (-1, 1):
-            parts.append((_wheel(sx * 0.33 * l, sy * (w / 2 - 0.14), r, r, 0.24), M_TYRE))
+            parts.append((wheel_cylinder(sx * 0.33 * l, sy * (w / 2 - 0.14), r, r, 0.24), M_TYRE))
     return parts
 
 
@@ -436,7 +341,7 @@ def _add_car(b: _MeshBuilder, objects: list[StreetObject], x: float, y: float, y
 
 def _add_cone(b: _MeshBuilder, objects: list[StreetObject], x: float, y: float) -> None:
     h, r = 0.7, 0.2
-    b.add(_box(x, y, 0.36, 0.36, 0.0, 0.03), M_CONE, obj=len(objects))
+    b.add(box_solid(x, y, 0.36, 0.36, 0.0, 0.03), M_CONE, obj=len(objects))
     a = 2 * np.pi * np.arange(8) / 8
     base = np.c_[x + r * np.cos(a), y + r * np.sin(a)]
     v = np.concatenate([np.c_[base, np.full(8, 0.03)], [[x, y, h]]])

@@ -10,15 +10,21 @@ import pytest
 from conftest import devkit
 
 from streetaug.augment.core import (
+    camera_dir_to_lonlat,
     invert_transform,
     luminance,
     make_transform,
+    read_exr,
+    read_image_rgb,
     rotate_vectors,
+    sample_equirect,
     transform_points,
+    yaw_to_quat,
 )
-from streetaug.augment.core import read_exr, read_image_rgb
 from streetaug.augment.lighting.sun import sun_direction_global
-from streetaug.augment.scenegen.lidar import points_in_box
+from streetaug.augment.pipeline.lidar import empty_beams
+from streetaug.augment.scenegen.ground_truth import ground_truth_light
+from streetaug.augment.scenegen.lidar import N_AZIMUTH, N_RINGS, beam_directions_sensor, points_in_box
 from streetaug.augment.scenegen.make import CAMERA_RIGS, SAMPLE_SCENES, choose_exposure, make_sample_scenes
 from streetaug.augment.scenegen.render import SkyParams, StreetRenderer
 from streetaug.augment.scenegen.street import StreetParams, build_street
@@ -141,9 +147,6 @@ def test_lidar_road_points_lie_on_the_ground(dataroot: Path) -> None:
 
 
 def test_lidar_stores_every_beam_in_firing_order_as_nuscenes_does(dataroot: Path) -> None:
-    from streetaug.augment.pipeline.lidar import empty_beams
-    from streetaug.augment.scenegen.lidar import N_AZIMUTH, N_RINGS, beam_directions_sensor
-
     t = _tables(dataroot)
     scene = next(s for s in t["scene"] if s["name"] == "sample-sunny")
     sd = next(d for d in t["sample_data"] if d["sample_token"] == scene["first_sample_token"] and d["fileformat"] == "pcd")
@@ -214,8 +217,6 @@ def test_shadowed_road_is_darker_than_lit_road_in_the_sunny_image(dataroot: Path
     sd = _by_token(t["sample_data"])[gt["cameras"]["CAM_FRONT"]["sample_data_token"]]
     image = read_image_rgb(dataroot / sd["filename"]).astype(np.float64) / 255
     # re-trace the same view to find which road pixels the sun reaches
-    from streetaug.augment.core import yaw_to_quat
-
     T = make_transform(yaw_to_quat(np.radians(spec.heading_deg)), [*spec.origin_xy, 0.0])
     scene = build_street(StreetParams(seed=spec.street_seed, drive_on_left=spec.drive_on_left), T)
     renderer = StreetRenderer(scene, SkyParams(np.array(gt["sun"]["direction_global"]), spec.turbidity, spec.cloud_cover))
@@ -304,9 +305,6 @@ def test_map_drivable_area_covers_the_road_points_and_the_ego(dataroot: Path) ->
 
 
 def test_ground_truth_light_in_the_camera_frame(dataroot: Path) -> None:
-    from streetaug.augment.core import camera_dir_to_lonlat, sample_equirect
-    from streetaug.augment.scenegen.ground_truth import ground_truth_light
-
     gt = json.loads((dataroot / "ground_truth" / "sample-sunny" / "lighting.json").read_text())
     light = ground_truth_light(dataroot, "sample-sunny", "CAM_FRONT", 64, 128)
     np.testing.assert_allclose(light.sun.direction, gt["sun"]["direction_camera"]["CAM_FRONT"], atol=1e-6)
