@@ -90,7 +90,7 @@ def timed_run(dataroot: Path, version: str, out: Path, quality: str, level: str,
     rss = [w["peak_rss_mb"] for w in summary["workers"].values()]
     # Per sample CPU seconds / cameras; the median leaves out each worker's one-off warm-up (first ephemeris
     # call, caches), which a real run amortises over thousands of samples.
-    cpu = [r["cpu_s"] for r in read_log(out / "augment_log.jsonl")]
+    cpu = [r.cpu_s for r in read_log(out / "augment_log.jsonl")]
     return {
         "wall_s": round(wall, 2),
         "images": n_images,

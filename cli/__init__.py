@@ -1,4 +1,11 @@
-"""The ``streetaug`` command line (``streetaug.cli.main:main``)."""
+"""The ``streetaug`` command line: thin click commands that parse options, call one library function and print.
+
+It owns the commands (``main.py``: the group, ``predict-light``, ``insert``, ``make-samples``; ``batch.py``,
+``bench.py``, ``stability.py``, ``train.py``: one module per command family) and the options, parsing and
+error handling they share (``common.py``: exit 0 on success, 2 on bad arguments, 1 on runtime errors with
+a one-line cause, tracebacks with ``--debug``). The entry point is ``streetaug.cli.main:main``; nothing
+else imports this package, so it exports no names of its own.
+"""
 
 import os
 
@@ -7,3 +14,5 @@ import os
 # is by processes anyway.
 for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
+
+__all__: list[str] = []

@@ -6,12 +6,15 @@ from pathlib import Path
 
 import click
 
-from .common import LEVEL_HELP, LIGHT_LEVELS, _asset_options, _render_options, _runtime_errors
+from streetaug.augment.batch import BatchConfig, RunOptions, default_workers, format_summary, merge as merge_shards
+from streetaug.augment.batch import parse_shard, run_batch
+from streetaug.datasets.bundled import BUNDLED_VERSION, bundled_dataroot
+
+from .common import LEVEL_HELP, LIGHT_LEVELS, asset_options, render_options, runtime_errors
 
 
 def _dataroot(dataroot: Path | None, version: str | None) -> tuple[str, str]:
-    from streetaug.datasets.bundled import BUNDLED_VERSION, bundled_dataroot
-
+    """(absolute dataroot, version) of the options; the bundled sample scenes without ``--dataroot``."""
     if dataroot is None:
         return str(bundled_dataroot().resolve()), version or BUNDLED_VERSION
     if version is None:
@@ -33,8 +36,8 @@ def _dataroot(dataroot: Path | None, version: str | None) -> tuple[str, str]:
               help="Objects placed in each camera's view.")
 @click.option("--yaw-sigma", type=float, default=15.0, show_default=True,
               help="Yaw noise (deg) around the ego heading: 15 augmentation (paper), 3 realistic.")
-@_asset_options
-@_render_options
+@asset_options
+@render_options
 @click.option("--level", type=click.Choice(LIGHT_LEVELS), default="auto", show_default=True, help=LEVEL_HELP)
 @click.option("--workers", type=click.IntRange(min=1), default=None,
               help="Local worker processes [default: all cores].")
@@ -50,7 +53,7 @@ def _dataroot(dataroot: Path | None, version: str | None) -> tuple[str, str]:
 @click.option("--fail-fast", is_flag=True, help="Stop at the first failing sample (with --debug: its traceback).")
 @click.option("--no-progress", is_flag=True, help="No progress bar.")
 @click.option("--debug", is_flag=True, help="Show tracebacks.")
-@_runtime_errors
+@runtime_errors
 def batch(dataroot, version, out, cameras, limit, n_objects, yaw_sigma, asset, assets_dir, asset_front, asset_length,
           quality, seed, ev, match_camera, level, workers, scheduler, dask_local, shard, dry_run, contact_sheet, fail_fast,
           no_progress, debug):
@@ -64,8 +67,6 @@ def batch(dataroot, version, out, cameras, limit, n_objects, yaw_sigma, asset, a
           --shard $SLURM_ARRAY_TASK_ID/64 --no-progress      # one job of an array, then:
       streetaug merge --out /shared/aug
     """
-    from streetaug.augment.batch import BatchConfig, RunOptions, default_workers, format_summary, parse_shard, run_batch
-
     if scheduler and dask_local:
         raise click.UsageError("give --scheduler ADDRESS or --dask-local N, not both")
     if dry_run and shard:
@@ -102,7 +103,7 @@ def batch(dataroot, version, out, cameras, limit, n_objects, yaw_sigma, asset, a
 @click.option("--contact-sheet", type=click.IntRange(min=0), default=12, show_default=True,
               help="Random augmented images in OUT/contact_sheet.png (0: none).")
 @click.option("--debug", is_flag=True, help="Show tracebacks.")
-@_runtime_errors
+@runtime_errors
 def merge(out, allow_incomplete, contact_sheet, debug):
     """Join the shards of 'streetaug batch --shard I/N' into one nuScenes dataset (log, tables, summary).
 
@@ -110,7 +111,5 @@ def merge(out, allow_incomplete, contact_sheet, debug):
     Example:
       streetaug merge --out /shared/aug
     """
-    from streetaug.augment.batch import format_summary, merge as merge_shards
-
     summary = merge_shards(out, allow_incomplete, contact_sheet, echo=lambda msg: click.echo(msg, err=True))
     click.echo(format_summary(summary))

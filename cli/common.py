@@ -15,15 +15,20 @@ from typing import Callable
 import click
 import numpy as np
 
+from streetaug.augment.core import intrinsics_from_fov
+from streetaug.datasets.bundled import BUNDLED_VERSION, bundled_dataroot
+from streetaug.datasets.nuscenes import NuScenesReader
+from streetaug.datasets.sample import CameraView, Sample
+
 CAMERA_DEFAULT = "CAM_FRONT"
-# Lighting levels offered on the command line (see streetaug.augment.lighting.estimate).
+# Lighting levels offered on the command line (see streetaug.augment.lighting.api).
 LIGHT_LEVELS = ("L0", "L1", "L2", "L3", "auto")
 LEVEL_HELP = ("Lighting level: L0 constant dome (the no-light baseline), L1 sun + parametric sky, "
               "L2 + scene volume near the placement, L3 full scene volume, auto the cheapest level whose "
               "predicted error is within 0.05 of the best (choice and reason in lighting.json).")
 
 
-def _parse_floats(value: str | None, n: int, name: str) -> list[float] | None:
+def parse_floats(value: str | None, n: int, name: str) -> list[float] | None:
     if value is None:
         return None
     try:
@@ -35,7 +40,7 @@ def _parse_floats(value: str | None, n: int, name: str) -> list[float] | None:
     return parts
 
 
-def _runtime_errors(func: Callable) -> Callable:
+def runtime_errors(func: Callable) -> Callable:
     """Turn library errors into one line on stderr and exit code 1 (traceback with --debug)."""
 
     @functools.wraps(func)
@@ -56,7 +61,7 @@ def _runtime_errors(func: Callable) -> Callable:
 # ----------------------------------------------------------------------------- shared options
 
 
-def _dataset_options(func: Callable) -> Callable:
+def dataset_options(func: Callable) -> Callable:
     options = [
         click.option("--dataroot", type=click.Path(file_okay=False, path_type=Path),
                      help="nuScenes dataroot (default: the bundled sample scenes)."),
@@ -71,10 +76,8 @@ def _dataset_options(func: Callable) -> Callable:
     return func
 
 
-def _open_dataset(dataroot: Path | None, version: str | None):
-    from streetaug.datasets.bundled import BUNDLED_VERSION, bundled_dataroot
-    from streetaug.datasets.nuscenes import NuScenesReader
-
+def open_dataset(dataroot: Path | None, version: str | None) -> NuScenesReader:
+    """The reader of ``--dataroot``/``--version`` (the bundled sample scenes without ``--dataroot``)."""
     if dataroot is None:
         return NuScenesReader(bundled_dataroot(), version or BUNDLED_VERSION)
     if version is None:
@@ -82,7 +85,8 @@ def _open_dataset(dataroot: Path | None, version: str | None):
     return NuScenesReader(dataroot, version)
 
 
-def _resolve_sample(reader, scene: str | None, sample_token: str | None) -> str:
+def resolve_sample(reader: NuScenesReader, scene: str | None, sample_token: str | None) -> str:
+    """``--sample`` or else the first sample of ``--scene``."""
     if sample_token:
         return sample_token
     if scene is None:
@@ -93,7 +97,8 @@ def _resolve_sample(reader, scene: str | None, sample_token: str | None) -> str:
     return tokens[0]
 
 
-def _view(sample, camera: str):
+def camera_view(sample: Sample, camera: str) -> CameraView:
+    """The sample's ``--camera``, or a usage error naming the cameras it has."""
     if camera not in sample.cameras:
         raise click.UsageError(
             f"camera {camera!r} not in sample {sample.token}; available: {', '.join(sorted(sample.cameras))}"
@@ -101,18 +106,22 @@ def _view(sample, camera: str):
     return sample.cameras[camera]
 
 
-def _intrinsics(intrinsics: str | None, fov_deg: float | None, width: int, height: int) -> np.ndarray:
-    from streetaug.augment.core import intrinsics_from_fov
+def parse_intrinsics(intrinsics: str) -> np.ndarray:
+    """``--intrinsics fx,fy,cx,cy`` -> K (3, 3) (pixel centres at integers)."""
+    fx, fy, cx, cy = parse_floats(intrinsics, 4, "--intrinsics")
+    if fx <= 0 or fy <= 0:
+        raise click.BadParameter("focal lengths must be positive", param_hint="--intrinsics")
+    return np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
 
+
+def intrinsics_option(intrinsics: str | None, fov_deg: float | None, width: int, height: int) -> np.ndarray:
+    """K (3, 3) from ``--intrinsics`` or else ``--fov-deg`` (horizontal, principal point at the image centre)."""
     if intrinsics is not None:
-        fx, fy, cx, cy = _parse_floats(intrinsics, 4, "--intrinsics")
-        if fx <= 0 or fy <= 0:
-            raise click.BadParameter("focal lengths must be positive", param_hint="--intrinsics")
-        return np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
+        return parse_intrinsics(intrinsics)
     return intrinsics_from_fov(width, height, fov_deg)
 
 
-def _asset_options(func: Callable) -> Callable:
+def asset_options(func: Callable) -> Callable:
     options = [
         click.option("--asset", type=click.Path(dir_okay=False, path_type=Path),
                      help="glTF/GLB/OBJ/PLY asset (metres, +Y up, front +Z). Default: a procedural car."),
@@ -128,7 +137,7 @@ def _asset_options(func: Callable) -> Callable:
     return func
 
 
-def _render_options(func: Callable) -> Callable:
+def render_options(func: Callable) -> Callable:
     options = [
         click.option("--quality", type=click.Choice(["draft", "default", "high"]), default="default",
                      show_default=True, help="Render preset."),

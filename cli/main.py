@@ -11,19 +11,25 @@ from pathlib import Path
 import click
 import numpy as np
 
+from .batch import batch, merge
+from .bench import bench
 from .common import (
     LEVEL_HELP,
     LIGHT_LEVELS,
-    _asset_options,
-    _dataset_options,
-    _intrinsics,
-    _open_dataset,
-    _parse_floats,
-    _render_options,
-    _resolve_sample,
-    _runtime_errors,
-    _view,
+    asset_options,
+    camera_view,
+    dataset_options,
+    intrinsics_option,
+    open_dataset,
+    parse_floats,
+    parse_intrinsics,
+    render_options,
+    resolve_sample,
+    runtime_errors,
 )
+from .stability import stability
+from .train import train_light, train_sky
+
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100})
 @click.version_option(package_name="streetaug")
@@ -42,7 +48,7 @@ def main() -> None:
 
 
 @main.command("predict-light")
-@_dataset_options
+@dataset_options
 @click.option("--image", type=click.Path(dir_okay=False, path_type=Path), help="A single image (no metadata).")
 @click.option("--fov-deg", type=float, help="Horizontal field of view of --image, degrees.")
 @click.option("--intrinsics", help="fx,fy,cx,cy of --image (pixel centres at integers).")
@@ -51,7 +57,7 @@ def main() -> None:
 @click.option("--level", type=click.Choice(LIGHT_LEVELS), default="auto", show_default=True, help=LEVEL_HELP)
 @click.option("--out", required=True, type=click.Path(file_okay=False, path_type=Path), help="Output folder.")
 @click.option("--debug", is_flag=True, help="Show tracebacks.")
-@_runtime_errors
+@runtime_errors
 def predict_light(dataroot, version, scene, sample_token, camera, image, fov_deg, intrinsics, at, level, out, debug):
     """Estimate the scene's HDR lighting; write lighting.json, envmap_camera.exr and preview.png.
 
@@ -63,22 +69,21 @@ def predict_light(dataroot, version, scene, sample_token, camera, image, fov_deg
       streetaug predict-light --image photo.jpg --fov-deg 70 --out out/light-photo
     """
     from streetaug.augment.core import read_image_rgb
-    from streetaug.augment.lighting.estimate import estimate_lighting, estimate_lighting_from_image
-    from streetaug.augment.lighting.outputs import write_lighting_outputs
+    from streetaug.augment.lighting import estimate_lighting, estimate_lighting_from_image, write_lighting_outputs
     from streetaug.augment.pipeline import ego_ground_plane_cam
 
-    at_cam = _parse_floats(at, 3, "--at")
+    at_cam = parse_floats(at, 3, "--at")
     if image is not None:
         if fov_deg is None and intrinsics is None:
             raise click.UsageError("--image needs --fov-deg F or --intrinsics fx,fy,cx,cy")
         rgb = read_image_rgb(image)
-        K = _intrinsics(intrinsics, fov_deg, rgb.shape[1], rgb.shape[0])
+        K = intrinsics_option(intrinsics, fov_deg, rgb.shape[1], rgb.shape[0])
         estimate = estimate_lighting_from_image(rgb, K, level=level)
         query = at_cam or [0.0, 1.5, 15.0]
     else:
-        reader = _open_dataset(dataroot, version)
-        sample = reader.sample(_resolve_sample(reader, scene, sample_token))
-        view = _view(sample, camera)
+        reader = open_dataset(dataroot, version)
+        sample = reader.sample(resolve_sample(reader, scene, sample_token))
+        view = camera_view(sample, camera)
         rgb = view.image
         if at_cam is None:
             normal, offset = ego_ground_plane_cam(view)
@@ -97,9 +102,9 @@ def predict_light(dataroot, version, scene, sample_token, camera, image, fov_deg
 
 
 @main.command("insert")
-@_dataset_options
-@_asset_options
-@_render_options
+@dataset_options
+@asset_options
+@render_options
 @click.option("--level", type=click.Choice(LIGHT_LEVELS), default="auto", show_default=True, help=LEVEL_HELP)
 @click.option("--n-objects", type=click.IntRange(1, 8), default=1, show_default=True, help="Objects per image.")
 @click.option("--yaw-sigma", type=float, default=3.0, show_default=True,
@@ -113,7 +118,7 @@ def predict_light(dataroot, version, scene, sample_token, camera, image, fov_deg
 @click.option("--explain", is_flag=True, help="Dataset form: also write placement_bev.png (candidates and the "
               "rules that rejected them, over the map, LiDAR and boxes).")
 @click.option("--debug", is_flag=True, help="Also write mask.png and shadow.exr; show tracebacks.")
-@_runtime_errors
+@runtime_errors
 def insert(dataroot, version, scene, sample_token, camera, asset, assets_dir, asset_front, asset_length,
            quality, seed, ev, match_camera, level, n_objects, yaw_sigma, image, intrinsics, depth, envmap, pose_camera, out, explain,
            debug):
@@ -128,7 +133,9 @@ def insert(dataroot, version, scene, sample_token, camera, asset, assets_dir, as
       streetaug insert --image img.png --intrinsics 1266,1266,816,491 --depth depth.exr \\
           --envmap env.exr --asset car.glb --pose-camera 0.5,1.5,15,90 --out out/img
     """
-    from streetaug.augment.pipeline import InsertOptions, insert_into_image, insert_into_view, write_insert_outputs
+    # Deferred: the pipeline loads torch (the learned sky model), the assets scipy; `streetaug --help` must not.
+    from streetaug.augment.assets.select import load_asset_options, select_assets
+    from streetaug.augment.pipeline import InsertOptions, insert_image_to_files, insert_view_to_files, item_seed
 
     options = InsertOptions(quality=quality, level=level, seed=seed, n_objects=n_objects, yaw_sigma_deg=yaw_sigma, ev=ev,
                             match_camera=match_camera)
@@ -137,58 +144,23 @@ def insert(dataroot, version, scene, sample_token, camera, asset, assets_dir, as
                                   ("--asset", asset), ("--pose-camera", pose_camera)] if v is None]
         if missing:
             raise click.UsageError(f"the image form of insert also needs {', '.join(missing)}")
-        from streetaug.augment.assets.select import load_asset_options
-        from streetaug.augment.core import read_exr, read_image_rgb
-
-        rgb = read_image_rgb(image)
-        K = _intrinsics(intrinsics, None, rgb.shape[1], rgb.shape[0])
-        depth_m = _read_depth(depth)
-        env = read_exr(envmap)
-        mesh = load_asset_options(asset, asset_front, asset_length)
-        pose = _parse_floats(pose_camera, 4, "--pose-camera")
-        result = insert_into_image(rgb, K, depth_m, env, mesh, pose, options)
-        suffix = image.suffix
+        result, path = insert_image_to_files(image, parse_intrinsics(intrinsics), depth, envmap,
+                                             load_asset_options(asset, asset_front, asset_length),
+                                             parse_floats(pose_camera, 4, "--pose-camera"), options, out, debug)
     else:
-        from streetaug.augment.assets.select import select_assets
-        from streetaug.augment.pipeline import item_seed
-
         if scene is None and sample_token is None:
             raise click.UsageError("give --scene NAME_OR_TOKEN (dataset form) or --image IMG (image form)")
-        reader = _open_dataset(dataroot, version)
-        sample = reader.sample(_resolve_sample(reader, scene, sample_token))
-        view = _view(sample, camera)
-        rng = item_seed(seed, "asset", sample.token, camera)
-        meshes = select_assets(rng, n_objects, asset, assets_dir, asset_front, asset_length)
-        result = insert_into_view(sample, view, meshes, options)
-        suffix = Path(view.image_path).suffix
-        if explain:
-            from streetaug.augment.core import write_image_rgb
-            from streetaug.placement.explain import draw_placement_bev
-
-            write_image_rgb(out / "placement_bev.png", draw_placement_bev(sample, view, result.placement))
-    path = write_insert_outputs(result, out, suffix, debug=debug)
+        reader = open_dataset(dataroot, version)
+        sample = reader.sample(resolve_sample(reader, scene, sample_token))
+        view = camera_view(sample, camera)
+        assets = select_assets(item_seed(seed, "asset", sample.token, camera), n_objects, asset, assets_dir,
+                               asset_front, asset_length)
+        result, path = insert_view_to_files(sample, view, assets, options, out, debug, explain)
     if result.skipped_reason:
         click.echo(f"no object inserted: {result.skipped_reason} (image copied unchanged to {path})")
     else:
         click.echo(f"wrote {path} and {out}/labels.json: {len(result.objects)} object(s), "
                    f"{result.timing_s['total']:.2f} s")
-
-
-def _read_depth(path: Path) -> np.ndarray:
-    from streetaug.augment.core import InputError, read_exr
-
-    if path.suffix.lower() == ".npy":
-        if not path.is_file():
-            raise InputError(f"{path}: depth file not found")
-        depth = np.load(path, allow_pickle=False)
-    elif path.suffix.lower() == ".exr":
-        depth = read_exr(path)
-        depth = depth[..., 0]
-    else:
-        raise InputError(f"{path}: depth must be .exr or .npy (metres, camera-frame z)")
-    if depth.ndim != 2:
-        raise InputError(f"{path}: depth must be a single-channel (H, W) map, got shape {depth.shape}")
-    return depth.astype(np.float32)
 
 
 # ----------------------------------------------------------------------------- make-samples
@@ -201,7 +173,7 @@ def _read_depth(path: Path) -> np.ndarray:
 @click.option("--height", type=int, default=900, show_default=True)
 @click.option("--seed", type=int, default=0, show_default=True)
 @click.option("--debug", is_flag=True, help="Show tracebacks.")
-@_runtime_errors
+@runtime_errors
 def make_samples(out, scenes, width, height, seed, debug):
     """Generate the procedural sample scenes (nuScenes format + ground-truth lighting).
 
@@ -209,7 +181,7 @@ def make_samples(out, scenes, width, height, seed, debug):
     Example (regenerates the bundled scenes byte-identically):
       streetaug make-samples --out examples/nuscenes-samples
     """
-    from streetaug.augment.scenegen.make import make_sample_scenes
+    from streetaug.augment.scenegen.make import make_sample_scenes  # deferred: scipy, slow for `--help`
 
     names = [s.strip() for s in scenes.split(",")] if scenes else None
     paths = make_sample_scenes(out, names=names, width=width, height=height, seed=seed)
@@ -218,11 +190,6 @@ def make_samples(out, scenes, width, height, seed, debug):
 
 # ----------------------------------------------------------------------------- commands in their own modules
 # Each module defines one click command (or a few) and is registered here.
-from .batch import batch, merge  # noqa: E402
-from .bench import bench  # noqa: E402
-from .stability import stability  # noqa: E402
-from .train import train_light, train_sky  # noqa: E402
-
 main.add_command(batch)
 main.add_command(bench)
 main.add_command(merge)

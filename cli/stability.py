@@ -6,11 +6,11 @@ from pathlib import Path
 
 import click
 
-from .common import _dataset_options, _open_dataset, _resolve_sample, _runtime_errors, _view
+from .common import camera_view, dataset_options, open_dataset, resolve_sample, runtime_errors
 
 
 @click.command("stability")
-@_dataset_options
+@dataset_options
 @click.option("--families", default=None,
               help="Comma-separated perturbation families (default: all: exposure, noise, jpeg, focal, depth_bias, "
                    "depth_noise, lidar_dropout, calibration).")
@@ -21,7 +21,7 @@ from .common import _dataset_options, _open_dataset, _resolve_sample, _runtime_e
 @click.option("--seed", type=int, default=0, show_default=True)
 @click.option("--out", required=True, type=click.Path(file_okay=False, path_type=Path), help="Output folder.")
 @click.option("--debug", is_flag=True, help="Show tracebacks.")
-@_runtime_errors
+@runtime_errors
 def stability(dataroot, version, scene, sample_token, camera, families, failure_modes, quality, seed, out, debug):
     """Perturb one sample's inputs and measure how the sun, env map, placement and composite change.
 
@@ -31,26 +31,21 @@ def stability(dataroot, version, scene, sample_token, camera, families, failure_
     Example:
       streetaug stability --scene sample-sunny --out out/stability
     """
+    # Deferred: the insertion loads torch (the learned sky model), the assets scipy; `streetaug --help` must not.
     from streetaug.augment.assets.select import select_assets
-    from streetaug.augment.core import write_json_atomic
+    from streetaug.augment.evaluation.failure_modes import write_failure_modes
+    from streetaug.augment.evaluation.stability import write_stability_report
     from streetaug.augment.pipeline import InsertOptions, item_seed
-    from streetaug.augment.core import write_image_rgb
-    from streetaug.augment.evaluation.stability import contact_sheet, plot_report, run_failure_cases, stability_report
 
-    reader = _open_dataset(dataroot, version)
-    sample = reader.sample(_resolve_sample(reader, scene, sample_token))
-    view = _view(sample, camera)
+    reader = open_dataset(dataroot, version)
+    sample = reader.sample(resolve_sample(reader, scene, sample_token))
+    view = camera_view(sample, camera)
     assets = select_assets(item_seed(seed, "asset", sample.token, camera), 1)
     options = InsertOptions(quality=quality, seed=seed)
     if failure_modes:
-        rows, images = run_failure_cases(sample, view, assets, options)
-        write_json_atomic(out / "failure_modes.json", {"schema": "streetaug.failure_modes/1", "cases": rows})
-        write_image_rgb(out / "failure_modes.jpg", contact_sheet(rows, images))
-        for row in rows:
+        for row in write_failure_modes(sample, view, assets, options, out):
             click.echo(f"{row['case']:>20}: {row['outcome']:<8} {row['detail']}")
         return
     names = [f.strip() for f in families.split(",")] if families else None
-    report = stability_report(sample, view, assets, options, names, seed=seed)
-    write_json_atomic(out / "stability.json", report)
-    plot_report(report, out / "stability.png")
+    report = write_stability_report(sample, view, assets, options, out, names, seed=seed)
     click.echo(f"wrote {out}/stability.json and stability.png ({len(report['rows'])} perturbed runs)")

@@ -1,6 +1,6 @@
 """``streetaug train-sky`` and ``streetaug train-light``: train the learned sky model and image predictor.
 
-Thin shells over :mod:`streetaug.augment.lighting.skynet.train`; the resolved configuration and the
+Thin shells over :mod:`streetaug.augment.training`; the resolved configuration and the
 training report are written beside the cached data (``--cache``).
 """
 
@@ -10,7 +10,7 @@ from pathlib import Path
 
 import click
 
-from .common import _runtime_errors
+from .common import runtime_errors
 
 _COMMON = [
     click.option("--seed", type=int, default=0, show_default=True, help="Seed of data, batches and initialisation."),
@@ -41,7 +41,7 @@ def _overrides(**kwargs) -> dict:
 @click.command("train-sky")
 @_common
 @click.option("--n-synth", type=click.IntRange(min=1), default=None, help="Number of synthetic skies generated.")
-@_runtime_errors
+@runtime_errors
 def train_sky(seed, steps, batch, threads, out, cache_dir, hdri_dir, debug, n_synth):
     """Train the sky model (LDR sky dome -> sky vector -> HDR dome) on synthetic + real skies.
 
@@ -51,8 +51,8 @@ def train_sky(seed, steps, batch, threads, out, cache_dir, hdri_dir, debug, n_sy
     """
     from dataclasses import replace
 
-    from streetaug.augment.lighting.skynet.train import SkyTrainConfig
-    from streetaug.augment.lighting.skynet.train import train_sky as run
+    from streetaug.augment.training import SkyTrainConfig  # defers torch: only training needs it
+    from streetaug.augment.training import train_sky as run
 
     cfg = replace(SkyTrainConfig(), **_overrides(seed=seed, steps=steps, batch=batch, threads=threads, out=out,
                                                  cache_dir=cache_dir, hdri_dir=hdri_dir, n_synth=n_synth))
@@ -66,7 +66,7 @@ def train_sky(seed, steps, batch, threads, out, cache_dir, hdri_dir, debug, n_sy
 @click.option("--n-streets", type=click.IntRange(min=1), default=None, help="Generated streets (2 views each).")
 @click.option("--sky-weights", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Sky model weights (default: the package's).")
-@_runtime_errors
+@runtime_errors
 def train_light(seed, steps, batch, threads, out, cache_dir, hdri_dir, debug, n_streets, sky_weights):
     """Train the image -> sky-vector predictor (sun direction, visibility, sky latent) on top of the sky model.
 
@@ -76,8 +76,8 @@ def train_light(seed, steps, batch, threads, out, cache_dir, hdri_dir, debug, n_
     """
     from dataclasses import replace
 
-    from streetaug.augment.lighting.skynet.train import LightTrainConfig
-    from streetaug.augment.lighting.skynet.train import train_light as run
+    from streetaug.augment.training import LightTrainConfig  # defers torch: only training needs it
+    from streetaug.augment.training import train_light as run
 
     cfg = replace(LightTrainConfig(), **_overrides(seed=seed, steps=steps, batch=batch, threads=threads, out=out,
                                                    cache_dir=cache_dir, hdri_dir=hdri_dir, n_streets=n_streets,

@@ -1,4 +1,4 @@
-"""``augment_log.jsonl``: one JSON line per attempted image, appended by the driver alone.
+"""``augment_log.jsonl``: one :class:`~.row.LogRow` per attempted image, appended by the driver alone.
 
 Crash safety: the lines of one sample are appended in one write and fsync'ed, after its files are in
 place. A crash can leave a truncated last line or a sample with only some of its lines; on resume
@@ -14,11 +14,10 @@ from pathlib import Path
 from typing import Callable, Iterable
 
 from ..core import write_bytes_atomic
+from .row import LogRow
 
-DONE_STATUSES = ("ok", "skipped")
 
-
-def read_log(path: Path) -> list[dict]:
+def read_log(path: Path) -> list[LogRow]:
     """Rows of a log in file order; lines that do not parse (a crash's truncated tail) are ignored."""
     rows = []
     if not path.is_file():
@@ -26,50 +25,51 @@ def read_log(path: Path) -> list[dict]:
     with open(path, "rb") as f:
         for line in f:
             try:
-                row = json.loads(line)
+                doc = json.loads(line)
             except (json.JSONDecodeError, UnicodeDecodeError):
                 continue
-            if isinstance(row, dict) and "sample_token" in row and "camera" in row:
-                rows.append(row)
+            if isinstance(doc, dict) and "sample_token" in doc and "camera" in doc:
+                rows.append(LogRow.from_json(doc))
     return rows
 
 
-def latest_rows(rows: Iterable[dict]) -> dict[tuple[str, str], dict]:
+def latest_rows(rows: Iterable[LogRow]) -> dict[tuple[str, str], LogRow]:
     """(sample_token, camera) -> its last row."""
-    return {(r["sample_token"], r["camera"]): r for r in rows}
+    return {r.key: r for r in rows}
 
 
-def done_samples(rows: Iterable[dict], out_dir: Path, expected: Callable[[str], Iterable[str]]) -> set[str]:
+def done_samples(rows: Iterable[LogRow], out_dir: Path, expected: Callable[[str], Iterable[str]]) -> set[str]:
     """Samples whose every expected camera has an ok/skipped row whose files exist."""
-    by_sample: dict[str, dict[str, dict]] = {}
+    by_sample: dict[str, dict[str, LogRow]] = {}
     for (token, camera), row in latest_rows(rows).items():
         by_sample.setdefault(token, {})[camera] = row
     done = set()
     for token, cams in by_sample.items():
         want = list(expected(token))
-        if want and all(c in cams and _row_done(cams[c], out_dir) for c in want):
+        if want and all(c in cams and row_complete(cams[c], out_dir) for c in want):
             done.add(token)
     return done
 
 
-def _row_done(row: dict, out_dir: Path) -> bool:
-    return row.get("status") in DONE_STATUSES and all((out_dir / f).is_file() for f in row.get("files", []))
+def row_complete(row: LogRow, out_dir: Path) -> bool:
+    """The row's image is done (ok / skipped) and every file it wrote exists under ``out_dir``."""
+    return row.done and all((out_dir / f).is_file() for f in row.files)
 
 
-def compact_log(path: Path, keep: Callable[[dict], bool]) -> list[dict]:
+def compact_log(path: Path, keep: Callable[[LogRow], bool]) -> list[LogRow]:
     """Keep the last row per image of rows with ``keep(row)``; rewrite the file (atomically) if that changes it."""
     raw = path.read_bytes() if path.is_file() else b""
     rows = read_log(path)
     kept = [r for r in latest_rows(rows).values() if keep(r)]
     if len(kept) != len(rows) or (raw and not raw.endswith(b"\n")):
-        write_bytes_atomic(path, b"".join(_line(r) for r in kept))
+        write_bytes_atomic(path, b"".join(log_line(r) for r in kept))
     return kept
 
 
-def append_rows(path: Path, rows: list[dict]) -> None:
+def append_rows(path: Path, rows: list[LogRow]) -> None:
     """Append rows in one write, then fsync."""
     path.parent.mkdir(parents=True, exist_ok=True)
-    data = b"".join(_line(r) for r in rows)
+    data = b"".join(log_line(r) for r in rows)
     fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o666)
     try:
         while data:
@@ -79,9 +79,11 @@ def append_rows(path: Path, rows: list[dict]) -> None:
         os.close(fd)
 
 
-def write_log(path: Path, rows: list[dict]) -> None:
-    write_bytes_atomic(path, b"".join(_line(r) for r in rows))
+def write_log(path: Path, rows: list[LogRow]) -> None:
+    """Write a whole log (atomically)."""
+    write_bytes_atomic(path, b"".join(log_line(r) for r in rows))
 
 
-def _line(row: dict) -> bytes:
-    return (json.dumps(row, sort_keys=True) + "\n").encode()
+def log_line(row: LogRow) -> bytes:
+    """One line of the log: the row's JSON with sorted keys."""
+    return (json.dumps(row.to_json(), sort_keys=True) + "\n").encode()

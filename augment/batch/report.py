@@ -11,6 +11,7 @@ import cv2
 import numpy as np
 
 from ..core import read_image_rgb, write_image_rgb
+from .row import LogRow
 
 SUMMARY_SCHEMA = "streetaug.batch_summary/1"
 PERCENTILES = (50, 90, 99)
@@ -24,31 +25,31 @@ def reason_key(status: str, reason: str) -> str:
     return f"{status}: {text[:100]}"
 
 
-def summarize(rows: list[dict], this_run: dict | None = None) -> dict:
+def summarize(rows: list[LogRow], this_run: dict | None = None) -> dict:
     """Summary of a batch's final log rows (one per image) plus the numbers of this run."""
-    counts = Counter(r["status"] for r in rows)
-    reasons = Counter(reason_key(r["status"], r.get("reason", "")) for r in rows if r.get("reason"))
-    lighting = Counter(f"{r['lighting']['level']} sun={r['lighting']['sun_source']}" for r in rows
-                       if r.get("status") == "ok" and r.get("lighting"))
+    counts = Counter(r.status for r in rows)
+    reasons = Counter(reason_key(r.status, r.reason) for r in rows if r.reason)
+    lighting = Counter(f"{r.lighting.level} sun={r.lighting.sun_source}" for r in rows
+                       if r.status == "ok" and r.lighting)
     stages: dict[str, list[float]] = {}
     for r in rows:
-        if r["status"] == "ok":
-            for stage, seconds in r.get("timing_s", {}).items():
+        if r.status == "ok":
+            for stage, seconds in r.timing_s.items():
                 stages.setdefault(stage, []).append(float(seconds))
-            if "cpu_s" in r:  # the sample's CPU time per camera, for comparison with "total"
-                stages.setdefault("cpu", []).append(float(r["cpu_s"]))
+            if r.cpu_s is not None:  # the sample's CPU time per camera, for comparison with "total"
+                stages.setdefault("cpu", []).append(float(r.cpu_s))
     workers: dict[str, dict] = {}
     for r in rows:
-        if "worker" in r:
-            w = workers.setdefault(r["worker"], {"images": 0, "peak_rss_mb": 0.0})
+        if r.worker is not None:
+            w = workers.setdefault(r.worker, {"images": 0, "peak_rss_mb": 0.0})
             w["images"] += 1
-            w["peak_rss_mb"] = max(w["peak_rss_mb"], float(r.get("peak_rss_mb", 0.0)))
-    objects = [o for r in rows if r["status"] in ("ok", "skipped") for o in r.get("objects", [])]
+            w["peak_rss_mb"] = max(w["peak_rss_mb"], float(r.peak_rss_mb or 0.0))
+    objects = [o for r in rows if r.done for o in r.objects or ()]
     return {
         "schema": SUMMARY_SCHEMA,
         "counts": {k: counts[k] for k in sorted(counts)},
         "images": len(rows),
-        "samples": len({r["sample_token"] for r in rows}),
+        "samples": len({r.sample_token for r in rows}),
         "objects_inserted": len(objects),
         "reasons": dict(reasons.most_common(20)),
         "lighting": dict(lighting.most_common()),
@@ -96,10 +97,9 @@ def format_summary(summary: dict) -> str:
     return "\n".join(lines)
 
 
-def contact_sheet(out_dir: Path, rows: list[dict], n: int, seed: int, thumb_width: int = 400) -> Path | None:
+def contact_sheet(out_dir: Path, rows: list[LogRow], n: int, seed: int, thumb_width: int = 400) -> Path | None:
     """``out_dir/contact_sheet.png``: up to ``n`` random augmented images (seeded), inserted objects boxed in green."""
-    ok = sorted((r for r in rows if r["status"] == "ok" and r.get("image")),
-                key=lambda r: (r["sample_token"], r["camera"]))
+    ok = sorted((r for r in rows if r.status == "ok" and r.image), key=lambda r: r.key)
     if n <= 0 or not ok:
         return None
     rng = np.random.default_rng(seed)
@@ -107,8 +107,8 @@ def contact_sheet(out_dir: Path, rows: list[dict], n: int, seed: int, thumb_widt
     thumbs = []
     for i in picks:
         row = ok[int(i)]
-        image = read_image_rgb(out_dir / row["image"]).copy()
-        labels_path = out_dir / row["files"][1] if len(row.get("files", [])) > 1 else None
+        image = read_image_rgb(out_dir / row.image).copy()
+        labels_path = out_dir / row.files[1] if len(row.files) > 1 else None
         if labels_path is not None and labels_path.is_file():
             for obj in json.loads(labels_path.read_text()).get("objects", []):
                 if obj.get("bbox_2d"):
@@ -116,7 +116,7 @@ def contact_sheet(out_dir: Path, rows: list[dict], n: int, seed: int, thumb_widt
                     cv2.rectangle(image, (x0, y0), (x1, y1), (0, 255, 0), max(2, image.shape[1] // 400))
         scale = thumb_width / image.shape[1]
         thumb = cv2.resize(image, (thumb_width, int(round(image.shape[0] * scale))), interpolation=cv2.INTER_AREA)
-        caption = f"{row['camera']} {row['sample_token'][:8]}"
+        caption = f"{row.camera} {row.sample_token[:8]}"
         (tw, th), _ = cv2.getTextSize(caption, cv2.FONT_HERSHEY_SIMPLEX, 0.5, 1)
         thumb[: th + 12, : tw + 12] //= 3
         cv2.putText(thumb, caption, (6, th + 6), cv2.FONT_HERSHEY_SIMPLEX, 0.5, (255, 255, 255), 1, cv2.LINE_AA)

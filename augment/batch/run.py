@@ -27,24 +27,21 @@ from tqdm import tqdm
 
 from streetaug.datasets.nuscenes import NuScenesReader
 from streetaug.datasets.nuscenes_writer import InsertedObject, link_source, write_augmented_tables
+from streetaug.datasets.nuscenes_format import visibility_token
 
 from ..core import InputError, write_json_atomic
 from .config import BatchConfig, RunOptions, check_and_save_config, load_config
 from .execute import run_dask, run_inline, run_processes
+from .layout import LIDARSEG_FOLDER, LOG_FILE, PLAN_FILE, SUMMARY_FILE, shard_dir
 from .log import append_rows, compact_log, done_samples, latest_rows, read_log, write_log
 from .report import contact_sheet, summarize
-from .worker import LIDARSEG_FOLDER, TableSlicer, process_sample
+from .row import LogRow
+from .worker import TableSlicer, process_sample
 
-LOG_FILE = "augment_log.jsonl"
-SUMMARY_FILE = "summary.json"
 
 
 def _echo_none(_: str) -> None:
     pass
-
-
-def shard_dir(out_dir: Path, shard: tuple[int, int]) -> Path:
-    return out_dir / "shards" / f"{shard[0]}-of-{shard[1]}"
 
 
 def planned_samples(reader: NuScenesReader, limit: int | None, shard: tuple[int, int] | None = None) -> list[str]:
@@ -100,7 +97,7 @@ def run_batch(config: BatchConfig, out_dir: str | Path, run: RunOptions = RunOpt
         _remove_stale_temp_files(out_dir, config.version)
     done = set() if run.dry_run else done_samples(read_log(log_path), out_dir, expected)
     if not run.dry_run:
-        compact_log(log_path, keep=lambda r: r["sample_token"] in done)
+        compact_log(log_path, keep=lambda r: r.sample_token in done)
     pending = [t for t in tokens if t not in done]
     if done:
         echo(f"resuming: {len(tokens) - len(pending)} of {len(tokens)} samples already done")
@@ -119,7 +116,7 @@ def run_batch(config: BatchConfig, out_dir: str | Path, run: RunOptions = RunOpt
 
     t0 = time.perf_counter()
     status: Counter = Counter()
-    new_rows: list[dict] = []
+    new_rows: list[LogRow] = []
     first_result_s = None  # worker start-up + the first sample
     with tqdm(total=sum(map(len, cameras.values())), unit="img", desc="plan" if run.dry_run else "augment",
               disable=not run.progress, dynamic_ncols=True, smoothing=0.05) as bar:
@@ -129,11 +126,11 @@ def run_batch(config: BatchConfig, out_dir: str | Path, run: RunOptions = RunOpt
             if not run.dry_run:
                 append_rows(log_path, rows)
             new_rows.extend(rows)
-            status.update(r["status"] for r in rows)
+            status.update(r.status for r in rows)
             bar.update(len(rows))
             bar.set_postfix({k: status[k] for k in sorted(status)}, refresh=False)
     wall = time.perf_counter() - t0
-    cpu_s = sum(r.get("cpu_s", 0.0) for r in new_rows)
+    cpu_s = sum(r.cpu_s or 0.0 for r in new_rows)
     this_run = {"samples": len(pending), "images": len(new_rows), "resumed_samples": len(tokens) - len(pending),
                 "wall_s": round(wall, 3),
                 "images_per_s": round(len(new_rows) / wall, 4) if wall > 0 and new_rows else None,
@@ -153,30 +150,30 @@ def run_batch(config: BatchConfig, out_dir: str | Path, run: RunOptions = RunOpt
     return finalize(out_dir, config, reader, read_log(log_path), this_run, run.contact_sheet)
 
 
-def finalize(out_dir: Path, config: BatchConfig, reader: NuScenesReader, rows: list[dict], this_run: dict,
+def finalize(out_dir: Path, config: BatchConfig, reader: NuScenesReader, rows: list[LogRow], this_run: dict,
              contact_sheet_n: int = 12) -> dict:
     """Write the nuScenes tables, ``summary.json`` and the contact sheet from the final log rows."""
     order = {t: i for i, t in enumerate(reader.sample_tokens())}
-    rows = sorted(latest_rows(rows).values(), key=lambda r: (order.get(r["sample_token"], len(order)), r["camera"]))
-    augmented = {r["sample_data_token"]: r["image"] for r in rows if r["status"] == "ok"}
+    rows = sorted(latest_rows(rows).values(), key=lambda r: (order.get(r.sample_token, len(order)), r.camera))
+    augmented = {r.sample_data_token: r.image for r in rows if r.status == "ok"}
     lidarseg, recounted = {}, {}
     objects = []
     for r in rows:
-        if r["status"] not in ("ok", "skipped"):
+        if not r.done:
             continue
-        lidar = r.get("lidar")
+        lidar = r.lidar
         if lidar is not None:  # the sample's sweep with its objects (the same entry on each camera row)
-            augmented[lidar["sample_data_token"]] = lidar["file"]
-            if lidar.get("lidarseg_file"):
-                lidarseg[lidar["sample_data_token"]] = lidar["lidarseg_file"]
-            recounted.update(lidar.get("source_num_lidar_pts", {}))
-        for o in r.get("objects", []):
-            box = o["box_global"]
+            augmented[lidar.sample_data_token] = lidar.file
+            if lidar.lidarseg_file:
+                lidarseg[lidar.sample_data_token] = lidar.lidarseg_file
+            recounted.update(lidar.source_num_lidar_pts)
+        for o in r.objects or ():
+            box = o.box_global
             objects.append(InsertedObject(
-                sample_token=r["sample_token"], object_index=o["object_index"], category=o["category"],
-                attribute=o.get("attribute"), translation=box["translation"], size=box["size"],
-                rotation=box["rotation"], visibility_token=_visibility(o), seed=config.seed,
-                num_lidar_pts=int(o.get("num_lidar_pts", 0))))
+                sample_token=r.sample_token, object_index=o.object_index, category=o.category,
+                attribute=o.attribute, translation=box["translation"], size=box["size"],
+                rotation=box["rotation"], visibility_token=visibility_token(o.visible_fraction), seed=config.seed,
+                num_lidar_pts=int(o.num_lidar_pts or 0)))
     objects.sort(key=lambda o: (order.get(o.sample_token, len(order)), o.object_index))
     link_source(out_dir, config.dataroot)
     tables = write_augmented_tables(config.dataroot, config.version, out_dir, augmented, objects, lidarseg,
@@ -189,20 +186,13 @@ def finalize(out_dir: Path, config: BatchConfig, reader: NuScenesReader, rows: l
     return summary
 
 
-def _visibility(obj: dict) -> str:
-    from streetaug.placement.labels import visibility_token
-
-    coverage = float(obj.get("coverage_px", 0.0))
-    return visibility_token(float(obj.get("visible_px", 0.0)) / coverage if coverage > 0 else 0.0)
-
-
-def _write_plan(out_dir: Path, rows: list[dict], tokens: list[str], this_run: dict) -> dict:
+def _write_plan(out_dir: Path, rows: list[LogRow], tokens: list[str], this_run: dict) -> dict:
     order = {t: i for i, t in enumerate(tokens)}
-    rows = sorted(rows, key=lambda r: (order.get(r["sample_token"], 0), r["camera"]))
-    write_log(out_dir / "plan.jsonl", rows)
+    rows = sorted(rows, key=lambda r: (order.get(r.sample_token, 0), r.camera))
+    write_log(out_dir / PLAN_FILE, rows)
     summary = summarize(rows, this_run)
-    summary["objects_planned"] = sum(len(r.get("objects", [])) for r in rows)
-    summary["rejections"] = dict(sum((Counter(r.get("placement_report") or {}) for r in rows), Counter()))
+    summary["objects_planned"] = sum(len(r.objects or ()) for r in rows)
+    summary["rejections"] = dict(sum((Counter(r.placement_report or {}) for r in rows), Counter()))
     return summary
 
 
@@ -236,9 +226,9 @@ def merge(out_dir: str | Path, allow_incomplete: bool = False, contact_sheet_n: 
         raise InputError(f"{out_dir}: {len(missing)} of {len(planned)} planned samples have no result in "
                          f"{len(logs)} shard log(s) (e.g. {', '.join(missing[:3])}); run the missing shards "
                          "(or rerun failed ones: they resume), or merge with --allow-incomplete")
-    kept = [r for r in latest.values() if r["sample_token"] in attempted]
+    kept = [r for r in latest.values() if r.sample_token in attempted]
     order = {t: i for i, t in enumerate(reader.sample_tokens())}
-    kept.sort(key=lambda r: (order.get(r["sample_token"], len(order)), r["camera"]))
+    kept.sort(key=lambda r: (order.get(r.sample_token, len(order)), r.camera))
     _remove_stale_temp_files(out_dir, config.version)
     write_log(out_dir / LOG_FILE, kept)
     echo(f"merged {len(logs)} shard log(s): {len(kept)} images of {len(attempted)} samples"

@@ -21,44 +21,61 @@ or next to it.  The renderer's own error against an independent path tracer (Mit
 
 from __future__ import annotations
 
+import csv
+import io
 import json
+import os
+import platform
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Sequence
+from typing import Callable, Sequence
 
 import cv2
 import numpy as np
 
 from streetaug.datasets.bundled import BUNDLED_VERSION
 from streetaug.datasets.nuscenes import NuScenesReader
+from streetaug.datasets.sample import CameraView, Sample
 
+from ..assets.asset import Asset
 from ..assets.select import select_assets
-from ..core import atomic_path, rotate_vectors, transform_points
-from ..lighting.estimate import estimate_lighting
+from ..core import InputError, atomic_path, rotate_vectors, transform_points, write_bytes_atomic, write_json_atomic
+from ..lighting.api import estimate_lighting
 from ..pipeline import InsertOptions, item_seed, place_in_view, scene_depth_for_view
-from ..render.insert import render_insertion
+from ..lighting.light import DistantLight
+from ..render import Insertion, render_insertion
 from ..scenegen.ground_truth import GroundTruthScene
 from .metrics import env_log_error, psnr_db
 
 LEVELS = ("L0", "L1", "L2", "L3", "auto")
 PRESETS = ("draft", "default", "high")
+SCHEMA = "streetaug.speed_accuracy/1"
+# Where benchmarks/bench_render_reference.py caches the renderer's comparison with Mitsuba.
+REFERENCE_RESULTS = Path(__file__).resolve().parents[2] / "benchmarks" / "results"
 
 
 @dataclass(frozen=True)
 class Case:
-    """One scene + placement of the sweep."""
+    """One scene + placement of the sweep.
+
+    Attributes:
+        T_cam_from_object: (4, 4) the placed car; ground_normal_cam: (3,) the ground's up (camera frame).
+        depth_m: (H, W) the scene depth; center_cam: (3,) the car's centre (camera frame, metres).
+        reference: the car rendered at the ``high`` preset under ``true_light``, the true local light at its
+            centre (camera frame).
+    """
 
     scene: str
     seed: int
-    sample: object
-    view: object
-    asset: object
+    sample: Sample
+    view: CameraView
+    asset: Asset
     T_cam_from_object: np.ndarray
     ground_normal_cam: np.ndarray
     depth_m: np.ndarray
-    reference: object  # Insertion under the true light, high preset
-    true_light: object  # DistantLight at the car's centre (camera frame)
+    reference: Insertion
+    true_light: DistantLight
     center_cam: np.ndarray
 
 
@@ -220,3 +237,44 @@ def markdown_table(table: list[dict]) -> str:
                      f"{t['ssim']:.4f} | {t['env_log_error']:.3f} | {'yes' if t['pareto'] else ''} | "
                      f"{t['rmse_above_front']:.2f} | {', '.join(t['chosen_levels']) if t['level'] == 'auto' else ''} |")
     return "\n".join(lines) + "\n"
+
+
+def run_bench(dataroot: str | Path, scenes: Sequence[str], seeds: Sequence[int], levels: Sequence[str],
+              presets: Sequence[str], out_dir: str | Path, on_step: Callable[[], None] = lambda: None,
+              reference_results: str | Path = REFERENCE_RESULTS) -> list[dict]:
+    """The sweep of ``streetaug bench``: every case x level x preset; writes ``speed_accuracy.png``, ``.csv``
+    (one row per case and configuration), ``.md`` (the table) and ``.json`` into ``out_dir``.
+
+    ``on_step`` is called after each configuration (a progress bar). Returns the table (one line per
+    configuration, :func:`summarise`).
+
+    Raises:
+        InputError: no placement found in any scene / seed.
+    """
+    cases = make_cases(dataroot, scenes, seeds)
+    if not cases:
+        raise InputError("no placement found in any scene/seed: nothing to measure")
+    rows = []
+    for case in cases:
+        for level in levels:
+            for preset in presets:
+                rows.append(run_configuration(case, level, preset))
+                on_step()
+    table = summarise(rows)
+    out_dir = Path(out_dir)
+    title = (f"{len(cases)} insertions ({', '.join(scenes)}); load {os.getloadavg()[0]:.1f} on {os.cpu_count()} "
+             f"cores\nreference: high preset under the true local light of the generated street")
+    plot_chart(table, out_dir / "speed_accuracy.png", title)
+    buf = io.StringIO()
+    writer = csv.DictWriter(buf, fieldnames=list(rows[0]))
+    writer.writeheader()
+    writer.writerows(rows)
+    write_bytes_atomic(out_dir / "speed_accuracy.csv", buf.getvalue().encode())
+    write_bytes_atomic(out_dir / "speed_accuracy.md", markdown_table(table).encode())
+    write_json_atomic(out_dir / "speed_accuracy.json", {
+        "schema": SCHEMA, "machine": {"python": platform.python_version(), "cpu_count": os.cpu_count(),
+                                      "load_avg": os.getloadavg()},
+        "cases": [{"scene": c.scene, "seed": c.seed} for c in cases], "table": table, "rows": rows,
+        "renderer_vs_mitsuba": renderer_reference_rows(reference_results),
+    })
+    return table

@@ -19,8 +19,8 @@ from streetaug.datasets.sample import CameraView, Sample
 
 from ..core import PinholeCamera, rotate_vectors, transform_points
 from ..core.depth import densify_lidar_depth, ground_plane_depth
-from ..lighting.estimate import LightingEstimate
 from ..lighting.light import DistantLight
+from ..lighting.types import LightingEstimate
 
 
 def ego_ground_plane_cam(view: CameraView) -> tuple[np.ndarray, float]:

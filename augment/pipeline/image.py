@@ -41,12 +41,13 @@ def insert_into_image(
     light = DistantLight.from_envmap(envmap_cam)
     timing["lighting"] = time.perf_counter() - t0
     T_cam_from_object = pose_camera_to_transform(*pose_camera)
-    ground_normal = ground_normal_from_depth(PinholeCamera(K, W, H), depth_m, T_cam_from_object, asset.wlh)
+    camera = PinholeCamera(K, W, H)
+    ground_normal = ground_normal_from_depth(camera, depth_m, T_cam_from_object, asset.wlh)
     rendered = render_objects(image, K, depth_m, [light], [asset], [T_cam_from_object], [ground_normal], options,
                               item_seed(options.seed, "image"), timing)
     (obj,) = rendered.objects
     ins = obj.insertion
-    objects = [object_label(T_cam_from_object, asset.wlh, asset.category, K, W, H, ins.mask, ins.coverage)]
+    objects = [object_label(T_cam_from_object, asset.wlh, asset.category, camera, ins.mask, ins.coverage)]
     timing["total"] = time.perf_counter() - t0
     return InsertResult(rendered.image, objects, rendered.mask, rendered.shadow_ratio, timing)
 

@@ -25,7 +25,7 @@ from typing import Sequence
 import numpy as np
 
 from streetaug.datasets.sample import Box
-from streetaug.datasets.lidarseg import LIDARSEG_CAR
+from streetaug.datasets.nuscenes_format import LIDARSEG_CAR
 from streetaug.placement.place import Placement
 from streetaug.placement.rules import points_in_box, points_in_boxes
 

@@ -9,9 +9,9 @@ from typing import Sequence
 import numpy as np
 
 from ..assets.asset import Asset
-from ..lighting.light import DistantLight
 from ..core import PinholeCamera
-from ..render import QUALITY_PRESETS, Insertion, footprint, render_insertion
+from ..lighting.light import DistantLight
+from ..render import Insertion, footprint, render_insertion
 from .options import InsertOptions, render_settings
 
 
@@ -81,9 +81,8 @@ def render_objects(image: np.ndarray, K: np.ndarray, depth_m: np.ndarray, lights
     return RenderedImage(image, mask_union, shadow, rendered)
 
 
-def reaches_view(K: np.ndarray, width: int, height: int, asset: Asset, T_cam_from_object: np.ndarray,
-                 light: DistantLight, quality: str) -> bool:
-    """Whether the object or its shadow can touch any pixel of a ``width`` x ``height`` image (the
-    renderer's own pixel boxes)."""
-    where = footprint(PinholeCamera(K, width, height), asset, T_cam_from_object, light, QUALITY_PRESETS[quality])
-    return where.reaches_image
+def reaches_view(camera: PinholeCamera, asset: Asset, T_cam_from_object: np.ndarray, light: DistantLight,
+                 options: InsertOptions) -> bool:
+    """Whether the object or its shadow can touch any pixel of ``camera``'s image (the renderer's own
+    pixel boxes, :func:`~streetaug.augment.render.footprint`, with the settings it renders with)."""
+    return footprint(camera, asset, T_cam_from_object, light, render_settings(options)).reaches_image

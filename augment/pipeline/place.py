@@ -13,21 +13,23 @@ from streetaug.placement.config import PlacementConfig
 from streetaug.placement.place import Placement, PlacementResult, place_objects
 
 from ..assets.asset import Asset
+from .context import SampleContext
 from .options import InsertOptions, item_seed
 
 
 def place_in_view(sample: Sample, view: CameraView, assets: Sequence[Asset], placed: Sequence[Placement],
-                  options: InsertOptions) -> PlacementResult:
+                  options: InsertOptions, depth_m: np.ndarray | None = None) -> PlacementResult:
     """Place ``assets`` in ``view``, clear (as dynamic boxes) of the objects ``placed`` for other cameras.
 
-    Seeded by (seed, sample token, channel).
+    Seeded by (seed, sample token, channel). ``depth_m``: the view's scene depth (the renderer's), None to
+    let placement compute the same. Each placement's ``asset_index`` indexes ``assets``.
     """
     if placed:  # earlier objects count as annotated vehicles (3 m clearance); LiDAR is shared, not re-read
         sample = replace(sample, boxes=sample.boxes + tuple(p.box for p in placed),
                          _load_lidar=lambda s=sample: s.lidar)
     config = PlacementConfig(yaw_sigma_deg=options.yaw_sigma_deg, n_objects=len(assets))
-    return place_objects(sample, view, [a.wlh for a in assets], item_seed(options.seed, sample.token, view.channel),
-                         config, categories=[a.category for a in assets])
+    return place_objects(sample, view, assets, item_seed(options.seed, sample.token, view.channel), config,
+                         depth_m=depth_m)
 
 
 @dataclass(frozen=True)
@@ -61,28 +63,23 @@ class SamplePlacement:
 
 
 def place_in_sample(sample: Sample, views: Sequence[CameraView], assets_by_channel: dict[str, Sequence[Asset]],
-                    options: InsertOptions) -> SamplePlacement:
-    """Place each view's assets in that view in turn, each object clear of those placed before."""
+                    options: InsertOptions, context: SampleContext | None = None) -> SamplePlacement:
+    """Place each view's assets in that view in turn, each object clear of those placed before.
+
+    With ``context`` (of the same sample and views) placement tests occlusion on its views' scene depth,
+    the one the renderer then uses; without, placement computes the same depth itself.
+    """
     placements, placed_for, placed_assets, results, seconds = [], [], [], {}, {}
     for view in views:
         t = time.perf_counter()
         assets = list(assets_by_channel.get(view.channel, ()))
         if assets:
-            res = place_in_view(sample, view, assets, placements, options)
+            depth_m = None if context is None else context.view(view.channel).depth_m
+            res = place_in_view(sample, view, assets, placements, options, depth_m)
             results[view.channel] = res
-            for p, asset in zip(res.placements, assets_of_placements(assets, res.placements)):
+            for p in res.placements:
                 placements.append(p)
                 placed_for.append(view.channel)
-                placed_assets.append(asset)
+                placed_assets.append(assets[p.asset_index])
         seconds[view.channel] = time.perf_counter() - t
     return SamplePlacement(placements, placed_for, placed_assets, results, seconds)
-
-
-def assets_of_placements(assets: Sequence[Asset], placements: Sequence[Placement]) -> list[Asset]:
-    """The asset of each placement (placement may drop objects it could not place; sizes identify them)."""
-    unused = list(assets)
-    out = []
-    for p in placements:
-        i = next(i for i, a in enumerate(unused) if np.allclose(a.wlh, p.wlh))
-        out.append(unused.pop(i))
-    return out

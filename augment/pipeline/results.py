@@ -10,7 +10,7 @@ import numpy as np
 from streetaug.placement.place import Placement, PlacementResult
 
 from ..assets.asset import Asset
-from ..lighting.estimate import LightingEstimate
+from ..lighting.types import LightingEstimate
 
 
 @dataclass(frozen=True)

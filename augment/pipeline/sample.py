@@ -12,8 +12,8 @@ import numpy as np
 from streetaug.datasets.sample import CameraView, Sample
 
 from ..assets.asset import Asset
-from ..lighting.estimate import LightingEstimate
-from ..lighting.multiview import estimate_views_lighting
+from ..lighting.api import estimate_views_lighting
+from ..lighting.types import LightingEstimate
 from .context import SampleContext
 from .options import InsertOptions, render_settings
 from .place import SamplePlacement, place_in_sample
@@ -66,7 +66,7 @@ def insert_into_sample(
     _ = sample.lidar
     t0 = time.perf_counter()
     context = SampleContext.of(sample, views)
-    placed = place_in_sample(sample, views, assets_by_channel, options)
+    placed = place_in_sample(sample, views, assets_by_channel, options, context)
     t = time.perf_counter()
     lighting = sample_lighting(sample, views, options.level, placement_points_cam(views, placed))
     lighting_s = (time.perf_counter() - t) / max(len(views), 1)

@@ -11,7 +11,7 @@ from streetaug.placement.labels import object_label
 from streetaug.placement.place import PlacementResult
 
 from ..core import rotate_vectors
-from ..lighting.estimate import LightingEstimate
+from ..lighting.types import LightingEstimate
 from .context import ViewContext, object_light
 from .objects import reaches_view, render_objects
 from .options import InsertOptions, item_seed
@@ -65,8 +65,7 @@ def render_into_view(context: ViewContext, token: str, placed: SamplePlacement, 
     t = time.perf_counter()
     lights = [object_light(estimate, T[:3, 3] + 0.5 * p.wlh[2] * T[:3, 2]) for T, p in zip(poses, placements)]
     timing["local_light"] = time.perf_counter() - t  # each object's environment at its centre (L2/L3: Eq. 1)
-    shown = [i for i in range(n)
-             if reaches_view(view.K, view.width, view.height, assets[i], poses[i], lights[i], options.quality)]
+    shown = [i for i in range(n) if reaches_view(context.camera, assets[i], poses[i], lights[i], options)]
     if not shown:
         timing["total"] = timing["lighting"] + timing["placement"] + time.perf_counter() - t0
         result = InsertResult(image=image, objects=[], mask=np.zeros(image.shape[:2], np.float32),
@@ -87,9 +86,8 @@ def render_into_view(context: ViewContext, token: str, placed: SamplePlacement, 
         coverage_px[i] = ins.coverage_px
         if ins.coverage_px <= 0:  # only its shadow reaches this camera
             continue
-        label = object_label(obj.T_cam_from_object, obj.asset.wlh, obj.asset.category, view.K, view.width,
-                             view.height, ins.mask, ins.coverage, T_global_from_cam=view.T_global_from_cam,
-                             attribute=placements[i].attribute)
+        label = object_label(obj.T_cam_from_object, obj.asset.wlh, obj.asset.category, context.camera, ins.mask,
+                             ins.coverage, T_global_from_cam=view.T_global_from_cam, attribute=placements[i].attribute)
         label.update(object_index=i, placed_for=placed.placed_for[i])
         objects.append(label)
     timing["total"] = timing["lighting"] + timing["placement"] + time.perf_counter() - t0

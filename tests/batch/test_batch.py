@@ -23,12 +23,14 @@ import pytest
 from click.testing import CliRunner
 
 from conftest import devkit
-from streetaug.augment.batch import BatchConfig, RunOptions, merge, read_log, run_batch
+from streetaug.augment.batch import BatchConfig, LogRow, RunOptions, merge, read_log, run_batch
+from streetaug.augment.batch.config import load_config
+from streetaug.augment.batch.execute import init_pool_worker, tune_malloc
 from streetaug.augment.core import InputError
+from streetaug.cli.main import main
 from streetaug.datasets.bundled import BUNDLED_VERSION, bundled_dataroot
 from streetaug.datasets.nuscenes import NuScenesReader
-from streetaug.datasets.nuscenes_writer import new_token
-from streetaug.cli.main import main
+from streetaug.datasets.nuscenes_format import new_token
 
 REAL = Path(__file__).resolve().parents[3] / "shared" / "data" / "nuscenes-real"
 CAMERAS = ("CAM_FRONT", "CAM_BACK")
@@ -42,6 +44,11 @@ def config(**kw) -> BatchConfig:
                   quality="draft", seed=0, limit=N_SAMPLES)
     values.update(kw)
     return BatchConfig(**values)
+
+
+def log_json(path: Path) -> list[dict]:
+    """The lines of a log as the file contract has them (JSON objects)."""
+    return [json.loads(line) for line in path.read_text().splitlines()]
 
 
 def tree_hash(root: Path) -> dict[str, str]:
@@ -61,7 +68,7 @@ def digest(out: Path) -> dict:
         doc.pop("timing_s")
         files[str(p.relative_to(out))] = doc
     rows = sorted(json.dumps({k: v for k, v in r.items() if k not in VOLATILE}, sort_keys=True)
-                  for r in read_log(out / "augment_log.jsonl"))
+                  for r in log_json(out / "augment_log.jsonl"))
     return {"files": files, "log": rows}
 
 
@@ -85,7 +92,7 @@ def reference(tmp_path_factory):
 class TestDataset:
     def test_log_summary_and_files(self, reference):
         out, summary, _, _ = reference
-        rows = read_log(out / "augment_log.jsonl")
+        rows = log_json(out / "augment_log.jsonl")
         assert sorted((r["sample_token"], r["camera"]) for r in rows) == sorted(
             {(r["sample_token"], r["camera"]) for r in rows})  # one line per image
         assert len(rows) == N_SAMPLES * len(CAMERAS) == summary["images"]
@@ -96,6 +103,18 @@ class TestDataset:
             assert r["status"] == "skipped" or (out / r["image"]).is_file() and r["reason"] == ""
         assert summary["objects_inserted"] == sum(len(r["objects"]) for r in rows) >= N_SAMPLES
         assert (out / "contact_sheet.png").is_file() and (out / "batch_config.json").is_file()
+
+    def test_log_lines_carry_the_contract_keys(self, reference):
+        for doc in log_json(reference[0] / "augment_log.jsonl"):
+            assert {"sample_token", "camera", "status", "reason", "timing_s"} <= set(doc)
+            assert doc["status"] in ("ok", "skipped", "failed") and isinstance(doc["timing_s"]["total"], float)
+
+    def test_log_rows_round_trip(self, reference):
+        """Every line reads into a LogRow and back into the same JSON, unknown keys included."""
+        for doc in log_json(reference[0] / "augment_log.jsonl"):
+            assert LogRow.from_json(doc).to_json() == doc
+            newer = {**doc, "added_by_a_newer_version": {"x": 1}}
+            assert LogRow.from_json(newer).to_json() == newer
 
     def test_source_is_never_written(self, reference):
         _, _, before, after = reference
@@ -108,7 +127,7 @@ class TestDataset:
         n = summary["objects_inserted"]
         assert len(table(new, "sample_annotation")) == len(table(src, "sample_annotation")) + n
         assert len(table(new, "instance")) == len(table(src, "instance")) + n
-        rows = read_log(out / "augment_log.jsonl")
+        rows = log_json(out / "augment_log.jsonl")
         ok = {r["sample_data_token"]: r["image"] for r in rows if r["status"] == "ok"}
         ok.update({r["lidar"]["sample_data_token"]: r["lidar"]["file"] for r in rows if r.get("lidar")})
         assert len(ok) > len({r["image"] for r in rows if r["status"] == "ok"})  # the LiDAR sweeps too
@@ -127,7 +146,7 @@ class TestDevkit:
         nuscenes = devkit()
         out, _, _, _ = reference
         nusc = nuscenes.NuScenes(version=BUNDLED_VERSION, dataroot=str(out), verbose=False)
-        rows = [r for r in read_log(out / "augment_log.jsonl") if r["status"] == "ok"]
+        rows = [r for r in log_json(out / "augment_log.jsonl") if r["status"] == "ok"]
         for r in rows:
             path, boxes, K = nusc.get_sample_data(r["sample_data_token"])
             assert Path(path) == out / r["image"]
@@ -167,7 +186,7 @@ class TestDevkit:
         nusc = nuscenes.NuScenes(version="v1.0-mini", dataroot=str(out), verbose=False)
         sample = nusc.sample[0]
         assert len(sample["anns"]) == 68 + summary["objects_inserted"]
-        ok = [r for r in read_log(out / "augment_log.jsonl") if r["status"] == "ok"]
+        ok = [r for r in log_json(out / "augment_log.jsonl") if r["status"] == "ok"]
         for r in ok:
             assert Path(nusc.get_sample_data_path(r["sample_data_token"])) == out / r["image"]
         nusc.render_sample_data(ok[0]["sample_data_token"], out_path=str(tmp_path / "cam.png"), verbose=False)
@@ -215,7 +234,7 @@ class TestSameOutput:
         summary = run_batch(config(), tmp_path, RunOptions(workers=2, **QUIET))
         assert "2 local processes" in summary["this_run"]["executor"]
         # Rendered in the spawned workers (which of the two takes which sample depends on their start-up).
-        assert all(not r["worker"].endswith(f":{os.getpid()}") for r in read_log(tmp_path / "augment_log.jsonl"))
+        assert all(not r["worker"].endswith(f":{os.getpid()}") for r in log_json(tmp_path / "augment_log.jsonl"))
         assert_same_output(tmp_path, reference[0])
 
     def test_dask_local_cluster(self, reference, tmp_path):
@@ -255,7 +274,7 @@ class TestSameOutput:
         proc.wait()
         assert proc.returncode == -signal.SIGKILL
         assert not (out / "summary.json").exists()
-        killed_rows = read_log(log)
+        killed_rows = read_log(log)  # typed rows; a truncated line is skipped
         # What a kill mid-write can leave: a truncated last log line and a temporary image file.
         with open(log, "ab") as f:
             f.write(b'{"camera": "CAM_FRONT", "sample_tok')
@@ -277,7 +296,7 @@ class TestRobustness:
         broken.write_bytes(broken.read_bytes()[:200])  # a truncated JPEG
         cfg = config(dataroot=str(src), cameras=("CAM_FRONT",))
         summary = run_batch(cfg, tmp_path / "out", RunOptions(workers=1, **QUIET))
-        rows = read_log(tmp_path / "out" / "augment_log.jsonl")
+        rows = log_json(tmp_path / "out" / "augment_log.jsonl")
         failed = [r for r in rows if r["status"] == "failed"]
         assert len(failed) == 1 and broken.name in failed[0]["reason"]
         assert summary["counts"]["failed"] == 1 and summary["counts"].get("ok", 0) >= 1
@@ -302,7 +321,7 @@ class TestRobustness:
 
     def test_dry_run_plans_without_rendering(self, tmp_path):
         summary = run_batch(config(), tmp_path, RunOptions(workers=1, dry_run=True, **QUIET))
-        plan = read_log(tmp_path / "plan.jsonl")
+        plan = log_json(tmp_path / "plan.jsonl")
         assert len(plan) == N_SAMPLES * len(CAMERAS) and {r["status"] for r in plan} <= {"planned", "no_placement"}
         assert summary["objects_planned"] == sum(len(r["objects"]) for r in plan) >= N_SAMPLES
         assert not (tmp_path / "samples").exists() and not (tmp_path / "augment_log.jsonl").exists()
@@ -321,7 +340,6 @@ def test_malloc_tuning_applies_on_glibc():
     """Workers keep image-sized arrays in the heap even under Dask's MALLOC_TRIM_THRESHOLD_ (see tune_malloc)."""
     import platform
 
-    from streetaug.augment.batch.execute import tune_malloc
 
     if platform.system() != "Linux" or platform.libc_ver()[0] != "glibc":
         pytest.skip("mallopt tuning is glibc-only")
@@ -330,8 +348,6 @@ def test_malloc_tuning_applies_on_glibc():
 
 def test_config_of_an_older_run_still_resumes(reference, tmp_path):
     """A batch_config.json written before ``match_camera`` existed reads as its default; others stay required."""
-    from streetaug.augment.batch.config import load_config
-
     out = tmp_path / "out"
     shutil.copytree(reference[0], out, symlinks=True)
     doc = json.loads((out / "batch_config.json").read_text())
@@ -355,7 +371,6 @@ def test_pool_workers_deliver_every_result_and_exit_cleanly():
     import multiprocessing
     from concurrent.futures import ProcessPoolExecutor
 
-    from streetaug.augment.batch.execute import init_pool_worker
 
     pool = ProcessPoolExecutor(2, mp_context=multiprocessing.get_context("spawn"), initializer=init_pool_worker)
     pids = list(pool.map(_pid, range(8)))

@@ -18,9 +18,11 @@ import pytest
 import trimesh
 from click.testing import CliRunner, Result
 
-from streetaug.augment.core import project_points
-from streetaug.augment.core import read_exr, write_exr
+from streetaug.augment.core import project_points, read_exr, write_exr
+from streetaug.augment.core.depth import ground_plane_depth
 from streetaug.cli.main import main
+from streetaug.datasets.bundled import BUNDLED_VERSION, bundled_dataroot
+from streetaug.datasets.nuscenes import NuScenesReader
 
 REAL = Path(__file__).resolve().parents[3] / "shared" / "data" / "nuscenes-real"
 
@@ -63,9 +65,6 @@ class TestInsertDatasetForm:
             assert (sunny_insert / name).is_file(), name
 
     def test_image_mask_and_label_agree(self, sunny_insert):
-        from streetaug.datasets.bundled import BUNDLED_VERSION, bundled_dataroot
-        from streetaug.datasets.nuscenes import NuScenesReader
-
         reader = NuScenesReader(bundled_dataroot(), BUNDLED_VERSION)
         view = reader.sample(reader.sample_tokens("sample-sunny")[0]).cameras["CAM_FRONT"]
         labels = json.loads((sunny_insert / "labels.json").read_text())
@@ -151,8 +150,6 @@ class TestPredictLight:
             assert json.loads((out / "lighting.json").read_text())["query_point_camera"] == [-2.0, 1.5, 12.0]
 
     def test_single_image(self, tmp_path):
-        from streetaug.datasets.bundled import bundled_dataroot
-
         image = sorted((bundled_dataroot() / "samples" / "CAM_FRONT").glob("*.jpg"))[0]
         result = run("predict-light", "--image", image, "--fov-deg", "64", "--out", tmp_path)
         assert result.exit_code == 0, result.output
@@ -171,8 +168,6 @@ def _box_asset(path: Path, wlh=(1.8, 4.4, 1.5)) -> Path:
 @pytest.fixture(scope="module")
 def image_form_inputs(tmp_path_factory):
     """A 320x180 grey image, the ground plane's depth 1.5 m below the camera, a sky + sun env map, a box asset."""
-    from streetaug.augment.core.depth import ground_plane_depth
-
     root = tmp_path_factory.mktemp("imageform")
     W, H, f = 320, 180, 200.0
     K = np.array([[f, 0, W / 2], [0, f, H / 2], [0, 0, 1.0]])
@@ -273,8 +268,6 @@ class TestBadInput:
         assert result.exit_code == 2 and "--version" in result.output
 
     def test_dataset_with_a_missing_table(self, tmp_path):
-        from streetaug.datasets.bundled import BUNDLED_VERSION, bundled_dataroot
-
         root = tmp_path / "data"
         shutil.copytree(bundled_dataroot() / BUNDLED_VERSION, root / BUNDLED_VERSION)
         (root / BUNDLED_VERSION / "ego_pose.json").unlink()

@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from streetaug.augment.evaluation.metrics import psnr_db
+from streetaug.augment.evaluation.metrics import env_log_error, psnr_db
 
 
 def test_psnr_of_a_known_error():
@@ -27,8 +27,6 @@ def test_psnr_identical_and_empty():
 
 
 def test_env_log_error():
-    from streetaug.augment.evaluation.metrics import env_log_error
-
     true = np.full((16, 32, 3), 1.0, np.float32)
     assert env_log_error(true, true) == 0.0
     est = true.copy()

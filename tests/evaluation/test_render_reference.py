@@ -4,10 +4,20 @@ The conventions of the reference scene (camera, pixel centres, principal point, 
 orientation) are checked with a single bright direction, then a small insertion is compared.
 """
 
+import dataclasses
+
+import cv2
 import numpy as np
 import pytest
 
+from render_fixtures import primitive_car, sunny_light
+from streetaug.augment.assets.asset import Material
+from streetaug.augment.core import (hdr_to_ldr_uint8, intrinsics_from_fov, lonlat_to_camera_dir, luminance,
+                                   pose_camera_to_transform, project_points)
+from streetaug.augment.core.depth import ground_plane_depth
 from streetaug.augment.evaluation import reference as ref
+from streetaug.augment.lighting.light import DistantLight
+from streetaug.augment.render import render_insertion
 
 OK, WHY = ref.mitsuba_available()
 pytestmark = pytest.mark.skipif(not OK, reason=f"Mitsuba reference unavailable: {WHY}")
@@ -15,8 +25,6 @@ pytestmark = pytest.mark.skipif(not OK, reason=f"Mitsuba reference unavailable: 
 
 def _spot_env(spots, height=256, width=512):
     """A black map with 2 x 2-pixel spots; returns the map and each spot's exact camera-frame direction."""
-    from streetaug.augment.core import lonlat_to_camera_dir
-
     env = np.zeros((height, width, 3), np.float32)
     dirs = []
     for lon_deg, lat_deg, ch in spots:
@@ -31,8 +39,6 @@ def _spot_env(spots, height=256, width=512):
 @pytest.mark.parametrize("principal", ["centred", "off-centre"])
 def test_camera_and_envmap_conventions_single_bright_direction(principal):
     """A bright direction of the camera-frame map lands where our projection puts it (to 0.15 px)."""
-    from streetaug.augment.core import project_points
-
     W, H = 160, 90
     cx, cy = ((W - 1) / 2, (H - 1) / 2) if principal == "centred" else (100.0, 55.0)
     K = np.array([[100.0, 0, cx], [0, 100.0, cy], [0, 0, 1]])
@@ -49,8 +55,6 @@ def test_camera_and_envmap_conventions_single_bright_direction(principal):
 
 
 def test_material_mapping():
-    from streetaug.augment.assets.asset import Material
-
     lam = ref.mitsuba_bsdf(Material("m", np.array([0.5, 0.4, 0.3]), metallic=0.0, specular=0.0))
     assert lam["type"] == "diffuse"
     metal = ref.mitsuba_bsdf(Material("m", np.array([0.9, 0.6, 0.1]), metallic=1.0, roughness=0.7))
@@ -61,11 +65,6 @@ def test_material_mapping():
 
 def _exact_car():
     """The primitive car with materials whose Mitsuba mapping is exact: rough metals and Lambertians."""
-    import dataclasses
-
-    from render_fixtures import primitive_car
-    from streetaug.augment.assets.asset import Material
-
     car = primitive_car()
     mats = (Material("paint", np.array([0.7, 0.15, 0.1]), metallic=1.0, roughness=1.0),
             Material("cabin", np.array([0.3, 0.3, 0.32]), metallic=0.0, specular=0.0),
@@ -75,14 +74,6 @@ def _exact_car():
 
 def test_insertion_matches_mitsuba():
     """A small sunny scene: our default composite against Mitsuba's with-car image (same LDR space)."""
-    import cv2
-
-    from render_fixtures import sunny_light
-    from streetaug.augment.core import hdr_to_ldr_uint8, intrinsics_from_fov, luminance, pose_camera_to_transform
-    from streetaug.augment.lighting.light import DistantLight
-    from streetaug.augment.core.depth import ground_plane_depth
-    from streetaug.augment.render.insert import render_insertion
-
     W, H = 200, 112
     K = intrinsics_from_fov(W, H, 55.0)
     up, albedo = np.array([0.0, -1.0, 0.0]), np.array([0.2, 0.2, 0.2])

@@ -10,6 +10,7 @@ import pytest
 from click.testing import CliRunner
 
 from streetaug.augment.evaluation import speed_accuracy as sa
+from streetaug.cli.main import main
 
 
 def test_ssim_is_one_for_identical_images_and_drops_with_noise():
@@ -49,8 +50,6 @@ def test_pareto_front_and_distance_to_it():
 
 
 def test_bench_small_writes_chart_table_and_rows(tmp_path):
-    from streetaug.cli.main import main
-
     result = CliRunner().invoke(main, ["bench", "--small", "--out", str(tmp_path)], catch_exceptions=False)
     assert result.exit_code == 0, result.output
     for name in ("speed_accuracy.png", "speed_accuracy.csv", "speed_accuracy.md", "speed_accuracy.json"):
@@ -69,7 +68,5 @@ def test_bench_small_writes_chart_table_and_rows(tmp_path):
 
 
 def test_bench_rejects_unknown_level(tmp_path):
-    from streetaug.cli.main import main
-
     result = CliRunner().invoke(main, ["bench", "--levels", "L9", "--out", str(tmp_path)])
     assert result.exit_code == 2 and "--levels" in result.output

@@ -15,8 +15,10 @@ from click.testing import CliRunner
 
 from streetaug.augment.assets.procedural import procedural_car
 from streetaug.augment.core import InputError
+from streetaug.augment.evaluation.failure_modes import failure_cases
+from streetaug.augment.evaluation.stability import FAMILIES, measure, run_once
 from streetaug.augment.pipeline import InsertOptions, insert_into_view
-from streetaug.augment.evaluation.stability import FAMILIES, failure_cases, measure, run_once
+from streetaug.cli.main import main
 from streetaug.datasets.bundled import BUNDLED_VERSION, bundled_dataroot
 from streetaug.datasets.nuscenes import NuScenesReader
 
@@ -86,8 +88,6 @@ def test_geometry_perturbations_move_the_placement_a_little(sunny, car, baseline
 
 
 def test_stability_command_writes_report(tmp_path):
-    from streetaug.cli.main import main
-
     result = CliRunner().invoke(main, ["stability", "--scene", "sample-sunny", "--families", "jpeg",
                                        "--out", str(tmp_path)], catch_exceptions=False)
     assert result.exit_code == 0, result.output

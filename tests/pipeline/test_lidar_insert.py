@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 import trimesh
 
+from streetaug.augment.core.raycast import RayScene
 from streetaug.augment.pipeline.lidar import DEFAULT_CAR_INTENSITY, car_intensity, empty_beams, insert_into_sweep
 from streetaug.datasets.sample import Box
 from streetaug.placement.rules import points_in_box
@@ -119,7 +120,6 @@ def test_an_object_beyond_the_returns_is_hit_by_the_empty_beams():
     out = insert_into_sweep(points, [box])
     hit = out.moved == 0
     # every beam that meets the box (ray cast from the true beams) now returns from it, and only those
-    from streetaug.augment.core.raycast import RayScene
 
     truth = RayScene(*box).intersect(sensor.astype(np.float64), d)
     assert hit.sum() == truth.hit.sum() > 20
