@@ -46,7 +46,7 @@ from streetaug.augment.render import QUALITY_PRESETS, prepare_asset, render_inse
 def sample_scenes(cars) -> list:
     """(name, image, K, depth, light, ev, [(car, T, ground normal)]) for CAM_FRONT of each bundled scene."""
     from streetaug.augment.core import rotate_vectors
-    from streetaug.augment.lighting.estimate import estimate_lighting
+    from streetaug.augment.lighting.api import estimate_lighting
     from streetaug.augment.pipeline import InsertOptions, place_in_view, scene_depth_for_view
     from streetaug.datasets.bundled import BUNDLED_VERSION, bundled_dataroot
     from streetaug.datasets.nuscenes import NuScenesReader
