@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 from typing import Callable
 
 import numpy as np
+import shapely
 
 from streetaug.augment.core import (
     invert_transform,
@@ -183,7 +184,7 @@ class Sample:
     timestamp_us: int
     cameras: dict[str, CameraView]
     boxes: tuple[Box, ...]
-    drivable_area_global: list | None = None
+    drivable_area_global: list[shapely.Geometry] | None = None
     _load_lidar: Callable[[], LidarSweep | None] = field(repr=False, compare=False, default=None)
     lanes: LaneCenterlines | None = field(repr=False, compare=False, default=None)
 

@@ -16,18 +16,19 @@ rendered object).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Sequence
 
 import cv2
 import numpy as np
 import shapely
 
 from streetaug.augment.core import quat_to_rotation, transform_points
-from streetaug.datasets.sample import Box, CameraView, Sample
-
 from streetaug.datasets.nuscenes_format import LIDARSEG_NON_DRIVABLE
+from streetaug.datasets.sample import Box, CameraView, Sample
 
 from .config import PlacementConfig
 from .drivable import DrivableArea
+from .place import Placement
 
 AUDITED_RULES = ("drivable", "distance", "annotated_boxes", "lidar_obstacles", "lidarseg", "in_view",
                  "corners_unoccluded", "mutual_collision")
@@ -50,12 +51,12 @@ class Audit:
         return all(self.passed.values())
 
 
-def box_hull_xy(box: Box):
+def box_hull_xy(box: Box) -> shapely.Polygon:
     """Shapely polygon: the convex hull of the box's 8 corners in global x/y (its vertical projection)."""
     return shapely.convex_hull(shapely.multipoints(box.corners()[:, :2]))
 
 
-def _points_in_any_box(points: np.ndarray, boxes, margin_m: float) -> np.ndarray:
+def _points_in_any_box(points: np.ndarray, boxes: Sequence[Box], margin_m: float) -> np.ndarray:
     inside = np.zeros(len(points), dtype=bool)
     for b in boxes:
         local = (points - b.center) @ quat_to_rotation(b.rotation)  # rows: R^T p
@@ -112,7 +113,7 @@ def _top_corners_occluded(corners_cam: np.ndarray, points_cam: np.ndarray, K: np
     return False
 
 
-def audit_placements(sample: Sample, view: CameraView, placements, drivable: DrivableArea,
+def audit_placements(sample: Sample, view: CameraView, placements: Sequence[Placement], drivable: DrivableArea,
                      config: PlacementConfig) -> list[Audit]:
     """Re-check each of ``placements`` (one image's :class:`Placement` list) against every rule.
 

@@ -19,7 +19,6 @@ Grid convention: cell ``grid[iy, ix]`` covers global ``x in [x0 + ix res, x0 + (
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
 
 import cv2
 import numpy as np
@@ -27,6 +26,7 @@ import shapely
 
 from streetaug.augment.core import check_shape, invert_transform, transform_points
 from streetaug.datasets.nuscenes_format import LIDARSEG_DRIVEABLE, LIDARSEG_EGO, LIDARSEG_NOISE
+from streetaug.datasets.sample import CameraView, Sample
 
 from .config import PlacementConfig
 
@@ -48,7 +48,7 @@ class DrivableArea:
 
     source: str
     confidence: str
-    region: Any = None
+    region: shapely.Geometry | None = None
     grid: np.ndarray | None = None
     grid_origin_xy: np.ndarray | None = None
     resolution_m: float = 0.25
@@ -275,12 +275,12 @@ def drivable_from_lidar_ground(
     return DrivableArea("lidar-ground", "low", grid=grid, grid_origin_xy=origin, resolution_m=config.grid_resolution_m)
 
 
-def drivable_area_for_sample(sample, view, config: PlacementConfig) -> tuple[DrivableArea | None, str | None]:
+def drivable_area_for_sample(sample: Sample, view: CameraView,
+                             config: PlacementConfig) -> tuple[DrivableArea | None, str | None]:
     """The best drivable area of ``sample`` around ``view``'s camera, or (None, reason).
 
     Args:
-        sample: a :class:`streetaug.datasets.sample.Sample`.
-        view: the :class:`streetaug.datasets.sample.CameraView` being augmented.
+        view: the camera being augmented.
     """
     cam_xy = view.T_global_from_cam[:2, 3]
     tried = []

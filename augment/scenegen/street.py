@@ -19,7 +19,7 @@ from streetaug.datasets.nuscenes_format import (LIDARSEG_CAR, LIDARSEG_DRIVEABLE
                                                 LIDARSEG_TERRAIN, LIDARSEG_TRAFFICCONE, LIDARSEG_VEGETATION)
 from streetaug.datasets.sample import Box
 
-from .primitives import box_solid, frustum, icosphere, prism, quad, rect_xy, wheel_cylinder
+from .primitives import Mesh, box_solid, frustum, icosphere, prism, quad, rect_xy, wheel_cylinder
 
 ROAD_HALF_WIDTH_M = 8.0  # kerb to kerb 16 m: 2 x (2 lanes of 2.8 m + a 2.4 m parking strip)
 LANE_WIDTH_M = 2.8
@@ -296,7 +296,8 @@ def _add_street_furniture(b: _MeshBuilder, rng: np.random.Generator) -> None:
             x += rng.uniform(11.0, 24.0)
 
 
-def car_parts(length: float, width: float, height: float, paint: SurfaceMaterial):
+def car_parts(length: float, width: float, height: float,
+              paint: SurfaceMaterial) -> list[tuple[Mesh, SurfaceMaterial]]:
     """A boxy car in the object frame (x front, y left, z up, origin bottom centre).
 
     Returns a list of (part, material) pairs; everything lies inside the box
@@ -414,7 +415,8 @@ def build_street(params: StreetParams, T_global_from_street: np.ndarray) -> Stre
     )
 
 
-def _travel_lanes(params: StreetParams, T_global_from_street: np.ndarray) -> list:
+def _travel_lanes(params: StreetParams,
+                  T_global_from_street: np.ndarray) -> list[tuple[np.ndarray, np.ndarray, float]]:
     """The four travel lanes (two each way) as (start_xy, end_xy, width) in the direction of travel.
 
     Right-hand traffic drives along +x on the y < 0 side; left-hand traffic on the y > 0 side.
