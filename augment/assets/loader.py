@@ -19,7 +19,9 @@ UVs are stored in the glTF convention (origin top-left, v down).
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -150,8 +152,21 @@ def load_asset(
 
 # ----------------------------------------------------------------------------- format readers
 
-# A part: (vertices (V,3) file frame, faces (F,3), vertex normals (V,3) or None, uv (V,2) glTF or None, Material)
-_PartT = tuple[np.ndarray, np.ndarray, np.ndarray | None, np.ndarray | None, Material]
+@dataclass(frozen=True)
+class FilePart:
+    """One mesh of a file with its material, in the file's frame (before the object-frame rotation).
+
+    Attributes:
+        vertices: (V, 3) float64; ``faces`` (F, 3) int64; ``normals`` (V, 3) float64 or None (computed later).
+        uv: (V, 2) float64 texture coordinates in the glTF convention (v down), or None.
+        material: the part's material.
+    """
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    normals: np.ndarray | None
+    uv: np.ndarray | None
+    material: Material
 
 
 def _trimesh_load(path: Path):
@@ -163,22 +178,29 @@ def _trimesh_load(path: Path):
         raise InputError(f"{path}: could not read the mesh ({type(e).__name__}: {e})") from None
 
 
-def _load_gltf_parts(path: Path, gltf: dict) -> list[_PartT]:
+def _scene_meshes(path: Path) -> list[tuple[np.ndarray, Any]]:
+    """(T_file_from_mesh (4, 4), trimesh mesh) of every non-empty triangle mesh in the file's scene graph."""
     import trimesh  # heavy: deferred until a mesh file is read
 
     scene = _trimesh_load(path)
-    exact = _gltf_materials_by_name(gltf)
-    cache: dict[int, Material] = {}
-    parts = []
+    out = []
     for node in scene.graph.nodes_geometry:
         T, geom_name = scene.graph[node]
         geom = scene.geometry[geom_name]
-        if not isinstance(geom, trimesh.Trimesh) or len(geom.faces) == 0:
-            continue
+        if isinstance(geom, trimesh.Trimesh) and len(geom.faces) > 0:
+            out.append((np.asarray(T, dtype=np.float64), geom))
+    return out
+
+
+def _load_gltf_parts(path: Path, gltf: dict) -> list[FilePart]:
+    exact = _gltf_materials_by_name(gltf)
+    cache: dict[int, Material] = {}  # one Material per material object of this file's scene
+    parts = []
+    for T, geom in _scene_meshes(path):
         mat_obj = getattr(geom.visual, "material", None)
         if id(mat_obj) not in cache:
             cache[id(mat_obj)] = _material_from_trimesh(mat_obj, exact, len(cache))
-        parts.append(_transformed_part(geom, np.asarray(T, dtype=np.float64), cache[id(mat_obj)]))
+        parts.append(_transformed_part(geom, T, cache[id(mat_obj)]))
     return parts
 
 
@@ -189,7 +211,8 @@ def _gltf_materials_by_name(gltf: dict) -> dict[str, dict]:
     return {m["name"]: m for m in mats if isinstance(m, dict) and m.get("name") and names.count(m["name"]) == 1}
 
 
-def _transformed_part(geom, T: np.ndarray, material: Material) -> _PartT:
+def _transformed_part(geom: Any, T: np.ndarray, material: Material) -> FilePart:
+    """A trimesh mesh moved by ``T`` (4, 4) (normals by its inverse transpose), uv flipped to v down."""
     V = np.asarray(geom.vertices, dtype=np.float64) @ T[:3, :3].T + T[:3, 3]
     F = np.asarray(geom.faces, dtype=np.int64)
     normal_matrix = np.linalg.inv(T[:3, :3]).T
@@ -202,7 +225,7 @@ def _transformed_part(geom, T: np.ndarray, material: Material) -> _PartT:
         uv[:, 1] = 1.0 - uv[:, 1]  # trimesh stores OpenGL (v up); assets keep the glTF convention
     else:
         uv = None
-    return V, F, N, uv, material
+    return FilePart(V, F, N, uv, material)
 
 
 def _texture(image, srgb: bool) -> np.ndarray | None:
@@ -254,22 +277,15 @@ def _grey_paint(name: str = "paint") -> Material:
     return Material(name=name, base_color=np.array([0.30, 0.30, 0.30]), metallic=0.0, roughness=0.4, clearcoat=1.0)
 
 
-def _load_obj_parts(path: Path, mtl: dict[str, dict]) -> list[_PartT]:
-    import trimesh  # heavy: deferred until a mesh file is read
-
-    scene = _trimesh_load(path)
+def _load_obj_parts(path: Path, mtl: dict[str, dict]) -> list[FilePart]:
     cache: dict[str, Material] = {}
     parts = []
-    for node in scene.graph.nodes_geometry:
-        T, geom_name = scene.graph[node]
-        geom = scene.geometry[geom_name]
-        if not isinstance(geom, trimesh.Trimesh) or len(geom.faces) == 0:
-            continue
+    for T, geom in _scene_meshes(path):
         mat_obj = getattr(geom.visual, "material", None)
         name = getattr(mat_obj, "name", None) or "default"
         if name not in cache:
             cache[name] = _material_from_mtl(name, mtl.get(name), mat_obj)
-        parts.append(_transformed_part(geom, np.asarray(T, dtype=np.float64), cache[name]))
+        parts.append(_transformed_part(geom, T, cache[name]))
     return parts
 
 
@@ -299,16 +315,11 @@ def _material_from_mtl(name: str, entry: dict | None, mat_obj) -> Material:
                     emission=np.clip(ke, 0, None), base_color_texture=texture)
 
 
-def _load_ply_parts(path: Path) -> list[_PartT]:
+def _load_ply_parts(path: Path) -> list[FilePart]:
     import trimesh  # heavy: deferred until a mesh file is read
 
-    scene = _trimesh_load(path)
     parts = []
-    for node in scene.graph.nodes_geometry:
-        T, geom_name = scene.graph[node]
-        geom = scene.geometry[geom_name]
-        if not isinstance(geom, trimesh.Trimesh) or len(geom.faces) == 0:
-            continue
+    for T, geom in _scene_meshes(path):
         kind = getattr(geom.visual, "kind", None)
         if kind in ("vertex", "face"):
             if kind == "vertex":
@@ -328,17 +339,17 @@ def _load_ply_parts(path: Path) -> list[_PartT]:
                 color = srgb_to_linear(face_srgb[sel].mean(axis=0))
                 sub = trimesh.Trimesh(geom.vertices, np.asarray(geom.faces)[sel], process=False)
                 mat = Material(name=f"color{k}", base_color=color, roughness=0.5)
-                V, F, _, _, _ = _transformed_part(sub, np.asarray(T, dtype=np.float64), mat)
-                parts.append((V, F, None, None, mat))
+                moved = _transformed_part(sub, T, mat)
+                parts.append(FilePart(moved.vertices, moved.faces, None, None, mat))
         else:
-            parts.append(_transformed_part(geom, np.asarray(T, dtype=np.float64), _grey_paint()))
+            parts.append(_transformed_part(geom, T, _grey_paint()))
     return parts
 
 
 # ----------------------------------------------------------------------------- assembly
 
 
-def _assemble(path: Path, parts: list[_PartT], R: np.ndarray, scale: float | None, length_m: float | None,
+def _assemble(path: Path, parts: list[FilePart], R: np.ndarray, scale: float | None, length_m: float | None,
               category: str) -> Asset:
     """Merge parts, rotate into the object frame, scale, recentre (bottom centre) and validate."""
     if not parts:
@@ -347,8 +358,9 @@ def _assemble(path: Path, parts: list[_PartT], R: np.ndarray, scale: float | Non
     mat_index: dict[int, int] = {}
     V_list, F_list, N_list, uv_list, fm_list = [], [], [], [], []
     offset = 0
-    any_uv = any(p[3] is not None for p in parts)
-    for V, F, N, uv, mat in parts:
+    any_uv = any(p.uv is not None for p in parts)
+    for part in parts:
+        V, F, N, uv, mat = part.vertices, part.faces, part.normals, part.uv, part.material
         if id(mat) not in mat_index:
             mat_index[id(mat)] = len(materials)
             materials.append(mat)
