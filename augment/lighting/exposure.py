@@ -18,6 +18,7 @@ from typing import Sequence
 
 import numpy as np
 
+from ...datasets.sample import CameraView
 from ..core import hdr_to_ldr, ldr_uint8_to_hdr, luminance, project_points, transform_points
 
 MIN_SHARED_POINTS = 40  # fewer shared points than this do not calibrate a pair
@@ -26,7 +27,7 @@ Z_BUFFER_SLACK = 1.03  # a point is visible when within 3 % of the nearest retur
 LDR_VALID = (8, 247)  # pixels outside (black, clipped) carry no ratio
 
 
-def visible_lidar_pixels(view, points_global: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def visible_lidar_pixels(view: CameraView, points_global: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Pixels (N, 2) of LiDAR points (N, 3, global) in ``view`` and whether each is visible there.
 
     Visible: in front of the camera, inside the image, and the nearest LiDAR return of its
@@ -47,7 +48,7 @@ def visible_lidar_pixels(view, points_global: np.ndarray) -> tuple[np.ndarray, n
     return uv, visible
 
 
-def lidar_luminance(view, points_global: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def lidar_luminance(view: CameraView, points_global: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Linear luminance (N,) of ``view``'s pixel (nearest) under each LiDAR point, and whether it is usable:
     the point is visible there (:func:`visible_lidar_pixels`) and its pixel neither black nor clipped."""
     uv, visible = visible_lidar_pixels(view, points_global)
@@ -71,7 +72,7 @@ def pair_ratio(a: tuple[np.ndarray, np.ndarray], b: tuple[np.ndarray, np.ndarray
     return float(np.exp(np.median(np.log(b[0][ok]) - np.log(a[0][ok])))), n
 
 
-def exposure_ratios(views: Sequence, points_global: np.ndarray | None) -> tuple[dict[str, float], dict]:
+def exposure_ratios(views: Sequence[CameraView], points_global: np.ndarray | None) -> tuple[dict[str, float], dict]:
     """Channel -> image units per reference (``views[0]``) unit, and a report of how each was found.
 
     Without LiDAR every ratio is 1 (one exposure assumed).

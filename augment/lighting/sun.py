@@ -14,6 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ...datasets.sample import CameraView
 from ..core import check_shape, rotate_vectors
 
 # Map origins (lat, lon in degrees) of the nuScenes map expansion (public devkit constants).
@@ -74,8 +75,8 @@ def sun_direction_global(location: str, timestamp_us: int) -> SunPosition:
     return SunPosition(azimuth_elevation_to_enu(azimuth, elevation), elevation, azimuth)
 
 
-def sun_direction_camera(view, location: str) -> np.ndarray:
-    """Unit (3,) direction towards the sun in the camera frame of ``view`` (a ``CameraView``)."""
+def sun_direction_camera(view: CameraView, location: str) -> np.ndarray:
+    """Unit (3,) direction towards the sun in the camera frame of ``view``."""
     sun = sun_direction_global(location, view.timestamp_us)
     T = np.asarray(view.T_cam_from_global)
     check_shape(T, (4, 4), "T_cam_from_global")
@@ -83,7 +84,7 @@ def sun_direction_camera(view, location: str) -> np.ndarray:
     return d / np.linalg.norm(d)
 
 
-def up_direction_camera(view) -> np.ndarray:
+def up_direction_camera(view: CameraView) -> np.ndarray:
     """Unit (3,) global up (+z) expressed in the camera frame of ``view``."""
     d = rotate_vectors(np.asarray(view.T_cam_from_global), np.array([[0.0, 0.0, 1.0]]))[0]
     return d / np.linalg.norm(d)

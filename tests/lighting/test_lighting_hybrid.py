@@ -314,3 +314,14 @@ def test_sample_lighting_l0_l1_and_bad_camera(bundled_sample):
         estimate_sample_lighting(s, ["CAM_SIDE"], "L1")
     with pytest.raises(ValueError):
         estimate_views_lighting([], None, "L1")
+
+
+def test_a_camera_that_was_not_an_input_gets_the_reference_light_turned_into_its_frame(bundled_sample):
+    s = bundled_sample
+    l1 = estimate_sample_lighting(s, ["CAM_FRONT"], "L1")
+    back = l1.for_view(s.cameras["CAM_BACK"])
+    sun_global = sun_direction_global(s.location, s.timestamp_us).direction_global
+    R_global_from_back = s.cameras["CAM_BACK"].T_global_from_cam[:3, :3]
+    assert back.level == "L1" and back.sun_source == "ephemeris" and "not an input view" in back.reason
+    assert np.degrees(np.arccos(np.clip(R_global_from_back @ back.sun_dir_cam @ sun_global, -1, 1))) < 0.05
+    assert np.allclose(back.light_cam.sun.direction, back.sun_dir_cam)

@@ -7,4 +7,4 @@ weight files and the shipped models' loaders), :mod:`.inputs` (the predictor's i
 Importing this package does not import torch.
 """
 
-__all__: list[str] = []  # a namespace of modules: import them directly (they import torch)
+__all__ = ["dome", "inputs", "model", "predict", "sun_cues", "weights"]  # modules (import them directly)
