@@ -107,19 +107,21 @@ def load_state(model: nn.Module, payload: dict, path: str | Path) -> nn.Module:
     return model
 
 
-def load_sky_model(path: str | Path | None = None) -> SkyModel:
-    """The sky model from a weights file (default: the package's), in eval mode."""
-    path = Path(path) if path else packaged_weights(SKY_WEIGHTS)
-    payload = read_weights(path, "sky")
-    model = SkyModel(SkyNetConfig.from_dict(payload["config"]))
+def _load_model(path: str | Path | None, default_name: str, kind: str, make) -> nn.Module:
+    """The network ``make(payload config)`` with the weights of ``path`` (default: the package's
+    ``default_name``), checked to be of ``kind``, in eval mode."""
+    path = Path(path) if path else packaged_weights(default_name)
+    payload = read_weights(path, kind)
+    model = make(payload["config"])
     load_state(model, payload, path)
     return model.eval()
+
+
+def load_sky_model(path: str | Path | None = None) -> SkyModel:
+    """The sky model from a weights file (default: the package's), in eval mode."""
+    return _load_model(path, SKY_WEIGHTS, "sky", lambda c: SkyModel(SkyNetConfig.from_dict(c)))
 
 
 def load_light_model(path: str | Path | None = None) -> LightNet:
     """The image -> sky-vector predictor from a weights file (default: the package's), in eval mode."""
-    path = Path(path) if path else packaged_weights(LIGHT_WEIGHTS)
-    payload = read_weights(path, "light")
-    model = LightNet(LightNetConfig.from_dict(payload["config"]))
-    load_state(model, payload, path)
-    return model.eval()
+    return _load_model(path, LIGHT_WEIGHTS, "light", lambda c: LightNet(LightNetConfig.from_dict(c)))
