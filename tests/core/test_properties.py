@@ -152,7 +152,7 @@ def test_shadow_ratio_finite_and_bounded_for_any_light(sky, sun, elevation, azim
     from streetaug.augment.assets.procedural import procedural_car
     from streetaug.augment.lighting.light import DistantLight, SunLight
     from streetaug.augment.core.depth import ground_plane_depth
-    from streetaug.augment.render.insert import render_insertion
+    from streetaug.augment.render import render_insertion
 
     W, H, f = 96, 64, 60.0
     K = np.array([[f, 0, W / 2], [0, f, H / 2], [0, 0, 1.0]])
