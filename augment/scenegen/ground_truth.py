@@ -21,6 +21,7 @@ from streetaug.augment.core import InputError, read_json
 from streetaug.augment.lighting.light import DistantLight, SunLight
 from streetaug.augment.lighting.sky import make_sky_light
 from streetaug.augment.lighting.sun import sun_direction_global
+from streetaug.datasets.sample import CameraView
 
 from .make import SAMPLE_SCENES
 from .patterns import surface_albedo
@@ -80,7 +81,7 @@ class GroundTruthScene:
         rng = np.random.default_rng(0)
         n = np.tile(r.sun_dir, (len(points_global), 1))
         samples = [(rng.uniform(size=len(n)), rng.uniform(size=len(n))) for _ in range(n_rays)]
-        return r._sun_visibility(points_global, n, rng, samples)
+        return r.sun_visibility_at(points_global, n, rng, samples)
 
     def radiance(self, origins_global: np.ndarray, dirs_global: np.ndarray, sky_rays: int = 8,
                  seed: int = 1) -> np.ndarray:
@@ -98,15 +99,15 @@ class GroundTruthScene:
         if len(hi):
             q = r.rays.hit_points(hits)[hi]
             face = hits.face[hi]
-            nq = r._oriented_normals(face, dirs_global[hi])
+            nq = r.oriented_normals(face, dirs_global[hi])
             T_street = r.T_street_from_global
             albedo, _ = surface_albedo(self.scene.materials, self.scene.face_material[face],
                                        transform_points(T_street, q), nq @ T_street[:3, :3].T)
-            vis = r._sun_visibility(q, nq, rng, [(rng.uniform(size=len(hi)), rng.uniform(size=len(hi)))
+            vis = r.sun_visibility_at(q, nq, rng, [(rng.uniform(size=len(hi)), rng.uniform(size=len(hi)))
                                                  for _ in range(4)])
             e = r.sun_e[None] * vis[:, None]
             samples = [(rng.uniform(size=len(hi)), rng.uniform(size=len(hi))) for _ in range(sky_rays)]
-            e = e + r._sky_gather(q, nq, samples, rng)
+            e = e + r.sky_gather(q, nq, samples, rng)
             L[hi] = albedo / np.pi * e
         return L * self.k
 
@@ -123,7 +124,7 @@ class GroundTruthScene:
                            self.sky.sun_half_angle_rad, v * self.sky.sun_visibility)
         return DistantLight(env, sun)
 
-    def test_points(self, view, n_each: int = 3) -> tuple[np.ndarray, np.ndarray]:
+    def test_points(self, view: CameraView, n_each: int = 3) -> tuple[np.ndarray, np.ndarray]:
         """Camera-frame points (M, 3) 0.5 m above the road 8-40 m ahead, ``n_each`` lit and shadowed; their visibility."""
         T_gc = view.T_global_from_cam
         xs, zs = np.meshgrid(np.linspace(-6, 6, 13), np.linspace(8, 40, 17))

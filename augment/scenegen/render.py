@@ -173,12 +173,13 @@ class StreetRenderer:
 
     # ------------------------------------------------------------------ shading
 
-    def _oriented_normals(self, face: np.ndarray, dirs: np.ndarray) -> np.ndarray:
+    def oriented_normals(self, face: np.ndarray, dirs: np.ndarray) -> np.ndarray:
+        """Unit normals (N, 3) of faces (N,) turned to face the rays (N, 3) that hit them."""
         n = self.normals[face]
         flip = np.einsum("ij,ij->i", n, dirs) > 0
         return np.where(flip[:, None], -n, n)
 
-    def _sun_visibility(self, points: np.ndarray, normals: np.ndarray, rng: np.random.Generator,
+    def sun_visibility_at(self, points: np.ndarray, normals: np.ndarray, rng: np.random.Generator,
                         disc_samples: list[tuple[np.ndarray, np.ndarray]] | None = None) -> np.ndarray:
         """(N,) fraction of visible points of the sun disc, times the cosine term (0 when facing away).
 
@@ -199,11 +200,11 @@ class StreetRenderer:
 
     def bounce_radiance(self, points: np.ndarray, normals: np.ndarray, face: np.ndarray, rng: np.random.Generator) -> np.ndarray:
         """Outgoing diffuse radiance (N, 3) of secondary hits: base albedo x (sun with shadow + 0.7 x open sky)."""
-        e = self.sun_e[None] * self._sun_visibility(points, normals, rng)[:, None]
+        e = self.sun_e[None] * self.sun_visibility_at(points, normals, rng)[:, None]
         e = e + 0.7 * self.sky_irradiance_unoccluded(normals)
         return self.base_albedo[face] / np.pi * e
 
-    def _sky_gather(self, points: np.ndarray, normals: np.ndarray, samples: list[tuple[np.ndarray, np.ndarray]],
+    def sky_gather(self, points: np.ndarray, normals: np.ndarray, samples: list[tuple[np.ndarray, np.ndarray]],
                     rng: np.random.Generator) -> np.ndarray:
         """Monte Carlo irradiance (N, 3) from the sky and one bounce; one cosine-weighted ray per (u1, u2) pair
         of (N,) arrays in ``samples``."""
@@ -219,7 +220,7 @@ class StreetRenderer:
             if hits.hit.any():
                 h = np.nonzero(hits.hit)[0]
                 q = self.rays.hit_points(hits)[h]
-                nq = self._oriented_normals(hits.face[h], d[h])
+                nq = self.oriented_normals(hits.face[h], d[h])
                 L[h] = self.bounce_radiance(q, nq, hits.face[h], rng)
             total += L * np.pi  # cosine pdf: E = pi * mean(L)
         return total / n_rays
@@ -237,7 +238,7 @@ class StreetRenderer:
         if hits.hit.any():
             h = np.nonzero(hits.hit)[0]
             q = self.rays.hit_points(hits)[h]
-            L[h] = self.bounce_radiance(q, self._oriented_normals(hits.face[h], r[h]), hits.face[h], rng)
+            L[h] = self.bounce_radiance(q, self.oriented_normals(hits.face[h], r[h]), hits.face[h], rng)
         return L * np.clip(fresnel * 4.0, 0, 1)[:, None]
 
     # ------------------------------------------------------------------ camera
@@ -307,14 +308,14 @@ class StreetRenderer:
         ph = px[h]
         face = hits.face[h]
         p = self.rays.hit_points(hits)[h]
-        n = self._oriented_normals(face, d[h])
+        n = self.oriented_normals(face, d[h])
         p_street = transform_points(self.T_street_from_global, p)
         n_street = n @ self.T_street_from_global[:3, :3].T
         albedo, gloss = surface_albedo(self.scene.materials, self.scene.face_material[face], p_street, n_street)
-        vis = self._sun_visibility(p, n, rng, [(u1[h], u2[h]) for u1, u2 in sun_samples])
+        vis = self.sun_visibility_at(p, n, rng, [(u1[h], u2[h]) for u1, u2 in sun_samples])
         acc.direct[ph] += albedo / np.pi * self.sun_e[None] * vis[:, None]
         acc.albedo_sum[ph] += albedo
-        acc.e_sky_sum[ph] += self._sky_gather(p, n, [(u1[h], u2[h]) for u1, u2 in sky_samples], rng)
+        acc.e_sky_sum[ph] += self.sky_gather(p, n, [(u1[h], u2[h]) for u1, u2 in sky_samples], rng)
         acc.hit_count[ph] += 1
         acc.normal_sum[ph] += n
         g_sel = gloss > 0
