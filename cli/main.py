@@ -70,7 +70,6 @@ def predict_light(dataroot, version, scene, sample_token, camera, image, fov_deg
     """
     from streetaug.augment.core import read_image_rgb
     from streetaug.augment.lighting import estimate_lighting, estimate_lighting_from_image, write_lighting_outputs
-    from streetaug.augment.pipeline import ego_ground_plane_cam
 
     at_cam = parse_floats(at, 3, "--at")
     if image is not None:
@@ -86,7 +85,7 @@ def predict_light(dataroot, version, scene, sample_token, camera, image, fov_deg
         view = camera_view(sample, camera)
         rgb = view.image
         if at_cam is None:
-            normal, offset = ego_ground_plane_cam(view)
+            normal, offset = view.ego_ground_plane_cam
             # The ground point straight ahead at 15 m depth: on the plane n . p + d = 0 with p = (0, y, 15).
             y = -(offset + normal[2] * 15.0) / normal[1] if abs(normal[1]) > 1e-6 else 1.5
             at_cam = [0.0, float(y), 15.0]

@@ -1,9 +1,8 @@
 """The per-sample context: what placement, lighting and rendering read of a sample, computed once.
 
-Per camera (:class:`ViewContext`): the LiDAR sweep in the camera frame, the ego's ground plane there,
-and the one dense scene depth (LiDAR densified, the ground plane where LiDAR leaves holes below the
-horizon; the plane alone without LiDAR) -- the same array for the placement's occlusion test and the
-renderer's. Per sample (:class:`SampleContext`): the cameras and, once the objects are placed, the
+Per camera (:class:`ViewContext`): the LiDAR sweep in the camera frame and the one dense scene depth
+(LiDAR densified, the ego's ground plane where LiDAR leaves holes below the horizon; the plane alone
+without LiDAR) -- the same array for the placement's occlusion test and the renderer's. Per sample (:class:`SampleContext`): the cameras and, once the objects are placed, the
 sample's lighting (one sun, sky and volume shared by the cameras, expressed in each camera's frame).
 """
 
@@ -17,18 +16,10 @@ import numpy as np
 
 from streetaug.datasets.sample import CameraView, Sample
 
-from ..core import PinholeCamera, rotate_vectors, transform_points
+from ..core import PinholeCamera
 from ..core.depth import densify_lidar_depth, ground_plane_depth
 from ..lighting.light import DistantLight
 from ..lighting.types import LightingEstimate
-
-
-def ego_ground_plane_cam(view: CameraView) -> tuple[np.ndarray, float]:
-    """The ego's ground plane (ego z = 0) in the camera frame as (normal (3,), offset d): n . p + d = 0."""
-    T_cam_from_ego = view.T_cam_from_ego
-    normal = rotate_vectors(T_cam_from_ego, np.array([[0.0, 0.0, 1.0]]))[0]
-    point = transform_points(T_cam_from_ego, np.zeros((1, 3)))[0]
-    return normal, float(-normal @ point)
 
 
 def scene_depth(view: CameraView, points_cam: np.ndarray | None) -> np.ndarray:
@@ -38,7 +29,7 @@ def scene_depth(view: CameraView, points_cam: np.ndarray | None) -> np.ndarray:
         points_cam: (N, 3) the sample's LiDAR points in this camera's frame, or None without LiDAR
             (then the ego's ground plane alone).
     """
-    normal, offset = ego_ground_plane_cam(view)
+    normal, offset = view.ego_ground_plane_cam
     if points_cam is None:
         return ground_plane_depth(view.K, view.width, view.height, normal, offset)
     return densify_lidar_depth(points_cam, view.K, view.width, view.height, ground_fill=(normal, offset))
@@ -77,11 +68,6 @@ class ViewContext:
     def camera(self) -> PinholeCamera:
         """The camera's intrinsics and image size."""
         return PinholeCamera(self.view.K, self.view.width, self.view.height)
-
-    @functools.cached_property
-    def ground_plane_cam(self) -> tuple[np.ndarray, float]:
-        """The ego's ground plane in this camera's frame (:func:`ego_ground_plane_cam`)."""
-        return ego_ground_plane_cam(self.view)
 
     @functools.cached_property
     def depth_m(self) -> np.ndarray:
