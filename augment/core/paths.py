@@ -6,6 +6,7 @@ lands outside the root is refused with an :class:`InputError` that names where t
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 from .errors import InputError
@@ -18,6 +19,10 @@ def is_inside(path: str | Path, root: str | Path) -> bool:
 
 def resolve_inside(root: str | Path, relative: str, where: str) -> Path:
     """``root / relative``, resolved, refused unless it stays inside ``root``.
+
+    Convention: the path must not be absolute nor climb out with ``..``; after symlinks it must lie inside
+    ``root``, or inside the target of a symlinked folder at the top of ``root`` (``samples -> /disk2/samples``,
+    a usual way to assemble a dataroot); a link deeper down that leaves those is refused.
 
     Args:
         root: the folder the path must stay in (a dataroot, an asset folder).
@@ -33,9 +38,16 @@ def resolve_inside(root: str | Path, relative: str, where: str) -> Path:
         raise InputError(f"{where}: the path {relative!r} contains a NUL byte")
     if Path(relative).is_absolute():
         raise InputError(f"{where}: {relative!r} is an absolute path; paths must be relative to {root}")
+    parts = Path(os.path.normpath(relative)).parts
+    if parts[0] == "..":
+        raise InputError(f"{where}: {relative!r} climbs out of {root}; paths must stay inside it")
     root_resolved = Path(root).resolve()
+    allowed = [root_resolved]
+    top = Path(root) / parts[0]
+    if len(parts) > 1 and top.is_symlink() and top.is_dir():
+        allowed.append(top.resolve())
     path = (root_resolved / relative).resolve()
-    if not path.is_relative_to(root_resolved):
+    if not any(path.is_relative_to(a) for a in allowed):
         raise InputError(f"{where}: {relative!r} resolves to {path}, outside {root_resolved}; "
                          "paths in tables and assets must stay inside their root (symlinks included)")
     return path

@@ -162,3 +162,18 @@ time.sleep(60)
             break
         assert time.time() < deadline, "the worker outlived its parent by 5 s"
         time.sleep(0.05)
+
+
+def test_a_linked_top_folder_of_the_root_is_followed(tmp_path):
+    disk2 = tmp_path / "disk2" / "samples"
+    (disk2 / "CAM_FRONT").mkdir(parents=True)
+    (disk2 / "CAM_FRONT" / "a.jpg").write_bytes(b"x")
+    root = tmp_path / "root"
+    root.mkdir()
+    (root / "samples").symlink_to(disk2)
+    assert resolve_inside(root, "samples/CAM_FRONT/a.jpg", "w") == (disk2 / "CAM_FRONT" / "a.jpg").resolve()
+    (disk2 / "CAM_FRONT" / "b.jpg").symlink_to("/etc/passwd")  # a link below the linked folder is not
+    with pytest.raises(InputError, match="outside"):
+        resolve_inside(root, "samples/CAM_FRONT/b.jpg", "w")
+    with pytest.raises(InputError, match="climbs out"):
+        resolve_inside(root, "samples/../../disk2/samples/CAM_FRONT/a.jpg", "w")
