@@ -28,7 +28,8 @@ def read_lidar_points(path: str | Path) -> np.ndarray:
         (N, 5) float32: x, y, z (LiDAR sensor frame, metres), intensity, ring index.
 
     Raises:
-        DatasetError: the file is missing, or its size is not a multiple of 20 bytes (truncated).
+        DatasetError: the file is missing, its size is not a multiple of 20 bytes (truncated), or a point
+            holds NaN or Inf.
     """
     path = Path(path)
     if not path.is_file():
@@ -40,6 +41,12 @@ def read_lidar_points(path: str | Path) -> np.ndarray:
             f"(float32 x {LIDAR_VALUES_PER_POINT} per point); the file is truncated or not a .pcd.bin"
         )
     points = np.fromfile(path, dtype="<f4").reshape(-1, LIDAR_VALUES_PER_POINT)
+    bad = ~np.isfinite(points).all(axis=1)
+    if bad.any():
+        raise DatasetError(
+            f"{path}: {int(bad.sum())} of {len(points)} points are non-finite (NaN or Inf in x, y, z, intensity "
+            "or ring); the sweep is corrupt"
+        )
     return points.astype(np.float32, copy=False)
 
 

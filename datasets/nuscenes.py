@@ -23,19 +23,20 @@ Usage::
 from __future__ import annotations
 
 import copy
-import json
 from collections import defaultdict
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from streetaug.augment.core import ConventionError, make_transform
+from streetaug.augment.core import ConventionError, InputError, make_transform, read_image_rgb
+from streetaug.augment.core.paths import resolve_inside
 
 from .errors import DatasetError
 from .lidarseg import read_lidar_points, read_lidarseg_labels
 from .nuscenes_map import DrivableArea, LaneCenterlines, map_expansion_path, read_lanes, read_map_expansion
 from .sample import Box, CameraView, LidarSweep, Sample
+from .tables import integer_field, read_table_rows, rotation_field, row_where, size_field, token_index, vector_field
 
 __all__ = ["DatasetError", "NuScenesReader", "read_lidar_points", "read_lidarseg_labels"]
 
@@ -97,28 +98,58 @@ class NuScenesReader:
                 f"(missing: {', '.join(missing)}); the dataset is incomplete, re-extract the metadata archive"
             )
         self._rows: dict[str, list[dict]] = {}
-        self._by_token: dict[str, dict[str, dict]] = {}
+        self._index: dict[str, dict[str, int]] = {}  # table -> token -> position in self._rows[table]
+        self._row_numbers: dict[str, dict[str, int]] | None = None  # with_tables: token -> row in the file
         self._sample_data_by_sample: dict[str, list[dict]] | None = None
         self._annotations_by_sample: dict[str, list[dict]] | None = None
         self._lidarseg_by_sd: dict[str, dict] | None = None
         self._drivable: dict[str, DrivableArea | None] = {}
         self._lanes: dict[str, LaneCenterlines | None] = {}
+        self._map_errors: dict[str, InputError] = {}
 
     def __repr__(self) -> str:
         return f"NuScenesReader({str(self.dataroot)!r}, {self.version!r})"
 
-    def with_tables(self, tables: dict[str, list[dict]]) -> "NuScenesReader":
+    def with_tables(self, tables: dict[str, list[dict]],
+                    row_numbers: dict[str, dict[str, int]] | None = None) -> "NuScenesReader":
         """A reader of the same files whose tables ``tables`` (name -> rows) replace the table files.
 
         Lets a batch worker build one ``Sample`` from that sample's rows without parsing the whole
         (multi-GB for trainval) tables; tables not given still load from their files. The parsed map
-        (drivable area) is shared with this reader.
+        (drivable area) is shared with this reader. ``row_numbers`` (table -> token -> row in the table
+        file, see :meth:`row_numbers_of`) lets messages name the rows of the files; without it they name
+        the token only.
         """
         other = copy.copy(self)
         other._rows = dict(tables)
-        other._by_token, other._sample_data_by_sample, other._annotations_by_sample = {}, None, None
+        other._index, other._sample_data_by_sample, other._annotations_by_sample = {}, None, None
         other._lidarseg_by_sd = None
+        other._row_numbers = row_numbers
         return other
+
+    def row_numbers_of(self, tables: dict[str, list[dict]]) -> dict[str, dict[str, int]]:
+        """Table -> token -> row in this reader's table files, for the rows of ``tables`` (a slice of them)."""
+        return {name: {r["token"]: self.row_number(name, r["token"]) for r in rows} for name, rows in tables.items()}
+
+    def row_number(self, table: str, token: str) -> int | None:
+        """The row index of ``token`` in the file ``<version>/<table>.json``, or None when not known."""
+        if self._row_numbers is not None:
+            return self._row_numbers.get(table, {}).get(token)
+        return self._token_index(table).get(token)
+
+    def where(self, table: str, row: dict, field: str | None) -> str:
+        """``"v1.0-mini/sample_data.json row 4 (token ab12) field 'filename'"``: where a value was read."""
+        token = row.get("token")
+        number = self.row_number(table, token) if isinstance(token, str) else None
+        return row_where(f"{self.version}/{table}.json", number, token, field)
+
+    def path_field(self, table: str, row: dict, field: str = "filename") -> Path:
+        """The file a row's ``field`` names, resolved inside the dataroot (symlinks included).
+
+        Raises:
+            InputError: the path is absolute or leads outside the dataroot (names the table, row and field).
+        """
+        return resolve_inside(self.dataroot, self._field(row, table, field), self.where(table, row, field))
 
     # ------------------------------------------------------------------ tables
 
@@ -131,26 +162,26 @@ class NuScenesReader:
                     self._rows[name] = []
                     return self._rows[name]
                 raise DatasetError(f"{path}: nuScenes table '{name}' not found")
-            try:
-                rows = json.loads(path.read_text())
-            except (json.JSONDecodeError, UnicodeDecodeError) as e:
-                raise DatasetError(f"{path}: table is not valid JSON ({e})") from None
-            if not isinstance(rows, list) or not all(isinstance(r, dict) and "token" in r for r in rows):
-                raise DatasetError(f"{path}: expected a JSON list of rows, each with a 'token'")
+            rows = read_table_rows(path)
+            self._index[name] = token_index(rows, str(path))  # duplicated tokens refused on reading
             self._rows[name] = rows
         return self._rows[name]
 
+    def _token_index(self, table: str) -> dict[str, int]:
+        if table not in self._index:
+            self._index[table] = token_index(self.table(table), str(self.table_dir / f"{table}.json"))
+        return self._index[table]
+
     def get(self, table: str, token: str) -> dict:
         """The row of ``table`` with ``token``; DatasetError naming the table and token otherwise."""
-        if table not in self._by_token:
-            self._by_token[table] = {r["token"]: r for r in self.table(table)}
-        row = self._by_token[table].get(token)
-        if row is None:
+        index = self._token_index(table)
+        position = index.get(token)
+        if position is None:
             raise DatasetError(
                 f"{self.table_dir / (table + '.json')}: no {table} with token '{token}' "
-                f"({len(self._by_token[table])} rows)"
+                f"({len(index)} rows)"
             )
-        return row
+        return self._rows[table][position]
 
     def _field(self, row: dict, table: str, key: str) -> Any:
         if key not in row:
@@ -307,12 +338,33 @@ class NuScenesReader:
             sample_data_token=sd["token"],
             image_path=str(self.dataroot / self._field(sd, "sample_data", "filename")),
             K=K,
-            width=int(sd.get("width", 0)),
-            height=int(sd.get("height", 0)),
+            width=integer_field(sd.get("width", 0), self.where("sample_data", sd, "width")),
+            height=integer_field(sd.get("height", 0), self.where("sample_data", sd, "height")),
             T_ego_from_cam=self._transform(calib, "calibrated_sensor"),
             T_global_from_ego=self.T_global_from_ego(sd),
-            timestamp_us=int(self._field(sd, "sample_data", "timestamp")),
+            timestamp_us=self._timestamp(sd, "sample_data"),
+            _load_image=lambda: self.camera_image(sd),
         )
+
+    def camera_image(self, sample_data: dict) -> np.ndarray:
+        """(H, W, 3) uint8 RGB of a camera ``sample_data`` row (what ``CameraView.image`` decodes).
+
+        Raises:
+            InputError: the file lies outside the dataroot, cannot be decoded, or its size differs from the
+                row's ``width`` / ``height`` (each names the file or the table, row and field).
+        """
+        path = self.path_field("sample_data", sample_data)
+        image = read_image_rgb(path)
+        want = (sample_data.get("width", 0), sample_data.get("height", 0))
+        got = (image.shape[1], image.shape[0])
+        if all(want) and tuple(int(v) for v in want) != got:
+            where = self.where("sample_data", sample_data, None)
+            raise DatasetError(f"{path}: the image is {got[0]} x {got[1]} but {where} says {want[0]} x {want[1]}; "
+                               "the table and the file do not belong together")
+        return image
+
+    def _timestamp(self, row: dict, table: str) -> int:
+        return integer_field(self._field(row, table, "timestamp"), self.where(table, row, "timestamp"))
 
     def lidarseg_path(self, sample_data_token: str) -> Path | None:
         """Path of the lidarseg labels of a LiDAR ``sample_data``, or None when the dataset has none.
@@ -324,14 +376,15 @@ class NuScenesReader:
             self._lidarseg_by_sd = {r.get("sample_data_token", ""): r for r in self.table("lidarseg")}
         row = self._lidarseg_by_sd.get(sample_data_token)
         if row is not None:
-            return self.dataroot / self._field(row, "lidarseg", "filename")
-        fallback = self.dataroot / "lidarseg" / self.version / f"{sample_data_token}_lidarseg.bin"
+            return self.path_field("lidarseg", row)
+        fallback = resolve_inside(self.dataroot, f"lidarseg/{self.version}/{sample_data_token}_lidarseg.bin",
+                                  f"the lidarseg file of sample_data token {sample_data_token!r}")
         return fallback if fallback.is_file() else None
 
     def lidar_sweep(self, sample_data_token: str) -> LidarSweep:
         """Read the LiDAR sweep (and its lidarseg labels when present) of a LiDAR ``sample_data``."""
         sd = self.get("sample_data", sample_data_token)
-        points = read_lidar_points(self.dataroot / self._field(sd, "sample_data", "filename"))
+        points = read_lidar_points(self.path_field("sample_data", sd))
         seg_path = self.lidarseg_path(sd["token"])
         labels = None if seg_path is None else read_lidarseg_labels(seg_path, num_points=len(points))
         return LidarSweep(
@@ -339,7 +392,7 @@ class NuScenesReader:
             intensity=points[:, 3].copy(),
             T_ego_from_lidar=self.T_ego_from_sensor(sd),
             T_global_from_ego=self.T_global_from_ego(sd),
-            timestamp_us=int(self._field(sd, "sample_data", "timestamp")),
+            timestamp_us=self._timestamp(sd, "sample_data"),
             labels=labels,
         )
 
@@ -351,29 +404,34 @@ class NuScenesReader:
         instance = self.get("instance", self._field(annotation, table, "instance_token"))
         category = self.get("category", self._field(instance, "instance", "category_token"))
         attributes = tuple(self.get("attribute", t)["name"] for t in annotation.get("attribute_tokens", []))
-        center = np.asarray(self._field(annotation, table, "translation"), dtype=np.float64)
-        wlh = np.asarray(self._field(annotation, table, "size"), dtype=np.float64)
-        rotation = np.asarray(self._field(annotation, table, "rotation"), dtype=np.float64)
-        if center.shape != (3,) or wlh.shape != (3,) or rotation.shape != (4,) or np.any(wlh <= 0):
-            raise DatasetError(
-                f"{self.table_dir / (table + '.json')}: row '{annotation['token']}' needs translation (3,), "
-                f"positive size [w, l, h] (3,) and rotation [w, x, y, z] (4,); got shapes "
-                f"{center.shape}, {wlh.shape}, {rotation.shape}"
-            )
-        rotation = rotation / np.linalg.norm(rotation)
+        center = vector_field(self._field(annotation, table, "translation"), 3,
+                              self.where(table, annotation, "translation"), "the box centre [x, y, z] in metres")
+        wlh = size_field(self._field(annotation, table, "size"), self.where(table, annotation, "size"))
+        rotation = rotation_field(self._field(annotation, table, "rotation"), self.where(table, annotation, "rotation"))
         return Box(center, wlh, rotation, category["name"], annotation["token"], attributes)
 
     # ------------------------------------------------------------------ map
 
     def _read_map(self, location: str) -> None:
-        """Parse ``location``'s map expansion once, for both its drivable area and its lanes."""
-        path = map_expansion_path(self.dataroot, location)
-        if not path.is_file():
-            self._drivable[location] = self._lanes[location] = None
-            return
-        data = read_map_expansion(path)
-        self._drivable[location] = DrivableArea.from_file(path, data)
-        self._lanes[location] = read_lanes(path, data=data)
+        """Parse ``location``'s map expansion once, for both its drivable area and its lanes.
+
+        A corrupt map file is an error (remembered: every sample of the location fails with it), never a
+        silent fall back to another drivable-area source.
+        """
+        if location in self._map_errors:
+            raise self._map_errors[location]
+        try:
+            relative = map_expansion_path(".", location)
+            path = resolve_inside(self.dataroot, str(relative), f"the map expansion of location {location!r} (log.json field 'location')")
+            if not path.is_file():
+                self._drivable[location] = self._lanes[location] = None
+                return
+            data = read_map_expansion(path)
+            drivable, lanes = DrivableArea.from_file(path, data), read_lanes(path, data=data)
+        except InputError as e:
+            self._map_errors[location] = e
+            raise
+        self._drivable[location], self._lanes[location] = drivable, lanes
 
     def drivable_area(self, location: str) -> DrivableArea | None:
         """The drivable area (with spatial index) of ``location``, or None without a map expansion file."""
@@ -418,7 +476,7 @@ class NuScenesReader:
             token=row["token"],
             scene_name=self._field(scene, "scene", "name"),
             location=location,
-            timestamp_us=int(self._field(row, "sample", "timestamp")),
+            timestamp_us=self._timestamp(row, "sample"),
             cameras=cameras,
             boxes=boxes,
             drivable_area_global=self.drivable_area_global(location) if self.with_map else None,

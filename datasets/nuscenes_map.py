@@ -12,7 +12,6 @@ File ``<dataroot>/maps/expansion/<location>.json`` (map expansion v1.x) holds, a
 from __future__ import annotations
 
 import functools
-import json
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -21,6 +20,8 @@ import shapely
 from scipy.spatial import cKDTree
 from shapely.geometry import MultiPolygon, Polygon, box
 from shapely.strtree import STRtree
+
+from streetaug.augment.core import read_json
 
 from .errors import DatasetError
 
@@ -39,10 +40,7 @@ def read_map_expansion(path: str | Path) -> dict:
     path = Path(path)
     if not path.is_file():
         raise DatasetError(f"{path}: map expansion file not found")
-    try:
-        data = json.loads(path.read_text())
-    except (json.JSONDecodeError, UnicodeDecodeError) as e:
-        raise DatasetError(f"{path}: map expansion file is not valid JSON ({e})") from None
+    data = read_json(path)  # names the file when it is not JSON, not UTF-8 or nested too deeply
     if not isinstance(data, dict):
         raise DatasetError(f"{path}: map expansion must be a JSON object")
     return data

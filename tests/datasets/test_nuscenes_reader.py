@@ -26,7 +26,6 @@ from streetaug.augment.core import (
 )
 from streetaug.augment.core import InputError
 from streetaug.datasets import nuscenes as nus
-from streetaug.datasets import sample as sample_module
 from streetaug.datasets.nuscenes import DatasetError, NuScenesReader
 from streetaug.datasets.lidarseg import read_lidar_points, read_lidarseg_labels
 from streetaug.datasets.nuscenes_map import read_drivable_area
@@ -161,7 +160,7 @@ class TestRealTables:
 
     def test_lazy_images_and_lidar(self, real_reader, monkeypatch):
         calls = {"image": 0, "lidar": 0}
-        real_read_image, real_read_lidar = sample_module.read_image_rgb, nus.read_lidar_points
+        real_read_image, real_read_lidar = nus.read_image_rgb, nus.read_lidar_points
 
         def counting_image(path):
             calls["image"] += 1
@@ -171,7 +170,7 @@ class TestRealTables:
             calls["lidar"] += 1
             return real_read_lidar(path)
 
-        monkeypatch.setattr(sample_module, "read_image_rgb", counting_image)
+        monkeypatch.setattr(nus, "read_image_rgb", counting_image)  # the reader decodes (after its path checks)
         monkeypatch.setattr(nus, "read_lidar_points", counting_lidar)
         s = real_reader.sample(REAL_SAMPLE)
         assert calls == {"image": 0, "lidar": 0}
