@@ -40,7 +40,7 @@ def resolve_inside(root: str | Path, relative: str, where: str) -> Path:
         raise InputError(f"{where}: {relative!r} is an absolute path; paths must be relative to {root}")
     parts = Path(os.path.normpath(relative)).parts
     if parts[0] == "..":
-        raise InputError(f"{where}: {relative!r} climbs out of {root}; paths must stay inside it")
+        raise InputError(f"{where}: {relative!r} climbs outside {root} with '..'; paths must stay inside it")
     root_resolved = Path(root).resolve()
     allowed = [root_resolved]
     top = Path(root) / parts[0]
