@@ -7,7 +7,10 @@ y left, z up, metres, origin at the bottom centre of the box).
 Safety: before any library sees a file, its external references are checked -- glTF
 ``buffers[].uri`` / ``images[].uri`` (also inside a GLB's JSON chunk), OBJ ``mtllib`` and MTL
 texture paths -- and anything absolute, with a URL scheme other than ``data:``, or escaping the
-asset's folder is refused with :class:`InputError`; so are files larger than 200 MB.
+asset's folder is refused with :class:`InputError`; so are files larger than 200 MB. Then what the file
+would cost is read from its headers (:mod:`.budget`): data URIs must be valid base64, textures above
+``ResourceLimits.max_texture_pixels`` and assets above ``max_triangles`` are refused, textures above
+``max_texture_side`` are reduced before their pixels are converted (limits from ``STREETAUG_MAX_*``).
 
 Materials: glTF PBR factors are read exactly from the file's JSON (baseColorFactor and
 emissiveFactor are linear; ``alphaMode: BLEND`` alpha and ``KHR_materials_transmission`` become
@@ -26,7 +29,9 @@ from typing import Any
 import numpy as np
 
 from ..core import InputError
+from ..core.limits import ResourceLimits, check_triangles
 from .asset import Asset, Material
+from .budget import check_gltf_budget, check_obj_budget, check_ply_budget, reduce_textures
 from .categories import category_for_asset
 from . import references
 from .procedural import srgb_to_linear
@@ -126,21 +131,27 @@ def load_asset(
     st = path.stat()
     if st.st_size > references.MAX_FILE_BYTES:
         raise InputError(f"{path}: file is {st.st_size / 2**20:.0f} MB; assets larger than 200 MB are refused")
-    key = (str(path.resolve()), st.st_mtime_ns, st.st_size, str(front_axis), str(up_axis), scale, length_m, category)
+    limits = ResourceLimits.from_env()
+    key = (str(path.resolve()), st.st_mtime_ns, st.st_size, str(front_axis), str(up_axis), scale, length_m, category,
+           limits)
     if use_cache and key in asset_cache:
         return asset_cache[key]
 
-    if suffix in (".gltf", ".glb"):
+    if suffix in (".gltf", ".glb"):  # references, data URIs, texture sizes and triangles checked first
         gltf = read_gltf_json(path)
         check_gltf_references(path, gltf)
-        parts = _load_gltf_parts(path, gltf)
+        check_gltf_budget(path, gltf, limits)
+        parts = _load_gltf_parts(path, gltf, limits)
     elif suffix == ".obj":
         mtl = check_obj_references(path)
-        parts = _load_obj_parts(path, mtl)
+        check_obj_budget(path, mtl, limits)
+        parts = _load_obj_parts(path, mtl, limits)
     else:
-        parts = _load_ply_parts(path)
+        check_ply_budget(path, limits)
+        parts = _load_ply_parts(path, limits)
     if category is None:
         category = category_for_asset(path)
+    check_triangles(sum(len(p.faces) for p in parts), str(path), limits)
     asset = _assemble(path, parts, R, scale, length_m, category)
 
     if use_cache:
@@ -178,11 +189,16 @@ def _trimesh_load(path: Path):
         raise InputError(f"{path}: could not read the mesh ({type(e).__name__}: {e})") from None
 
 
-def _scene_meshes(path: Path) -> list[tuple[np.ndarray, Any]]:
-    """(T_file_from_mesh (4, 4), trimesh mesh) of every non-empty triangle mesh in the file's scene graph."""
+def _scene_meshes(path: Path, limits: ResourceLimits) -> list[tuple[np.ndarray, Any]]:
+    """(T_file_from_mesh (4, 4), trimesh mesh) of every non-empty triangle mesh in the file's scene graph.
+
+    Textures above ``limits.max_texture_side`` are reduced before anything reads their pixels.
+    """
     import trimesh  # heavy: deferred until a mesh file is read
 
     scene = _trimesh_load(path)
+    reduce_textures((getattr(getattr(g, "visual", None), "material", None) for g in scene.geometry.values()),
+                    path, limits)
     out = []
     for node in scene.graph.nodes_geometry:
         T, geom_name = scene.graph[node]
@@ -192,11 +208,11 @@ def _scene_meshes(path: Path) -> list[tuple[np.ndarray, Any]]:
     return out
 
 
-def _load_gltf_parts(path: Path, gltf: dict) -> list[FilePart]:
+def _load_gltf_parts(path: Path, gltf: dict, limits: ResourceLimits) -> list[FilePart]:
     exact = _gltf_materials_by_name(gltf)
     cache: dict[int, Material] = {}  # one Material per material object of this file's scene
     parts = []
-    for T, geom in _scene_meshes(path):
+    for T, geom in _scene_meshes(path, limits):
         mat_obj = getattr(geom.visual, "material", None)
         if id(mat_obj) not in cache:
             cache[id(mat_obj)] = _material_from_trimesh(mat_obj, exact, len(cache))
@@ -228,11 +244,15 @@ def _transformed_part(geom: Any, T: np.ndarray, material: Material) -> FilePart:
     return FilePart(V, F, N, uv, material)
 
 
+_SRGB_TO_LINEAR_8BIT = srgb_to_linear(np.arange(256, dtype=np.float32) / 255.0).astype(np.float32)
+
+
 def _texture(image, srgb: bool) -> np.ndarray | None:
+    """float32 (H, W, 3) in [0, 1] of an 8-bit texture, linear when ``srgb`` (a 256-entry table: no float64 copies)."""
     if image is None:
         return None
-    arr = np.asarray(image.convert("RGB"), dtype=np.float32) / 255.0
-    return srgb_to_linear(arr).astype(np.float32) if srgb else arr
+    rgb = np.asarray(image.convert("RGB"))
+    return _SRGB_TO_LINEAR_8BIT[rgb] if srgb else np.asarray(rgb, dtype=np.float32) / 255.0
 
 
 def _material_from_trimesh(mat, exact: dict[str, dict], index: int) -> Material:
@@ -277,10 +297,10 @@ def _grey_paint(name: str = "paint") -> Material:
     return Material(name=name, base_color=np.array([0.30, 0.30, 0.30]), metallic=0.0, roughness=0.4, clearcoat=1.0)
 
 
-def _load_obj_parts(path: Path, mtl: dict[str, dict]) -> list[FilePart]:
+def _load_obj_parts(path: Path, mtl: dict[str, dict], limits: ResourceLimits) -> list[FilePart]:
     cache: dict[str, Material] = {}
     parts = []
-    for T, geom in _scene_meshes(path):
+    for T, geom in _scene_meshes(path, limits):
         mat_obj = getattr(geom.visual, "material", None)
         name = getattr(mat_obj, "name", None) or "default"
         if name not in cache:
@@ -315,11 +335,11 @@ def _material_from_mtl(name: str, entry: dict | None, mat_obj) -> Material:
                     emission=np.clip(ke, 0, None), base_color_texture=texture)
 
 
-def _load_ply_parts(path: Path) -> list[FilePart]:
+def _load_ply_parts(path: Path, limits: ResourceLimits) -> list[FilePart]:
     import trimesh  # heavy: deferred until a mesh file is read
 
     parts = []
-    for T, geom in _scene_meshes(path):
+    for T, geom in _scene_meshes(path, limits):
         kind = getattr(geom.visual, "kind", None)
         if kind in ("vertex", "face"):
             if kind == "vertex":
