@@ -99,7 +99,7 @@ class NuScenesReader:
             )
         self._rows: dict[str, list[dict]] = {}
         self._index: dict[str, dict[str, int]] = {}  # table -> token -> position in self._rows[table]
-        self._row_numbers: dict[str, dict[str, int]] | None = None  # with_tables: token -> row in the file
+        self._row_numbers: dict[str, dict[str, int]] = {}  # tables given to with_tables: token -> row in the file
         self._sample_data_by_sample: dict[str, list[dict]] | None = None
         self._annotations_by_sample: dict[str, list[dict]] | None = None
         self._lidarseg_by_sd: dict[str, dict] | None = None
@@ -124,7 +124,7 @@ class NuScenesReader:
         other._rows = dict(tables)
         other._index, other._sample_data_by_sample, other._annotations_by_sample = {}, None, None
         other._lidarseg_by_sd = None
-        other._row_numbers = row_numbers
+        other._row_numbers = {name: (row_numbers or {}).get(name, {}) for name in tables}
         return other
 
     def row_numbers_of(self, tables: dict[str, list[dict]]) -> dict[str, dict[str, int]]:
@@ -133,8 +133,8 @@ class NuScenesReader:
 
     def row_number(self, table: str, token: str) -> int | None:
         """The row index of ``token`` in the file ``<version>/<table>.json``, or None when not known."""
-        if self._row_numbers is not None:
-            return self._row_numbers.get(table, {}).get(token)
+        if table in self._row_numbers:
+            return self._row_numbers[table].get(token)
         return self._token_index(table).get(token)
 
     def where(self, table: str, row: dict, field: str | None) -> str:
