@@ -25,8 +25,8 @@ from typing import Any, Iterable
 import numpy as np
 
 from ..core import InputError
-from ..core.limits import ResourceLimits, check_triangles, image_size_from_bytes, image_size_from_header, \
-    texture_reduction
+from ..core.limits import (ResourceLimits, check_triangles, image_size_from_bytes, image_size_from_header,
+                           texture_reduction)
 from .references import check_reference
 
 _DATA_URI = re.compile(r"^data:(?P<type>[^,;]*)(?P<params>(;[^,;]*)*?);base64,(?P<payload>.*)$", re.DOTALL)

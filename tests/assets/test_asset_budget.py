@@ -11,6 +11,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
+import trimesh
 
 import fault_cases as fc
 from streetaug.augment.assets import loader
@@ -21,7 +22,7 @@ from streetaug.augment.core import InputError
 @pytest.fixture()
 def no_mesh_library(monkeypatch):
     """Fail the test if the mesh library is asked to open the file (the checks must come first)."""
-    monkeypatch.setattr(loader, "_trimesh_load", lambda path: pytest.fail(f"trimesh opened {path}"))
+    monkeypatch.setattr(trimesh, "load", lambda path, *a, **k: pytest.fail(f"trimesh opened {path}"))
 
 
 def glb_with_image(path: Path, image: bytes) -> Path:
