@@ -8,8 +8,14 @@ from __future__ import annotations
 
 import importlib
 import os
+from pathlib import Path
 
 import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+SHARED_DATA = REPO.parent / "shared" / "data"  # real data for development (never copied into the repository)
+HDRI = SHARED_DATA / "hdri"
+needs_hdri = pytest.mark.skipif(not (HDRI / "index.json").is_file(), reason=f"{HDRI} (real HDR panoramas) not present")
 
 
 def devkit():

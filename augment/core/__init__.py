@@ -1,15 +1,9 @@
 """The leaf core of streetaug: every convention, the error types, I/O at the edges, rays and depth.
 
-It imports nothing else of the project; everything else may import it. The conventions (one module each)::
+It imports nothing else of the project; everything else may import it. The conventions, one module each:
 
-    camera (OpenCV)            ego / object (nuScenes)         global (map of log.location)
-        z forward                  z up                            z up
-       /                           |  x forward                    |  y north
-      o---- x right                | /                             | /
-      |                    y left--o                               o---- x east
-      y down
-
-* ``frames``: quaternions ``[w, x, y, z]``, rigid transforms ``T_a_from_b`` (chains read right to left),
+* ``frames``: the frames (camera OpenCV, ego/object and global nuScenes; a diagram in its docstring),
+  quaternions ``[w, x, y, z]``, rigid transforms ``T_a_from_b`` (chains read right to left),
   object poses in the camera (``--pose-camera``).
 * ``camera``: :class:`PinholeCamera` (pixel centres at integer coordinates), projection, pixel rays.
 * ``envmap``: the camera-frame and world equirectangular maps and their one bilinear lookup.

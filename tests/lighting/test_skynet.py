@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 import torch
 
+from conftest import HDRI, needs_hdri
 from streetaug.augment.core import hdr_to_ldr, intrinsics_from_fov, luminance
 from streetaug.augment.core import InputError
 from streetaug.augment.lighting.skynet.dome import (
@@ -49,8 +50,6 @@ from streetaug.augment.lighting.skynet.weights import (
 from streetaug.augment.training import data as D
 from streetaug.augment.training.synth import SynthSky, random_sky, splat_direction
 
-HDRI = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "hdri"
-needs_hdri = pytest.mark.skipif(not (HDRI / "index.json").is_file(), reason=f"{HDRI} (real HDR panoramas) not present")
 SAMPLES = Path(__file__).resolve().parents[2] / "examples" / "nuscenes-samples"
 
 

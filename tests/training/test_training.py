@@ -13,6 +13,7 @@ import pytest
 import torch
 from click.testing import CliRunner
 
+from conftest import HDRI, needs_hdri
 from streetaug.augment.lighting.skynet.inputs import view_rays
 from streetaug.augment.lighting.skynet.model import LightNet
 from streetaug.augment.lighting.skynet.predict import get_models
@@ -29,8 +30,6 @@ from streetaug.augment.training.train import (
 )
 from streetaug.cli.main import main
 
-HDRI = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "hdri"
-needs_hdri = pytest.mark.skipif(not (HDRI / "index.json").is_file(), reason=f"{HDRI} (real HDR panoramas) not present")
 
 
 def unit(v):
