@@ -6,12 +6,14 @@ import time
 from pathlib import Path
 
 from streetaug.datasets.nuscenes import NuScenesReader
+from streetaug.datasets.sample import CameraView, Sample
 
 from ..assets.select import select_assets
 from ..pipeline import InsertOptions, insert_into_sample, item_seed, place_in_sample
 from .config import BatchConfig
+from .layout import output_file
 from .row import LogRow
-from .write import plan_rows, write_camera, write_lidar
+from .write import plan_rows, with_file_checks, write_camera, write_lidar
 
 
 def insert_options(config: BatchConfig) -> InsertOptions:
@@ -20,26 +22,67 @@ def insert_options(config: BatchConfig) -> InsertOptions:
                          yaw_sigma_deg=config.yaw_sigma_deg, ev=config.ev, match_camera=config.match_camera)
 
 
+def readable_views(sample: Sample, cameras: list[str], fail_fast: bool = False
+                   ) -> tuple[list[CameraView], dict[str, str]]:
+    """The sample's views of ``cameras`` whose image decodes, and camera -> why the others cannot be read.
+
+    A camera whose image is corrupt (or missing, or above the size limits) fails alone: the sample's other
+    cameras share the lighting and placement of the readable views only. With ``fail_fast`` the first
+    error is raised.
+    """
+    views, failed = [], {}
+    for c in cameras:
+        if c not in sample.cameras:
+            continue
+        view = sample.cameras[c]
+        try:
+            _ = view.image
+        except Exception as e:  # noqa: BLE001 - logged as this camera's failure
+            if fail_fast:
+                raise
+            failed[c] = f"{c}: {type(e).__name__}: {e}".splitlines()[0][:300]
+            continue
+        views.append(view)
+    return views, failed
+
+
 def augment_sample(reader: NuScenesReader, config: BatchConfig, out_dir: Path, token: str, cameras: list[str],
-                   dry_run: bool = False) -> list[LogRow]:
+                   dry_run: bool = False, fail_fast: bool = False) -> list[LogRow]:
     """Augment ``cameras`` of sample ``token`` (``reader`` holds its table rows) into ``out_dir``.
 
-    Returns one row per camera (with ``dry_run``: the planned placements, nothing rendered or written).
-    Raises whatever fails; the caller logs it.
+    Returns one row per camera (with ``dry_run``: the planned placements, nothing rendered or written); a
+    camera whose image cannot be read gets a failed row, the others go on without it.
+    Raises whatever else fails; the caller logs it.
     """
     t0 = time.perf_counter()
     sample = reader.sample(token)
-    views = [sample.cameras[c] for c in cameras if c in sample.cameras]
+    views, unreadable = readable_views(sample, cameras, fail_fast)
     assets = {v.channel: select_assets(item_seed(config.seed, "asset", token, v.channel), config.n_objects,
                                        config.asset, config.assets_dir, config.asset_front, config.asset_length)
               for v in views}
     options = insert_options(config)
     load_s = time.perf_counter() - t0
+    failed = {c: LogRow(token, c, "failed", reason, sample_data_token=sample.cameras[c].sample_data_token)
+              for c, reason in unreadable.items()}
+    if not views:
+        return [failed.get(c) or LogRow(token, c, "skipped", f"camera {c} not in this sample") for c in cameras]
     if dry_run:
-        return plan_rows(token, cameras, place_in_sample(sample, views, assets, options))
+        planned = plan_rows(token, [c for c in cameras if c not in failed], place_in_sample(sample, views, assets,
+                                                                                              options))
+        return ordered(cameras, planned, failed)
     result = insert_into_sample(sample, views, assets, options)
     t_lidar = time.perf_counter()
     lidar = write_lidar(out_dir, reader, sample, result, config.version)
     shared_s = {"load": load_s, "lidar": time.perf_counter() - t_lidar}  # per sample: shared by its cameras
     per_camera = {k: v / max(len(views), 1) for k, v in shared_s.items()}
-    return [write_camera(out_dir, sample, c, result, per_camera, lidar) for c in cameras]
+    names = {v.channel: output_file(reader.get("sample_data", v.sample_data_token)["filename"], v.channel,
+                                    v.sample_data_token) for v in views}
+    rows = [write_camera(out_dir, sample, c, result, per_camera, lidar, names.get(c))
+            for c in cameras if c not in failed]
+    return ordered(cameras, with_file_checks(out_dir, rows), failed)
+
+
+def ordered(cameras: list[str], rows: list[LogRow], failed: dict[str, LogRow]) -> list[LogRow]:
+    """One row per camera in the order of ``cameras``: the failed cameras' rows among the others."""
+    by_camera = {r.camera: r for r in rows}
+    return [failed[c] if c in failed else by_camera[c] for c in cameras]

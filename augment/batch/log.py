@@ -2,12 +2,13 @@
 
 Crash safety: the lines of one sample are appended in one write and fsync'ed, after its files are in
 place. A crash can leave a truncated last line or a sample with only some of its lines; on resume
-:func:`compact_log` keeps only the lines of complete samples (whose files exist) and drops the rest,
-so the log never holds two lines for one image.
+:func:`compact_log` keeps only the lines of complete samples (whose files are there with the size and
+sha256 their row recorded) and drops the rest, so the log never holds two lines for one image.
 """
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 from pathlib import Path
@@ -44,16 +45,53 @@ def done_samples(rows: Iterable[LogRow], out_dir: Path, expected: Callable[[str]
     for (token, camera), row in latest_rows(rows).items():
         by_sample.setdefault(token, {})[camera] = row
     done = set()
+    verified: dict[str, bool] = {}  # a sample's LiDAR sweep is on each of its camera rows: hashed once
     for token, cams in by_sample.items():
         want = list(expected(token))
-        if want and all(c in cams and row_complete(cams[c], out_dir) for c in want):
+        if want and all(c in cams and row_complete(cams[c], out_dir, verified) for c in want):
             done.add(token)
     return done
 
 
-def row_complete(row: LogRow, out_dir: Path) -> bool:
-    """The row's image is done (ok / skipped) and every file it wrote exists under ``out_dir``."""
-    return row.done and all((out_dir / f).is_file() for f in row.files)
+def file_check(path: Path) -> dict[str, int | str]:
+    """``{"size": bytes, "sha256": hex}`` of a file (what the log records of each output)."""
+    digest = hashlib.sha256()
+    size = 0
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            digest.update(block)
+            size += len(block)
+    return {"size": size, "sha256": digest.hexdigest()}
+
+
+def file_intact(path: Path, check: dict | None) -> bool:
+    """``path`` exists and, when ``check`` is given, has its recorded size and sha256."""
+    if not path.is_file():
+        return False
+    if not check:
+        return True  # a log written before checks were recorded: existence only
+    if path.stat().st_size != check.get("size"):
+        return False
+    return file_check(path)["sha256"] == check.get("sha256")
+
+
+def row_complete(row: LogRow, out_dir: Path, verified: dict[str, bool] | None = None) -> bool:
+    """The row's image is done (ok / skipped) and every file it wrote is under ``out_dir`` as written
+    (same size and sha256 as logged): a truncated or overwritten output is redone.
+
+    Args:
+        verified: file -> result of earlier checks of this resume (filled in here).
+    """
+    if not row.done:
+        return False
+    verified = {} if verified is None else verified
+    checks = row.file_checks or {}
+    for f in row.files:
+        if f not in verified:
+            verified[f] = file_intact(out_dir / f, checks.get(f))
+        if not verified[f]:
+            return False
+    return True
 
 
 def compact_log(path: Path, keep: Callable[[LogRow], bool]) -> list[LogRow]:

@@ -120,6 +120,8 @@ class LogRow:
         timing_s: seconds per stage (``load``, ``placement``, ``lighting``, ``depth``, ``render``, ``write``,
             ``total``, ...), the sample's shared stages divided among its cameras.
         files: the files it wrote, relative to the output folder (all must exist for a resume to skip it).
+        file_checks: file -> ``{"size": bytes, "sha256": hex}`` of each of ``files`` as written; a resume
+            redoes the image when a file's size or checksum differs (truncated, overwritten).
         image: the augmented image (ok rows).
         sample_data_token: the camera's ``sample_data`` token.
         objects: the objects placed in this camera's view (None when the camera is not in the sample).
@@ -149,6 +151,7 @@ class LogRow:
     cpu_s: float | None = None
     worker: str | None = None
     peak_rss_mb: float | None = None
+    file_checks: dict[str, dict[str, Any]] | None = None
     extra: dict[str, Any] = field(default_factory=dict)
 
     @property
@@ -173,6 +176,7 @@ class LogRow:
             "lighting": None if self.lighting is None else self.lighting.to_json(),
             "n_objects_visible": self.n_objects_visible, "seconds": self.seconds, "cpu_s": self.cpu_s,
             "worker": self.worker, "peak_rss_mb": self.peak_rss_mb,
+            "file_checks": None if self.file_checks is None else {k: dict(v) for k, v in self.file_checks.items()},
         }
         doc = _drop_none(doc)
         if self.status in ("planned", "no_placement"):
@@ -193,5 +197,6 @@ class LogRow:
             lighting=None if lighting is None else LoggedLighting.from_json(lighting),
             n_objects_visible=doc.get("n_objects_visible"), placement_report=doc.get("placement_report"),
             seconds=doc.get("seconds"), cpu_s=doc.get("cpu_s"), worker=doc.get("worker"),
-            peak_rss_mb=doc.get("peak_rss_mb"), extra={k: v for k, v in doc.items() if k not in known},
+            peak_rss_mb=doc.get("peak_rss_mb"), file_checks=doc.get("file_checks"),
+            extra={k: v for k, v in doc.items() if k not in known},
         )

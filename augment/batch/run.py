@@ -20,8 +20,9 @@ from __future__ import annotations
 import shutil
 import time
 from collections import Counter
+from dataclasses import replace
 from pathlib import Path
-from typing import Callable
+from typing import Callable, Iterable
 
 from tqdm import tqdm
 
@@ -30,9 +31,12 @@ from streetaug.datasets.nuscenes_writer import InsertedObject, link_source, writ
 from streetaug.datasets.nuscenes_format import visibility_token
 
 from ..core import InputError, write_json_atomic
+from ..core.lock import OutputLock
+from ..core.paths import refuse_output_inside
 from .config import BatchConfig, RunOptions, check_and_save_config, load_config
 from .execute import run_dask, run_inline, run_processes
-from .layout import LIDARSEG_FOLDER, LOG_FILE, PLAN_FILE, SUMMARY_FILE, shard_dir
+from .layout import (LIDARSEG_FOLDER, LOG_FILE, PLAN_FILE, SUMMARY_FILE, check_unique_outputs, labels_file,
+                     output_file, shard_dir)
 from .log import append_rows, compact_log, done_samples, latest_rows, read_log, write_log
 from .report import contact_sheet, summarize
 from .row import LogRow
@@ -73,17 +77,66 @@ def _remove_stale_temp_files(out_dir: Path, version: str) -> None:
             shutil.rmtree(path, ignore_errors=True)
 
 
+def planned_outputs(reader: NuScenesReader, tokens: list[str], cameras: tuple[str, ...]) -> dict[str, list[str]]:
+    """sample_data token -> the output files it would get (camera images and labels of ``cameras``, all when
+    empty, and the LiDAR sweep) for the samples ``tokens``. A filename that is no relative path inside the
+    dataroot is left out here: its sample fails alone, with the reader's message."""
+    outputs: dict[str, list[str]] = {}
+    for token in tokens:
+        rows = [(c, sd) for c, sd in reader.keyframe_sample_data(token, "camera").items()
+                if not cameras or c in cameras]
+        lidar = reader.lidar_sample_data(token)
+        if lidar is not None:
+            rows.append((reader.sensor_of(lidar).get("channel", "LIDAR_TOP"), lidar))
+        for channel, sd in rows:
+            try:
+                file = output_file(sd.get("filename", ""), channel, sd["token"])
+            except InputError:
+                continue
+            outputs[sd["token"]] = [file] if sd is lidar else [file, labels_file(file)]
+    return outputs
+
+
+def check_assets(config: BatchConfig) -> None:
+    """Load ``--asset`` or every asset of ``--assets`` once before any work, so that a broken file stops the
+    batch at once with its name (instead of failing every image that drew it)."""
+    if config.asset is None and config.assets_dir is None:
+        return
+    from ..assets.loader import list_assets  # deferred: trimesh and scipy, only when assets are given
+    from ..assets.select import load_asset_options
+
+    files = [Path(config.asset)] if config.asset is not None else list_assets(config.assets_dir)
+    for file in files:
+        load_asset_options(file, config.asset_front, config.asset_length)
+
+
 def run_batch(config: BatchConfig, out_dir: str | Path, run: RunOptions = RunOptions(),
               echo: Callable[[str], None] = _echo_none) -> dict:
     """Augment the samples of ``config`` into ``out_dir``; resume whatever an earlier run finished.
 
+    One run per output: the run holds ``OUT/.streetaug.lock`` (a shard: ``OUT/shards/I-of-N/.streetaug.lock``,
+    so the shards of one output run side by side) from before it writes anything until it ends.
+
     Returns the summary (also ``summary.json``; for a shard ``shards/I-of-N/summary.json``; with
     ``dry_run`` the plan's summary, and ``plan.jsonl``).
+
+    Raises:
+        InputError: ``out_dir`` is inside the source or contains it, another run holds the lock, the options
+            differ from the folder's earlier run, two inputs would map to one output, a given asset is broken.
     """
     out_dir = Path(out_dir)
+    refuse_output_inside(out_dir, config.dataroot)
+    config = replace(config, cameras=tuple(dict.fromkeys(config.cameras)))  # CAM_FRONT,CAM_FRONT: once
+    with OutputLock(shard_dir(out_dir, run.shard) if run.shard else out_dir, "batch"):
+        return _run_locked(config, out_dir, run, echo)
+
+
+def _run_locked(config: BatchConfig, out_dir: Path, run: RunOptions, echo: Callable[[str], None]) -> dict:
     reader = NuScenesReader(config.dataroot, config.version)
     _check_cameras(reader, config.cameras)
-    link_source(out_dir, config.dataroot)  # also refuses an output folder overlapping the source
+    check_unique_outputs(planned_outputs(reader, planned_samples(reader, config.limit), config.cameras))
+    check_assets(config)
+    link_source(out_dir, config.dataroot)
     if not run.dry_run:
         check_and_save_config(out_dir, config)
     tokens = planned_samples(reader, config.limit, run.shard)
@@ -113,7 +166,14 @@ def run_batch(config: BatchConfig, out_dir: str | Path, run: RunOptions = RunOpt
     else:
         executor = "1 process (inline)"
         results = run_inline(process_sample, tasks)
+    return _collect(config, out_dir, run, reader, log_path, results, cameras, tokens, executor)
 
+
+def _collect(config: BatchConfig, out_dir: Path, run: RunOptions, reader: NuScenesReader, log_path: Path,
+             results: Iterable[list[LogRow]], cameras: dict[str, list[str]], tokens: list[str],
+             executor: str) -> dict:
+    """Log the results as they come, then write the plan, the shard's summary or the dataset."""
+    pending = list(cameras)
     t0 = time.perf_counter()
     status: Counter = Counter()
     new_rows: list[LogRow] = []
@@ -205,6 +265,11 @@ def merge(out_dir: str | Path, allow_incomplete: bool = False, contact_sheet_n: 
             ``allow_incomplete``; their images then stay the source's).
     """
     out_dir = Path(out_dir)
+    with OutputLock(out_dir, "merge"):
+        return _merge_locked(out_dir, allow_incomplete, contact_sheet_n, echo)
+
+
+def _merge_locked(out_dir: Path, allow_incomplete: bool, contact_sheet_n: int, echo: Callable[[str], None]) -> dict:
     config = load_config(out_dir)
     if config is None:
         raise InputError(f"{out_dir}: no batch_config.json; run 'streetaug batch --shard I/N --out {out_dir}' first")

@@ -99,8 +99,9 @@ def process_sample(config: BatchConfig, out_dir: str, token: str, cameras: list[
 
     Returns one log row per camera (``status`` ok / skipped / failed; with ``dry_run`` planned /
     no_placement), with the sample's wall and CPU seconds shared evenly by its cameras (``seconds``,
-    ``cpu_s``). A failure anywhere fails the whole sample (all its cameras), so a sample's cameras
-    always show the same inserted objects; with ``fail_fast`` the error is raised instead.
+    ``cpu_s``). A camera whose image cannot be read fails alone (the others are augmented without it);
+    any other failure fails the whole sample (all its cameras), so a sample's cameras always show the same
+    inserted objects; with ``fail_fast`` the error is raised instead.
     """
     tune_malloc()  # in every kind of worker (inline, local process, Dask), before the heavy allocations
     # Deferred: the pipeline loads torch (the learned sky model); the driver imports this module only to
@@ -110,7 +111,7 @@ def process_sample(config: BatchConfig, out_dir: str, token: str, cameras: list[
     t0, cpu0 = time.perf_counter(), time.process_time()
     try:
         rows = augment_sample(dataset_reader(config).with_tables(tables), config, Path(out_dir), token, cameras,
-                              dry_run)
+                              dry_run, fail_fast)
     except Exception as e:  # noqa: BLE001 - one failing sample is logged and the batch goes on
         if fail_fast:
             raise

@@ -4,6 +4,7 @@ labels -- and the log rows that describe them."""
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -15,7 +16,8 @@ from streetaug.placement.place import Placement
 
 from ..core import write_bytes_atomic, write_image_rgb, write_json_atomic
 from ..pipeline import SampleInsertResult, SamplePlacement, insert_placements_into_sweep, labels_document
-from .layout import LIDARSEG_FOLDER
+from .layout import LIDARSEG_FOLDER, labels_file, output_file
+from .log import file_check
 from .row import LidarEntry, LoggedLighting, LoggedObject, LogRow
 
 
@@ -45,7 +47,7 @@ def write_lidar(out_dir: Path, reader: NuScenesReader, sample: Sample, result: S
                                           result.placements, result.assets, sample.boxes, class_index)
     before = {token: int(reader.get("sample_annotation", token).get("num_lidar_pts", n))
               for token, n in placed.lost_pts.items()}
-    file = f"samples/{Path(sd['filename']).parent.name}/{source.name}"
+    file = output_file(sd["filename"], reader.sensor_of(sd).get("channel", "LIDAR_TOP"), sd["token"])
     lidarseg_file = None if placed.sweep.labels is None else f"{LIDARSEG_FOLDER}/{version}/{seg_path.name}"
     write_bytes_atomic(out_dir / file, placed.sweep.points.astype("<f4").tobytes())
     if lidarseg_file is not None:
@@ -65,11 +67,12 @@ def logged_objects(result: SampleInsertResult, camera: str, lidar: LidarEntry | 
 
 
 def write_camera(out_dir: Path, sample: Sample, camera: str, result: SampleInsertResult, shared_s: dict[str, float],
-                 lidar: LidarEntry | None = None) -> LogRow:
+                 lidar: LidarEntry | None = None, image_rel: str | None = None) -> LogRow:
     """Write one camera's image + labels (when changed) and return its log row (with the sample's LiDAR entry).
 
     Args:
         shared_s: the sample's shared stages (``load``, ``lidar``), seconds per camera.
+        image_rel: the image's output path (:func:`~.layout.output_file` of its source filename).
     """
     files = tuple(lidar.files) if lidar is not None else ()
     if camera not in result.views:
@@ -85,9 +88,8 @@ def write_camera(out_dir: Path, sample: Sample, camera: str, result: SampleInser
     if np.array_equal(r.image, view.image):
         return row
     t = time.perf_counter()
-    name = Path(view.image_path).name
-    image_rel = f"samples/{camera}/{name}"
-    labels_rel = f"labels/{camera}/{Path(name).stem}.json"
+    image_rel = image_rel or f"samples/{camera}/{Path(view.image_path).name}"
+    labels_rel = labels_file(image_rel)
     write_image_rgb(out_dir / image_rel, r.image)
     doc = labels_document(r, image_rel)
     doc.update(sample_token=sample.token, sample_data_token=view.sample_data_token, camera=camera)
@@ -96,6 +98,16 @@ def write_camera(out_dir: Path, sample: Sample, camera: str, result: SampleInser
     return LogRow(sample.token, camera, "ok", "", timing_s=timing, files=(image_rel, labels_rel, *files),
                   image=image_rel, sample_data_token=view.sample_data_token, objects=row.objects, lidar=lidar,
                   lighting=lighting, n_objects_visible=len(r.objects))
+
+
+def with_file_checks(out_dir: Path, rows: list[LogRow]) -> list[LogRow]:
+    """The rows with the size and sha256 of each file they wrote (each file hashed once)."""
+    checks: dict[str, dict] = {}
+    for row in rows:
+        for f in row.files:
+            if f not in checks:
+                checks[f] = file_check(out_dir / f)
+    return [replace(r, file_checks={f: checks[f] for f in r.files}) if r.files else r for r in rows]
 
 
 def plan_rows(token: str, cameras: list[str], placed: SamplePlacement) -> list[LogRow]:
