@@ -10,7 +10,10 @@ from streetaug.augment.batch import BatchConfig, RunOptions, default_workers, fo
 from streetaug.augment.batch import parse_shard, run_batch
 from streetaug.datasets.bundled import BUNDLED_VERSION, bundled_dataroot
 
-from .common import LEVEL_HELP, LIGHT_LEVELS, asset_options, render_options, runtime_errors
+from streetaug.augment.batch.layout import LOG_FILE, PLAN_FILE, shard_dir
+
+from .common import (LEVEL_HELP, LIGHT_LEVELS, YAW_SIGMA_RANGE, asset_options, exit_if_failed, limit_options,
+                     render_options, runtime_errors)
 
 
 def _dataroot(dataroot: Path | None, version: str | None) -> tuple[str, str]:
@@ -34,8 +37,8 @@ def _dataroot(dataroot: Path | None, version: str | None) -> tuple[str, str]:
 @click.option("--limit", type=click.IntRange(min=1), help="At most this many samples (the first, in scene order).")
 @click.option("--n-objects", type=click.IntRange(1, 8), default=1, show_default=True,
               help="Objects placed in each camera's view.")
-@click.option("--yaw-sigma", type=float, default=15.0, show_default=True,
-              help="Yaw noise (deg) around the ego heading: 15 augmentation (paper), 3 realistic.")
+@click.option("--yaw-sigma", type=YAW_SIGMA_RANGE, default=15.0, show_default=True,
+              help="Yaw noise (deg, 0-180) around the ego heading: 15 augmentation (paper), 3 realistic.")
 @asset_options
 @render_options
 @click.option("--level", type=click.Choice(LIGHT_LEVELS), default="auto", show_default=True, help=LEVEL_HELP)
@@ -53,6 +56,7 @@ def _dataroot(dataroot: Path | None, version: str | None) -> tuple[str, str]:
 @click.option("--fail-fast", is_flag=True, help="Stop at the first failing sample (with --debug: its traceback).")
 @click.option("--no-progress", is_flag=True, help="No progress bar.")
 @click.option("--debug", is_flag=True, help="Show tracebacks.")
+@limit_options
 @runtime_errors
 def batch(dataroot, version, out, cameras, limit, n_objects, yaw_sigma, asset, assets_dir, asset_front, asset_length,
           quality, seed, ev, match_camera, level, workers, scheduler, dask_local, shard, dry_run, contact_sheet, fail_fast,
@@ -66,13 +70,19 @@ def batch(dataroot, version, out, cameras, limit, n_objects, yaw_sigma, asset, a
       streetaug batch --dataroot /data/nuscenes --version v1.0-trainval --out /shared/aug \\
           --shard $SLURM_ARRAY_TASK_ID/64 --no-progress      # one job of an array, then:
       streetaug merge --out /shared/aug
+
+    \b
+    Exit codes: 0 every image done (ok or skipped); 3 the batch finished but some or
+    all images failed ("N of M images failed; see OUT/augment_log.jsonl"); 1 bad input
+    (nothing augmented: e.g. --out inside the source, a broken asset, another run
+    writing into --out); 2 bad arguments.
     """
     if scheduler and dask_local:
         raise click.UsageError("give --scheduler ADDRESS or --dask-local N, not both")
     if dry_run and shard:
         raise click.UsageError("--dry-run plans the whole dataset; drop --shard")
     root, version = _dataroot(dataroot, version)
-    names = tuple(c.strip() for c in cameras.split(",") if c.strip())
+    names = tuple(dict.fromkeys(c.strip() for c in cameras.split(",") if c.strip()))  # duplicates once
     config = BatchConfig(
         dataroot=root, version=version, cameras=() if names in ((), ("all",)) else names, limit=limit, seed=seed,
         quality=quality, level=level, ev=ev, match_camera=match_camera, n_objects=n_objects, yaw_sigma_deg=yaw_sigma,
@@ -93,6 +103,8 @@ def batch(dataroot, version, out, cameras, limit, n_objects, yaw_sigma, asset, a
     else:
         click.echo(f"  dataset: NuScenes(version='{version}', dataroot='{out}')"
                    + (f"; look: {out}/contact_sheet.png" if summary.get("outputs", {}).get("contact_sheet") else ""))
+    log = out / PLAN_FILE if dry_run else (shard_dir(out, run.shard) if run.shard else out) / LOG_FILE
+    exit_if_failed(summary, log)
 
 
 @click.command("merge")
@@ -107,9 +119,12 @@ def batch(dataroot, version, out, cameras, limit, n_objects, yaw_sigma, asset, a
 def merge(out, allow_incomplete, contact_sheet, debug):
     """Join the shards of 'streetaug batch --shard I/N' into one nuScenes dataset (log, tables, summary).
 
+    Exit codes as batch: 0 nothing failed, 3 some images failed, 1 bad input.
+
     \b
     Example:
       streetaug merge --out /shared/aug
     """
     summary = merge_shards(out, allow_incomplete, contact_sheet, echo=lambda msg: click.echo(msg, err=True))
     click.echo(format_summary(summary))
+    exit_if_failed(summary, out / LOG_FILE)

@@ -1,13 +1,17 @@
 """Options, parsing and error handling shared by the ``streetaug`` commands.
 
-Exit codes: 0 success, 2 bad arguments (click usage errors), 1 runtime errors (one line on stderr;
-the traceback only with ``--debug``).
+Exit codes: 0 success, 1 bad input or runtime errors (one line on stderr; the traceback only with
+``--debug``), 2 bad arguments (click usage errors: also non-finite or absurd numbers), 3 a batch finished
+but some images failed (``summary.json`` counts them; the log says why).
 """
 
 from __future__ import annotations
 
 import functools
+import math
+import os
 import sys
+from dataclasses import fields
 import traceback
 from pathlib import Path
 from typing import Callable
@@ -16,6 +20,7 @@ import click
 import numpy as np
 
 from streetaug.augment.core import intrinsics_from_fov
+from streetaug.augment.core.limits import ResourceLimits
 from streetaug.datasets.bundled import BUNDLED_VERSION, bundled_dataroot
 from streetaug.datasets.nuscenes import NuScenesReader
 from streetaug.datasets.sample import CameraView, Sample
@@ -28,7 +33,15 @@ LEVEL_HELP = ("Lighting level: L0 constant dome (the no-light baseline), L1 sun 
               "predicted error is within 0.05 of the best (choice and reason in lighting.json).")
 
 
-def parse_floats(value: str | None, n: int, name: str) -> list[float] | None:
+EXIT_SOME_FAILED = 3  # a batch finished but some images failed
+MAX_POSITION_M = 1e4  # |X|, |Y|, |Z| of --at / --pose-camera
+MAX_YAW_DEG = 720.0
+MAX_PIXELS_PARAM = 1e6  # fx, fy, |cx|, |cy| of --intrinsics
+
+
+def parse_floats(value: str | None, n: int, name: str,
+                 bounds: list[float] | None = None) -> list[float] | None:
+    """``"a,b,c"`` -> n finite floats, each ``|x| <= bounds[i]`` when given (a usage error naming ``name``)."""
     if value is None:
         return None
     try:
@@ -37,7 +50,53 @@ def parse_floats(value: str | None, n: int, name: str) -> list[float] | None:
         raise click.BadParameter(f"expected {n} comma-separated numbers, got {value!r}", param_hint=name) from None
     if len(parts) != n or not all(np.isfinite(parts)):
         raise click.BadParameter(f"expected {n} finite comma-separated numbers, got {value!r}", param_hint=name)
+    for i, (x, bound) in enumerate(zip(parts, bounds or ())):
+        if abs(x) > bound:
+            raise click.BadParameter(f"value {i + 1} ({x:g}) is out of range: expected |x| <= {bound:g}",
+                                     param_hint=name)
     return parts
+
+
+def float_list(n: int, bounds: list[float]) -> Callable:
+    """A click callback checking a comma-separated option at parse time (:func:`parse_floats`); the value
+    stays the text, parsed again where it is used."""
+
+    def check(ctx: click.Context, param: click.Parameter, value: str | None) -> str | None:
+        parse_floats(value, n, param.opts[0], bounds)
+        return value
+
+    return check
+
+
+POSITION_CHECK = float_list(3, [MAX_POSITION_M] * 3)
+POSE_CHECK = float_list(4, [MAX_POSITION_M] * 3 + [MAX_YAW_DEG])
+INTRINSICS_CHECK = float_list(4, [MAX_PIXELS_PARAM] * 4)
+
+
+class FiniteFloat(click.FloatRange):
+    """A float option within a range, refusing NaN (which ``click.FloatRange`` lets through) and infinities."""
+
+    name = "float"
+
+    def convert(self, value, param, ctx):
+        rv = super().convert(value, param, ctx)
+        if not math.isfinite(rv):
+            self.fail(f"{value!r} is not a finite number", param, ctx)
+        return rv
+
+
+EV_RANGE = FiniteFloat(-20.0, 20.0)
+YAW_SIGMA_RANGE = FiniteFloat(0.0, 180.0)
+ASSET_LENGTH_RANGE = FiniteFloat(0.0, 100.0, min_open=True)
+FOV_RANGE = FiniteFloat(0.0, 180.0, min_open=True, max_open=True)
+
+
+def exit_if_failed(summary: dict, log: Path) -> None:
+    """Exit 3 with ``N of M images failed; see LOG`` when any image of the batch failed."""
+    failed = int(summary.get("counts", {}).get("failed", 0))
+    if failed:
+        click.echo(f"{failed} of {summary.get('images', failed)} images failed; see {log}", err=True)
+        sys.exit(EXIT_SOME_FAILED)
 
 
 def runtime_errors(func: Callable) -> Callable:
@@ -108,7 +167,7 @@ def camera_view(sample: Sample, camera: str) -> CameraView:
 
 def parse_intrinsics(intrinsics: str) -> np.ndarray:
     """``--intrinsics fx,fy,cx,cy`` -> K (3, 3) (pixel centres at integers)."""
-    fx, fy, cx, cy = parse_floats(intrinsics, 4, "--intrinsics")
+    fx, fy, cx, cy = parse_floats(intrinsics, 4, "--intrinsics", [MAX_PIXELS_PARAM] * 4)
     if fx <= 0 or fy <= 0:
         raise click.BadParameter("focal lengths must be positive", param_hint="--intrinsics")
     return np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
@@ -130,7 +189,8 @@ def asset_options(func: Callable) -> Callable:
         click.option("--asset-front", default="+z", show_default=True,
                      type=click.Choice(["+x", "-x", "+y", "-y", "+z", "-z"]),
                      help="Axis the asset's front points along (the Kenney cars: -z)."),
-        click.option("--asset-length", type=float, help="Rescale the asset to this length in metres."),
+        click.option("--asset-length", type=ASSET_LENGTH_RANGE,
+                     help="Rescale the asset to this length in metres (0 < L <= 100)."),
     ]
     for option in reversed(options):
         func = option(func)
@@ -142,10 +202,40 @@ def render_options(func: Callable) -> Callable:
         click.option("--quality", type=click.Choice(["draft", "default", "high"]), default="default",
                      show_default=True, help="Render preset."),
         click.option("--seed", type=int, default=0, show_default=True, help="Random seed (placement, asset, sampling)."),
-        click.option("--ev", type=float, default=0.0, show_default=True, help="Exposure of the camera response."),
+        click.option("--ev", type=EV_RANGE, default=0.0, show_default=True,
+                     help="Exposure of the camera response (stops, -20 to 20)."),
         click.option("--match-camera", is_flag=True,
                      help="Blur the car and add noise like the photo around it (estimated there; +20-60 ms)."),
     ]
     for option in reversed(options):
         func = option(func)
+    return func
+
+
+# ----------------------------------------------------------------------------- resource limits
+
+LIMIT_HELP = {
+    "max_image_pixels": "Largest input image, depth or env map (width x height pixels); larger ones are refused.",
+    "max_texture_side": "Textures larger than this (pixels, either side) are downscaled while decoding.",
+    "max_texture_pixels": "Largest texture (pixels, before downscaling); larger ones are refused.",
+    "max_triangles": "Most triangles of one asset; more are refused.",
+    "max_memory_mb": "Largest estimated peak memory of a stage (MiB); larger inputs are refused before it runs.",
+}
+
+
+def _set_limit(ctx: click.Context, param: click.Parameter, value: int | None) -> None:
+    """Put a ``--max-*`` option into the environment (``STREETAUG_MAX_*``), read by every process and worker."""
+    if value is not None and ctx.get_parameter_source(param.name) == click.core.ParameterSource.COMMANDLINE:
+        os.environ[param.envvar] = str(value)
+
+
+def limit_options(func: Callable) -> Callable:
+    """``--max-image-pixels``, ``--max-texture-side``, ``--max-texture-pixels``, ``--max-triangles``,
+    ``--max-memory-mb`` (defaults: :class:`ResourceLimits`; each also read from ``STREETAUG_MAX_*``)."""
+    defaults = ResourceLimits()
+    for f in reversed(fields(ResourceLimits)):
+        func = click.option(
+            "--" + f.name.replace("_", "-"), f.name, type=click.IntRange(min=1), envvar="STREETAUG_" + f.name.upper(),
+            show_envvar=True, expose_value=False, callback=_set_limit, metavar="N",
+            help=f"{LIMIT_HELP.get(f.name, f.name)} [default: {getattr(defaults, f.name)}]")(func)
     return func

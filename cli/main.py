@@ -1,7 +1,7 @@
 """The ``streetaug`` command line: a thin shell over the library API.
 
-Exit codes: 0 success, 2 bad arguments (click usage errors), 1 runtime errors (one line on stderr;
-the traceback only with ``--debug``).
+Exit codes: 0 success, 1 bad input or runtime errors (one line on stderr; the traceback only with
+``--debug``), 2 bad arguments (click usage errors), 3 a batch finished but some images failed.
 """
 
 from __future__ import annotations
@@ -11,15 +11,23 @@ from pathlib import Path
 import click
 import numpy as np
 
+from streetaug.augment.core.paths import refuse_output_inside
+
 from .batch import batch, merge
 from .bench import bench
 from .common import (
+    FOV_RANGE,
+    INTRINSICS_CHECK,
     LEVEL_HELP,
     LIGHT_LEVELS,
+    POSE_CHECK,
+    POSITION_CHECK,
+    YAW_SIGMA_RANGE,
     asset_options,
     camera_view,
     dataset_options,
     intrinsics_option,
+    limit_options,
     open_dataset,
     parse_floats,
     parse_intrinsics,
@@ -41,6 +49,12 @@ def main() -> None:
       streetaug insert --scene sample-sunny --out out/sunny
       streetaug predict-light --scene sample-lowsun --out out/light
       streetaug batch --out out/dataset
+
+    \b
+    Exit codes: 0 success; 1 bad input or a runtime error (one line on stderr, the
+    traceback with --debug); 2 bad arguments (also non-finite or out-of-range numbers);
+    3 a batch finished but some images failed (counted in summary.json, reasons in
+    OUT/augment_log.jsonl).
     """
 
 
@@ -50,13 +64,14 @@ def main() -> None:
 @main.command("predict-light")
 @dataset_options
 @click.option("--image", type=click.Path(dir_okay=False, path_type=Path), help="A single image (no metadata).")
-@click.option("--fov-deg", type=float, help="Horizontal field of view of --image, degrees.")
-@click.option("--intrinsics", help="fx,fy,cx,cy of --image (pixel centres at integers).")
-@click.option("--at", "at", help="X,Y,Z (camera frame, metres): point of the local environment map "
-              "(default: the ground point 15 m straight ahead).")
+@click.option("--fov-deg", type=FOV_RANGE, help="Horizontal field of view of --image, degrees (0-180).")
+@click.option("--intrinsics", callback=INTRINSICS_CHECK, help="fx,fy,cx,cy of --image (pixel centres at integers).")
+@click.option("--at", "at", callback=POSITION_CHECK, help="X,Y,Z (camera frame, metres): point of the local "
+              "environment map (default: the ground point 15 m straight ahead).")
 @click.option("--level", type=click.Choice(LIGHT_LEVELS), default="auto", show_default=True, help=LEVEL_HELP)
 @click.option("--out", required=True, type=click.Path(file_okay=False, path_type=Path), help="Output folder.")
 @click.option("--debug", is_flag=True, help="Show tracebacks.")
+@limit_options
 @runtime_errors
 def predict_light(dataroot, version, scene, sample_token, camera, image, fov_deg, intrinsics, at, level, out, debug):
     """Estimate the scene's HDR lighting; write lighting.json, envmap_camera.exr and preview.png.
@@ -106,17 +121,19 @@ def predict_light(dataroot, version, scene, sample_token, camera, image, fov_deg
 @render_options
 @click.option("--level", type=click.Choice(LIGHT_LEVELS), default="auto", show_default=True, help=LEVEL_HELP)
 @click.option("--n-objects", type=click.IntRange(1, 8), default=1, show_default=True, help="Objects per image.")
-@click.option("--yaw-sigma", type=float, default=3.0, show_default=True,
-              help="Yaw noise (deg) around the ego heading: 3 realistic, 15 augmentation.")
+@click.option("--yaw-sigma", type=YAW_SIGMA_RANGE, default=3.0, show_default=True,
+              help="Yaw noise (deg, 0-180) around the ego heading: 3 realistic, 15 augmentation.")
 @click.option("--image", type=click.Path(dir_okay=False, path_type=Path), help="Image form: the input image.")
-@click.option("--intrinsics", help="Image form: fx,fy,cx,cy.")
+@click.option("--intrinsics", callback=INTRINSICS_CHECK, help="Image form: fx,fy,cx,cy.")
 @click.option("--depth", type=click.Path(dir_okay=False, path_type=Path), help="Image form: metric depth (.exr|.npy).")
 @click.option("--envmap", type=click.Path(dir_okay=False, path_type=Path), help="Image form: camera-frame env map (.exr).")
-@click.option("--pose-camera", help="Image form: X,Y,Z,YAW_DEG (box bottom centre, camera frame).")
+@click.option("--pose-camera", callback=POSE_CHECK,
+              help="Image form: X,Y,Z,YAW_DEG (box bottom centre, camera frame; |X|, |Y|, |Z| <= 10 km).")
 @click.option("--out", required=True, type=click.Path(file_okay=False, path_type=Path), help="Output folder.")
 @click.option("--explain", is_flag=True, help="Dataset form: also write placement_bev.png (candidates and the "
               "rules that rejected them, over the map, LiDAR and boxes).")
 @click.option("--debug", is_flag=True, help="Also write mask.png and shadow.exr; show tracebacks.")
+@limit_options
 @runtime_errors
 def insert(dataroot, version, scene, sample_token, camera, asset, assets_dir, asset_front, asset_length,
            quality, seed, ev, match_camera, level, n_objects, yaw_sigma, image, intrinsics, depth, envmap, pose_camera, out, explain,
@@ -134,7 +151,8 @@ def insert(dataroot, version, scene, sample_token, camera, asset, assets_dir, as
     """
     # Deferred: the pipeline loads torch (the learned sky model), the assets scipy; `streetaug --help` must not.
     from streetaug.augment.assets.select import load_asset_options, select_assets
-    from streetaug.augment.pipeline import InsertOptions, insert_image_to_files, insert_view_to_files, item_seed
+    from streetaug.augment.pipeline import (InsertOptions, check_image_input, insert_image_to_files,
+                                            insert_view_to_files, item_seed)
 
     options = InsertOptions(quality=quality, level=level, seed=seed, n_objects=n_objects, yaw_sigma_deg=yaw_sigma, ev=ev,
                             match_camera=match_camera)
@@ -143,6 +161,7 @@ def insert(dataroot, version, scene, sample_token, camera, asset, assets_dir, as
                                   ("--asset", asset), ("--pose-camera", pose_camera)] if v is None]
         if missing:
             raise click.UsageError(f"the image form of insert also needs {', '.join(missing)}")
+        check_image_input(image, options)  # a huge image is refused at once, before the asset is loaded
         result, path = insert_image_to_files(image, parse_intrinsics(intrinsics), depth, envmap,
                                              load_asset_options(asset, asset_front, asset_length),
                                              parse_floats(pose_camera, 4, "--pose-camera"), options, out, debug)
@@ -150,6 +169,7 @@ def insert(dataroot, version, scene, sample_token, camera, asset, assets_dir, as
         if scene is None and sample_token is None:
             raise click.UsageError("give --scene NAME_OR_TOKEN (dataset form) or --image IMG (image form)")
         reader = open_dataset(dataroot, version)
+        refuse_output_inside(out, reader.dataroot)  # never write into the source (nor contain it)
         sample = reader.sample(resolve_sample(reader, scene, sample_token))
         view = camera_view(sample, camera)
         assets = select_assets(item_seed(seed, "asset", sample.token, camera), n_objects, asset, assets_dir,

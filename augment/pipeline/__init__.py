@@ -11,7 +11,7 @@ and :mod:`.results`.
 """
 
 from .context import SampleContext, ViewContext, scene_depth, scene_depth_for_view
-from .files import insert_image_to_files, insert_view_to_files, read_depth_map
+from .files import check_image_input, insert_image_to_files, insert_view_to_files, read_depth_map
 from .image import insert_into_image
 from .lidar import SampleSweep, SweepInsertion, insert_into_sweep, insert_placements_into_sweep
 from .options import InsertOptions, item_seed, render_settings
@@ -22,7 +22,7 @@ from .sample import insert_into_sample, insert_into_view, sample_lighting
 
 __all__ = [
     "InsertOptions", "InsertResult", "LABELS_SCHEMA", "SampleContext", "SampleInsertResult", "SamplePlacement",
-    "SampleSweep", "SweepInsertion", "ViewContext", "insert_image_to_files",
+    "SampleSweep", "SweepInsertion", "ViewContext", "check_image_input", "insert_image_to_files",
     "insert_into_image", "insert_into_sample", "insert_into_sweep", "insert_into_view", "insert_placements_into_sweep",
     "insert_view_to_files", "item_seed", "labels_document", "place_in_sample", "place_in_view", "read_depth_map",
     "render_settings", "sample_lighting", "scene_depth", "scene_depth_for_view", "write_insert_outputs",

@@ -13,7 +13,9 @@ from streetaug.placement.explain import draw_placement_bev
 
 from ..assets.asset import Asset
 from ..core import InputError, read_exr, read_image_rgb, write_image_rgb
+from ..core.limits import ResourceLimits, check_image_pixels, image_size_from_header
 from .image import insert_into_image
+from .memory import check_insert_memory
 from .options import InsertOptions
 from .outputs import write_insert_outputs
 from .results import InsertResult
@@ -47,6 +49,17 @@ def insert_view_to_files(sample: Sample, view: CameraView, assets: Sequence[Asse
     return result, write_insert_outputs(result, out_dir, Path(view.image_path).suffix, debug=debug)
 
 
+def check_image_input(image_path: Path, options: InsertOptions) -> None:
+    """Refuse, from its header alone, an input image above the size limit or whose insertion's memory estimate
+    is above the memory limit (``InputError`` with the size and the limit); unreadable headers pass (the
+    decoder names them)."""
+    size = image_size_from_header(image_path) if Path(image_path).is_file() else None
+    if size is not None:
+        limits = ResourceLimits.from_env()
+        check_image_pixels(size, str(image_path), limits)
+        check_insert_memory([size], options.quality, f"insert --image {image_path}", limits)
+
+
 def insert_image_to_files(image_path: Path, K: np.ndarray, depth_path: Path, envmap_path: Path, asset: Asset,
                           pose_camera: Sequence[float], options: InsertOptions, out_dir: Path,
                           debug: bool = False) -> tuple[InsertResult, Path]:
@@ -54,6 +67,7 @@ def insert_image_to_files(image_path: Path, K: np.ndarray, depth_path: Path, env
 
     ``K`` (3, 3) is the image's intrinsics. Returns the result and the written image's path.
     """
+    check_image_input(image_path, options)
     image = read_image_rgb(image_path)
     result = insert_into_image(image, K, read_depth_map(depth_path), read_exr(envmap_path), asset, pose_camera, options)
     return result, write_insert_outputs(result, out_dir, image_path.suffix, debug=debug)

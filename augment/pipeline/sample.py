@@ -15,6 +15,7 @@ from ..assets.asset import Asset
 from ..lighting.api import estimate_views_lighting
 from ..lighting.types import LightingEstimate
 from .context import SampleContext
+from .memory import check_insert_memory
 from .options import InsertOptions, render_settings
 from .place import SamplePlacement, place_in_sample
 from .results import InsertResult, SampleInsertResult
@@ -60,6 +61,7 @@ def insert_into_sample(
         assets_by_channel: channel -> the assets to place in that view (may be empty).
     """
     render_settings(options)  # a bad preset fails before any work
+    check_insert_memory([(v.width, v.height) for v in views], options.quality, f"sample {sample.token}")
     t_start = time.perf_counter()
     for view in views:  # file decoding is excluded from the contract's "total": decode first
         _ = view.image
