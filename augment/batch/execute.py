@@ -65,18 +65,6 @@ def _exit_without_teardown() -> None:
     os._exit(0)
 
 
-def die_with_parent() -> None:
-    """:func:`exit_with_parent`, also when the parent died while this process was still starting up (spawn
-    imports for seconds before the initializer runs; ``exit_with_parent`` alone takes the parent it then
-    sees, init, for the one to watch)."""
-    parent = multiprocessing.parent_process()
-    if parent is not None and parent.pid != os.getppid():
-        os._exit(1)
-    exit_with_parent()
-    if parent is not None and parent.pid != os.getppid():  # died between the check and the prctl
-        os._exit(1)
-
-
 def init_pool_worker() -> None:
     """Initializer of a worker process we start (local pool, Dask LocalCluster): it dies with its parent,
     malloc tuning, a fast exit.
@@ -89,7 +77,7 @@ def init_pool_worker() -> None:
     every run, while the driver waits for its workers.  The worker has sent its last result by the time
     ``atexit`` runs (multiprocessing flushes its queues before), so it skips the teardown with ``os._exit``.
     """
-    die_with_parent()
+    exit_with_parent()
     tune_malloc()
     atexit.register(_exit_without_teardown)
 

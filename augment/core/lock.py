@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import ctypes
 import json
+import multiprocessing
 import os
 import signal
 import socket
@@ -122,10 +123,16 @@ _PR_SET_PDEATHSIG = 1
 def exit_with_parent(poll_s: float = 1.0) -> None:
     """Make this (worker) process end when its parent dies (call it first thing in a worker initialiser).
 
-    On Linux the kernel sends SIGTERM on the parent's death (``prctl(PR_SET_PDEATHSIG)``); elsewhere, and as a
-    second guard, a daemon thread polls the parent pid and exits when it changes.
+    The parent is the process that started this one (``multiprocessing.parent_process()`` for a spawned
+    worker, else the current ``os.getppid()``): a spawned worker imports for seconds before its initialiser runs,
+    and if the parent died meanwhile, ``getppid()`` already names init. On Linux the kernel then sends SIGTERM on
+    the parent's death (``prctl(PR_SET_PDEATHSIG)``); elsewhere, and as a second guard, a daemon thread polls the
+    parent pid and exits when it changes.
     """
-    parent = os.getppid()
+    started_by = multiprocessing.parent_process()
+    parent = started_by.pid if started_by is not None else os.getppid()
+    if os.getppid() != parent:  # the parent is already gone
+        os._exit(1)
     try:
         libc = ctypes.CDLL(None, use_errno=True)
         libc.prctl(_PR_SET_PDEATHSIG, signal.SIGTERM, 0, 0, 0)

@@ -177,3 +177,41 @@ def test_a_linked_top_folder_of_the_root_is_followed(tmp_path):
         resolve_inside(root, "samples/CAM_FRONT/b.jpg", "w")
     with pytest.raises(InputError, match="climbs out"):
         resolve_inside(root, "samples/../../disk2/samples/CAM_FRONT/a.jpg", "w")
+
+
+def test_a_spawned_worker_whose_parent_died_while_it_started_exits(tmp_path):
+    """The parent dies before the worker's initialiser runs: getppid() then names init, yet it must exit."""
+    pid_file = tmp_path / "child.pid"
+    parent_code = f"""
+import multiprocessing, os, time
+
+def work(path):
+    open(path, "w").write(str(os.getpid()))
+    time.sleep(1.5)  # the parent is killed meanwhile
+    from streetaug.augment.core.lock import exit_with_parent
+    exit_with_parent(poll_s=0.1)
+    time.sleep(60)
+
+if __name__ == "__main__":
+    multiprocessing.get_context("spawn").Process(target=work, args=({str(pid_file)!r},)).start()
+    time.sleep(60)
+"""
+    script = tmp_path / "parent.py"
+    script.write_text(parent_code)
+    parent = subprocess.Popen([sys.executable, str(script)])
+    deadline = time.time() + 30
+    while not pid_file.exists() or not pid_file.read_text():
+        assert time.time() < deadline, "the child never started"
+        time.sleep(0.05)
+    child_pid = int(pid_file.read_text())
+    parent.kill()
+    parent.wait()
+    from streetaug.augment.core.lock import pid_alive
+
+    deadline = time.time() + 8
+    while pid_alive(child_pid):
+        stat = Path(f"/proc/{child_pid}/stat")
+        if stat.exists() and stat.read_text().rpartition(")")[2].split()[0] == "Z":
+            break
+        assert time.time() < deadline, "the worker outlived its parent"
+        time.sleep(0.05)
