@@ -11,7 +11,7 @@ from pathlib import Path
 import click
 import numpy as np
 
-from streetaug.augment.core.paths import refuse_output_inside
+from streetaug.augment.core.paths import refuse_output_inside, refuse_overwriting_inputs
 
 from .batch import batch, merge
 from .bench import bench
@@ -90,12 +90,14 @@ def predict_light(dataroot, version, scene, sample_token, camera, image, fov_deg
     if image is not None:
         if fov_deg is None and intrinsics is None:
             raise click.UsageError("--image needs --fov-deg F or --intrinsics fx,fy,cx,cy")
+        refuse_overwriting_inputs(out, ["lighting.json", "envmap_camera.exr", "preview.png"], {"--image": image})
         rgb = read_image_rgb(image)
         K = intrinsics_option(intrinsics, fov_deg, rgb.shape[1], rgb.shape[0])
         estimate = estimate_lighting_from_image(rgb, K, level=level)
         query = at_cam or [0.0, 1.5, 15.0]
     else:
         reader = open_dataset(dataroot, version)
+        refuse_output_inside(out, reader.dataroot)  # never write into the source (nor contain it)
         sample = reader.sample(resolve_sample(reader, scene, sample_token))
         view = camera_view(sample, camera)
         rgb = view.image
@@ -162,6 +164,8 @@ def insert(dataroot, version, scene, sample_token, camera, asset, assets_dir, as
         if missing:
             raise click.UsageError(f"the image form of insert also needs {', '.join(missing)}")
         check_image_input(image, options)  # a huge image is refused at once, before the asset is loaded
+        refuse_overwriting_inputs(out, ["image.png", "image.jpg", "labels.json", "mask.png", "shadow.exr"],
+                                  {"--image": image, "--depth": depth, "--envmap": envmap, "--asset": asset})
         result, path = insert_image_to_files(image, parse_intrinsics(intrinsics), depth, envmap,
                                              load_asset_options(asset, asset_front, asset_length),
                                              parse_floats(pose_camera, 4, "--pose-camera"), options, out, debug)

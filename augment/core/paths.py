@@ -64,3 +64,18 @@ def refuse_output_inside(out: str | Path, source_root: str | Path, what: str = "
         raise InputError(f"--out {out} is inside {what} ({src_r}); write the outputs somewhere else")
     if src_r.is_relative_to(out_r):
         raise InputError(f"--out {out} contains {what} ({src_r}); write the outputs somewhere else")
+
+
+def refuse_overwriting_inputs(out: str | Path, output_names: list[str], inputs: dict[str, str | Path | None]) -> None:
+    """Raise if writing ``out/<name>`` for any of ``output_names`` would replace one of the ``inputs``.
+
+    Args:
+        out: the output folder.
+        output_names: the files the command writes into it (e.g. ``["image.png", "labels.json"]``).
+        inputs: option name -> input path (None entries are ignored), for the message.
+    """
+    targets = {(Path(out) / name).resolve(): name for name in output_names}
+    for option, path in inputs.items():
+        if path is not None and Path(path).resolve() in targets:
+            raise InputError(f"--out {out} would overwrite the input {option} {path} with its "
+                             f"{targets[Path(path).resolve()]}; write the outputs somewhere else")

@@ -258,3 +258,26 @@ class TestResume:
         result = run(case)
         assert result.exit_code == 0, result.output
         assert images[0].read_bytes() == whole
+
+
+class TestOutputsNeverReplaceInputs:
+    def test_predict_light_never_writes_into_the_source(self, tmp_path):
+        root = fc.copy_bundled(tmp_path / "data")
+        before = tree(root)
+        result = CliRunner().invoke(main, ["predict-light", "--dataroot", str(root), "--version", fc.VERSION,
+                                           "--scene", "sample-sunny", "--out", str(root / "samples")])
+        assert result.exit_code == 1
+        assert "inside the source dataset" in result.output
+        assert tree(root) == before
+
+    def test_the_image_form_never_overwrites_its_input_image(self, tmp_path):
+        case = fc.case_huge_image(tmp_path, 64, real=True)  # a small valid image with all the other inputs
+        image = tmp_path / "image.png"
+        (tmp_path / "big.png").rename(image)
+        argv = [str(image) if a.endswith("big.png") else a for a in case.argv]
+        argv[argv.index("--out") + 1] = str(tmp_path)
+        before = image.read_bytes()
+        result = CliRunner().invoke(main, argv)
+        assert result.exit_code == 1, result.output
+        assert "would overwrite the input --image" in result.output
+        assert image.read_bytes() == before
