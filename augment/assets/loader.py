@@ -137,18 +137,10 @@ def load_asset(
     if use_cache and key in asset_cache:
         return asset_cache[key]
 
-    if suffix in (".gltf", ".glb"):  # references, data URIs, texture sizes and triangles checked first
-        gltf = read_gltf_json(path)
-        check_gltf_references(path, gltf)
-        check_gltf_budget(path, gltf, limits)
-        parts = _load_gltf_parts(path, gltf, limits)
-    elif suffix == ".obj":
-        mtl = check_obj_references(path)
-        check_obj_budget(path, mtl, limits)
-        parts = _load_obj_parts(path, mtl, limits)
-    else:
-        check_ply_budget(path, limits)
-        parts = _load_ply_parts(path, limits)
+    try:
+        parts = _checked_parts(path, suffix, limits)
+    except (OSError, SyntaxError) as e:  # a texture the mesh library opened lazily fails to decode (truncated...)
+        raise InputError(f"{path}: could not decode a texture or part ({type(e).__name__}: {e})") from None
     if category is None:
         category = category_for_asset(path)
     check_triangles(sum(len(p.faces) for p in parts), str(path), limits)
@@ -178,6 +170,21 @@ class FilePart:
     normals: np.ndarray | None
     uv: np.ndarray | None
     material: Material
+
+
+def _checked_parts(path: Path, suffix: str, limits: ResourceLimits) -> list[FilePart]:
+    """The file's parts, after its references, data URIs, texture sizes and triangle counts are checked."""
+    if suffix in (".gltf", ".glb"):
+        gltf = read_gltf_json(path)
+        check_gltf_references(path, gltf)
+        check_gltf_budget(path, gltf, limits)
+        return _load_gltf_parts(path, gltf, limits)
+    if suffix == ".obj":
+        mtl = check_obj_references(path)
+        check_obj_budget(path, mtl, limits)
+        return _load_obj_parts(path, mtl, limits)
+    check_ply_budget(path, limits)
+    return _load_ply_parts(path, limits)
 
 
 def _trimesh_load(path: Path):

@@ -281,3 +281,9 @@ class TestOutputsNeverReplaceInputs:
         assert result.exit_code == 1, result.output
         assert "would overwrite the input --image" in result.output
         assert image.read_bytes() == before
+
+
+def test_a_truncated_texture_names_the_asset(tmp_path):
+    result = run(fc.case_texture_bomb(tmp_path, 9000))  # the header says 9000 x 9000, the data is cut short
+    assert result.exit_code == 1
+    assert "car.gltf" in result.output and "could not decode a texture" in result.output
