@@ -11,8 +11,8 @@ building a ``Sample`` parses no image it does not need.
 from __future__ import annotations
 
 import functools
-from dataclasses import dataclass, field
-from typing import Callable
+from dataclasses import dataclass, field, replace
+from typing import Any, Callable
 
 import numpy as np
 import shapely
@@ -109,6 +109,10 @@ class CameraView:
             return read_image_rgb(self.image_path)
         return self._load_image()
 
+    def with_image(self, image: np.ndarray) -> "CameraView":
+        """This view (same calibration and pose) showing ``image`` (H, W, 3) uint8 instead, e.g. a perturbed copy."""
+        return replace(self, _load_image=lambda: image)
+
     @property
     def T_global_from_cam(self) -> np.ndarray:
         return self.T_global_from_ego @ self.T_ego_from_cam
@@ -191,3 +195,11 @@ class Sample:
     @functools.cached_property
     def lidar(self) -> LidarSweep | None:
         return None if self._load_lidar is None else self._load_lidar()
+
+    def with_lidar(self, lidar: LidarSweep | None, **changes: Any) -> "Sample":
+        """This sample with ``lidar`` as its sweep (None: no LiDAR), and the other ``changes`` to its fields."""
+        return replace(self, _load_lidar=lambda: lidar, **changes)
+
+    def evolve(self, **changes: Any) -> "Sample":
+        """This sample with ``changes`` to its fields, sharing its LiDAR sweep (read once, by whichever asks first)."""
+        return replace(self, _load_lidar=lambda: self.lidar, **changes)

@@ -52,8 +52,7 @@ def camera_view() -> CameraView:
         T_ego_from_cam=T_EGO_FROM_CAM,
         T_global_from_ego=T_GLOBAL_FROM_EGO,
         timestamp_us=0,
-        _load_image=lambda: np.zeros((HEIGHT, WIDTH, 3), np.uint8),
-    )
+    ).with_image(np.zeros((HEIGHT, WIDTH, 3), np.uint8))
 
 
 def ground_grid_ego(spacing_m: float = 0.5, x_range=(-10.0, 60.0), y_half: float = 12.0) -> np.ndarray:
@@ -114,6 +113,5 @@ def make_sample(boxes=(), polygons="road", lidar: LidarSweep | None = None, lane
         cameras={"CAM_FRONT": view},
         boxes=tuple(boxes),
         drivable_area_global=polys,
-        _load_lidar=(lambda: lidar),
         lanes=lanes,
-    )
+    ).with_lidar(lidar)

@@ -58,7 +58,7 @@ def facing_a_wall(sample: Sample, view: CameraView, distance_m: float = 4.0) -> 
     """A textured wall ``distance_m`` ahead fills the image, and a LiDAR wall (32-beam-like spacing) matches it."""
     rng = np.random.default_rng(0)
     wall_image = np.clip(rng.normal(120, 20, (view.height, view.width, 3)), 0, 255).astype(np.uint8)
-    v = dataclasses.replace(view, _load_image=lambda: wall_image)
+    v = view.with_image(wall_image)
     lidar = sample.lidar
     if lidar is None:
         return with_camera(sample, v)
@@ -70,7 +70,7 @@ def facing_a_wall(sample: Sample, view: CameraView, distance_m: float = 4.0) -> 
         [lidar.labels, np.full(len(wall_cam), 28, lidar.labels.dtype)])  # 28 = static.manmade
     walled = dataclasses.replace(lidar, points_sensor=pts, intensity=np.zeros(len(pts), np.float32), labels=labels)
     s, v = with_camera(sample, v)
-    return dataclasses.replace(s, _load_lidar=lambda: walled), v
+    return s.with_lidar(walled), v
 
 
 def wet_road(sample: Sample, view: CameraView) -> tuple[Sample, CameraView]:
@@ -79,7 +79,7 @@ def wet_road(sample: Sample, view: CameraView) -> tuple[Sample, CameraView]:
     horizon = int(np.clip(view.K[1, 2], 1, view.height - 1))
     n = min(horizon, view.height - horizon)
     img[horizon:horizon + n] = (0.4 * img[horizon:horizon + n] + 0.6 * img[horizon - n:horizon][::-1]).astype(np.uint8)
-    return with_camera(sample, dataclasses.replace(view, _load_image=lambda: img))
+    return with_camera(sample, view.with_image(img))
 
 
 def sun_behind_camera(sample: Sample, view: CameraView, elevation_deg: float = 30.0) -> tuple[Sample, CameraView]:
@@ -113,12 +113,12 @@ def failure_cases(sample: Sample, view: CameraView) -> dict[str, tuple[Sample, C
         "sun_behind_camera": (*sun_behind_camera(sample, view), "sun 30 deg high behind the camera"),
         "facing_a_wall": (*facing_a_wall(sample, view), "a wall 4 m ahead fills the view (image and LiDAR)"),
         "wet_road": (*wet_road(sample, view), "the road mirrors the sky and buildings"),
-        "no_lidar": (dataclasses.replace(sample, _load_lidar=lambda: None), view, "no LiDAR sweep"),
+        "no_lidar": (sample.with_lidar(None), view, "no LiDAR sweep"),
         "no_map_no_lidarseg": (
-            dataclasses.replace(sample, drivable_area_global=None,
-                                _load_lidar=lambda: None if lidar is None else dataclasses.replace(lidar, labels=None)),
+            sample.with_lidar(None if lidar is None else dataclasses.replace(lidar, labels=None),
+                              drivable_area_global=None),
             view, "no map expansion and no lidarseg: LiDAR ground only"),
-        "nothing_to_place_on": (dataclasses.replace(sample, drivable_area_global=None, _load_lidar=lambda: None), view,
+        "nothing_to_place_on": (sample.with_lidar(None, drivable_area_global=None), view,
                                 "no map, no LiDAR: no road known"),
     }
 

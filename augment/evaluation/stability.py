@@ -60,7 +60,7 @@ class Family:
 
 def _with_image(sample: Sample, view: CameraView, image_fn: ImageFn) -> Perturbed:
     image = image_fn(view.image)
-    new_view = dataclasses.replace(view, _load_image=lambda: image)
+    new_view = view.with_image(image)
     return (*with_camera(sample, new_view), image_fn)
 
 
@@ -79,7 +79,7 @@ def _with_lidar(sample: Sample, view: CameraView,
         lidar, points_sensor=points, intensity=lidar.intensity[keep],
         labels=None if lidar.labels is None else lidar.labels[keep],
     )
-    return dataclasses.replace(sample, _load_lidar=lambda: new), view, _identity
+    return sample.with_lidar(new), view, _identity
 
 
 def _identity(image: np.ndarray) -> np.ndarray:

@@ -166,8 +166,8 @@ def image_only_view(image_rgb: np.ndarray, K: np.ndarray,
     H, W = image_rgb.shape[:2]
     T_ego_from_cam = make_transform(np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]]),
                                     [0.0, 0.0, camera_height_m])
-    return CameraView("IMAGE", "", "", np.asarray(K, dtype=np.float64), W, H, T_ego_from_cam, np.eye(4), 0,
-                      _load_image=lambda: image_rgb)
+    return CameraView("IMAGE", "", "", np.asarray(K, dtype=np.float64), W, H, T_ego_from_cam, np.eye(4),
+                      0).with_image(image_rgb)
 
 
 def estimate_lighting_from_image(image_rgb: np.ndarray, K: np.ndarray, level: str = "L1") -> LightingEstimate:

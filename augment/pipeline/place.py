@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import Sequence
 
 import numpy as np
@@ -25,8 +25,7 @@ def place_in_view(sample: Sample, view: CameraView, assets: Sequence[Asset], pla
     let placement compute the same. Each placement's ``asset_index`` indexes ``assets``.
     """
     if placed:  # earlier objects count as annotated vehicles (3 m clearance); LiDAR is shared, not re-read
-        sample = replace(sample, boxes=sample.boxes + tuple(p.box for p in placed),
-                         _load_lidar=lambda s=sample: s.lidar)
+        sample = sample.evolve(boxes=sample.boxes + tuple(p.box for p in placed))
     config = PlacementConfig(yaw_sigma_deg=options.yaw_sigma_deg, n_objects=len(assets))
     return place_objects(sample, view, assets, item_seed(options.seed, sample.token, view.channel), config,
                          depth_m=depth_m)

@@ -574,3 +574,16 @@ class TestDevkitParity:
         for geom, rec in zip(ours, nmap.drivable_area):
             theirs = shapely.union_all([nmap.extract_polygon(t) for t in rec["polygon_tokens"]])
             assert geom.symmetric_difference(theirs).area < 1e-6 * max(theirs.area, 1.0)
+
+
+def test_with_image_and_with_lidar_replace_only_what_they_say(tmp_path):
+    from placement_fixtures import camera_view, lidar_sweep, make_sample
+
+    view = camera_view()
+    other = np.full((view.height, view.width, 3), 7, np.uint8)
+    swapped = view.with_image(other)
+    assert swapped.image is other and swapped.K is view.K and view.image.max() == 0
+    sample = make_sample(lidar=lidar_sweep(np.array([[10.0, 0.0, 0.0], [12.0, 1.0, 0.5]])))
+    assert sample.lidar is not None and sample.with_lidar(None).lidar is None
+    evolved = sample.evolve(boxes=())
+    assert evolved.lidar is sample.lidar and evolved.boxes == ()

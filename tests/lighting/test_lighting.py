@@ -168,7 +168,7 @@ def _view(image: np.ndarray, timestamp_us: int, yaw_deg: float = 30.0) -> Camera
     K = intrinsics_from_fov(W_IMG, H_IMG, 70.0)
     T_global_from_ego = make_transform(yaw_to_quat(np.radians(yaw_deg)), [100.0, 200.0, 0.0])
     return CameraView("CAM_FRONT", "", "synthetic.png", K, W_IMG, H_IMG, T_EGO_FROM_CAM, T_global_from_ego,
-                      timestamp_us, _load_image=lambda: image)
+                      timestamp_us).with_image(image)
 
 
 def _render(view: CameraView, light, shadow_stripes: bool) -> np.ndarray:

@@ -190,7 +190,7 @@ def _wall_scene(timestamp_us: int):
     rad[(rays[:, 1] > 0.01) | on_wall] = 0.04
     image = hdr_to_ldr_uint8(rad.reshape(H_IMG, W_IMG, 3))
     view = CameraView("CAM_FRONT", "tok", "synthetic.png", K, W_IMG, H_IMG, T_EGO_FROM_CAM, T_GLOBAL_FROM_EGO,
-                      timestamp_us, _load_image=lambda: image)
+                      timestamp_us).with_image(image)
     to_cam = np.linalg.inv(T_EGO_FROM_CAM)
     shaded_cam = transform_points(to_cam, np.array([[*shaded_ego[:2], 0.6]]))[0]
     lit_cam = transform_points(to_cam, np.array([[*lit_ego, 0.6]]))[0]
