@@ -39,6 +39,11 @@ class FaultCase:
     kill_after_s: float | None = None  # SIGKILL the main process after this long
 
 
+def batch_argv(root: Path, out: Path) -> list[str]:
+    """``streetaug batch`` of a copied dataset on one worker, CAM_FRONT, draft quality."""
+    return ["batch", "--dataroot", str(root), "--version", VERSION, "--out", str(out), "--workers", "1", *FAST]
+
+
 def copy_bundled(root: Path) -> Path:
     """A private copy of the bundled dataset (tables, images, LiDAR, lidarseg, maps; no ground truth)."""
     shutil.copytree(BUNDLED, root, ignore=shutil.ignore_patterns("ground_truth", "README.md"))
@@ -124,7 +129,7 @@ def case_basename_collision(tmp: Path) -> FaultCase:
     edit_table(root, "sample_data", edit)
     out = tmp / "out"
     return FaultCase("basename-collision", "two CAM_FRONT images named same.jpg in sub0/ and sub1/",
-                     ["batch", "--dataroot", str(root), "--version", VERSION, "--out", str(out), "--workers", "1", *FAST],
+                     batch_argv(root, out),
                      out)
 
 
@@ -136,7 +141,7 @@ def case_filename_escapes_batch(tmp: Path) -> FaultCase:
     edit_table(root, "sample_data", lambda rows: first_camera_row(rows).update(filename="../private/secret_photo.jpg"))
     out = tmp / "out"
     return FaultCase("filename-escapes-batch", "sample_data.filename = ../private/secret_photo.jpg",
-                     ["batch", "--dataroot", str(root), "--version", VERSION, "--out", str(out), "--workers", "1", *FAST],
+                     batch_argv(root, out),
                      out, watch={"private": private})
 
 
@@ -198,7 +203,7 @@ def case_all_images_corrupt(tmp: Path) -> FaultCase:
     corrupt_images(root)
     out = tmp / "out"
     return FaultCase("all-images-corrupt", "every CAM_FRONT image corrupt",
-                     ["batch", "--dataroot", str(root), "--version", VERSION, "--out", str(out), "--workers", "1", *FAST],
+                     batch_argv(root, out),
                      out)
 
 
@@ -254,7 +259,7 @@ def case_lidar_nan(tmp: Path) -> FaultCase:
     points.tofile(lidar)
     out = tmp / "out"
     return FaultCase("lidar-nan", "NaN coordinates in a LIDAR_TOP file",
-                     ["batch", "--dataroot", str(root), "--version", VERSION, "--out", str(out), "--workers", "1", *FAST],
+                     batch_argv(root, out),
                      out)
 
 
@@ -263,7 +268,7 @@ def case_table_field(tmp: Path, name: str, table: str, edit: Callable[[list[dict
     edit_table(root, table, edit)
     out = tmp / "out"
     return FaultCase(f"table:{name}", name,
-                     ["batch", "--dataroot", str(root), "--version", VERSION, "--out", str(out), "--workers", "1", *FAST],
+                     batch_argv(root, out),
                      out)
 
 
@@ -304,5 +309,5 @@ def case_deep_map(tmp: Path) -> FaultCase:
         p.write_text("[" * 100_000 + "]" * 100_000)
     out = tmp / "out"
     return FaultCase("deep-map-json", "a 100k-deep map expansion JSON",
-                     ["batch", "--dataroot", str(root), "--version", VERSION, "--out", str(out), "--workers", "1", *FAST],
+                     batch_argv(root, out),
                      out)

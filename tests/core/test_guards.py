@@ -16,7 +16,7 @@ import pytest
 from streetaug.augment.core import InputError, read_image_rgb, read_json, write_bytes_atomic, write_image_rgb
 from streetaug.augment.core.limits import (ResourceLimits, check_triangles, image_size_from_bytes,
                                            image_size_from_header, texture_reduction)
-from streetaug.augment.core.lock import LOCK_NAME, OutputLock
+from streetaug.augment.core.lock import LOCK_NAME, OutputLock, pid_alive
 from streetaug.augment.core.paths import is_inside, refuse_output_inside, resolve_inside
 
 
@@ -142,7 +142,11 @@ time.sleep(60)
 '''])
 time.sleep(60)
 """
-    parent = subprocess.Popen([sys.executable, "-c", parent_code])
+    assert_child_dies_with_parent(subprocess.Popen([sys.executable, "-c", parent_code]), pid_file, within_s=5)
+
+
+def assert_child_dies_with_parent(parent: subprocess.Popen, pid_file: Path, within_s: float) -> None:
+    """Wait for the child to write its pid, SIGKILL ``parent``, and assert the child is gone within ``within_s``."""
     deadline = time.time() + 30
     while not pid_file.exists() or not pid_file.read_text():
         assert time.time() < deadline, "the child never started"
@@ -150,17 +154,12 @@ time.sleep(60)
     child_pid = int(pid_file.read_text())
     parent.kill()
     parent.wait()
-    deadline = time.time() + 5
-    from streetaug.augment.core.lock import pid_alive
-
+    deadline = time.time() + within_s
     while pid_alive(child_pid):
-        try:  # reap it if it became our zombie (it is not our child, so this normally raises)
-            os.waitpid(child_pid, os.WNOHANG)
-        except ChildProcessError:
-            pass
-        if Path(f"/proc/{child_pid}/stat").exists() and Path(f"/proc/{child_pid}/stat").read_text().split()[2] == "Z":
-            break
-        assert time.time() < deadline, "the worker outlived its parent by 5 s"
+        stat = Path(f"/proc/{child_pid}/stat")
+        if stat.exists() and stat.read_text().rpartition(")")[2].split()[0] == "Z":
+            break  # exited, waiting to be reaped by init
+        assert time.time() < deadline, f"the worker outlived its parent by {within_s} s"
         time.sleep(0.05)
 
 
@@ -198,20 +197,4 @@ if __name__ == "__main__":
 """
     script = tmp_path / "parent.py"
     script.write_text(parent_code)
-    parent = subprocess.Popen([sys.executable, str(script)])
-    deadline = time.time() + 30
-    while not pid_file.exists() or not pid_file.read_text():
-        assert time.time() < deadline, "the child never started"
-        time.sleep(0.05)
-    child_pid = int(pid_file.read_text())
-    parent.kill()
-    parent.wait()
-    from streetaug.augment.core.lock import pid_alive
-
-    deadline = time.time() + 8
-    while pid_alive(child_pid):
-        stat = Path(f"/proc/{child_pid}/stat")
-        if stat.exists() and stat.read_text().rpartition(")")[2].split()[0] == "Z":
-            break
-        assert time.time() < deadline, "the worker outlived its parent"
-        time.sleep(0.05)
+    assert_child_dies_with_parent(subprocess.Popen([sys.executable, str(script)]), pid_file, within_s=8)
