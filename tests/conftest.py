@@ -10,6 +10,7 @@ import importlib
 import os
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 REPO = Path(__file__).resolve().parents[1]
@@ -26,3 +27,21 @@ def devkit():
         if os.environ.get("STREETAUG_REQUIRE_DEVKIT") == "1":
             pytest.fail(f"nuscenes-devkit is required here (STREETAUG_REQUIRE_DEVKIT=1) but not importable: {e}")
         pytest.skip("nuscenes-devkit not installed (make test installs it)")
+
+
+def unit(v):
+    """``v`` as a float64 unit vector."""
+    v = np.asarray(v, dtype=np.float64)
+    return v / np.linalg.norm(v)
+
+
+@pytest.fixture(scope="session")
+def models():
+    """The shipped learned-sky networks, on one torch thread (as the benchmarks time them)."""
+    import torch  # deferred: only the learned-sky tests need it
+
+    from streetaug.augment.lighting.skynet.predict import get_models
+
+    torch.set_num_threads(1)
+    return get_models()
+

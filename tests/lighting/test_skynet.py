@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 import torch
 
-from conftest import HDRI, needs_hdri
+from conftest import HDRI, needs_hdri, unit
 from streetaug.augment.core import hdr_to_ldr, intrinsics_from_fov, luminance
 from streetaug.augment.core import InputError
 from streetaug.augment.lighting.skynet.dome import (
@@ -34,7 +34,6 @@ from streetaug.augment.lighting.skynet.predict import (
     SkyVector,
     decode_sky,
     encode_dome,
-    get_models,
     predict_sky,
     refine_sky,
     sky_to_light,
@@ -55,17 +54,6 @@ SAMPLES = Path(__file__).resolve().parents[2] / "examples" / "nuscenes-samples"
 
 class _Foreign:
     """An arbitrary class: unpickling it would import and run code, so weight files must not contain it."""
-
-
-def _unit(v):
-    v = np.asarray(v, dtype=np.float64)
-    return v / np.linalg.norm(v)
-
-
-@pytest.fixture(scope="module")
-def models():
-    torch.set_num_threads(1)
-    return get_models()
 
 
 def _held_in_skies(n: int = 12) -> list[np.ndarray]:
@@ -113,7 +101,7 @@ class TestDome:
         np.testing.assert_allclose(Rh @ R.T, [[c, s, 0], [-s, c, 0], [0, 0, 1]], atol=1e-9)
 
     def test_peak_of_a_splat_is_its_direction_even_across_the_seam(self):
-        for d in (_unit([1, 0.2, 0.5]), _unit([-1, -0.01, 0.3]), _unit([-1, 0.01, 0.05])):
+        for d in (unit([1, 0.2, 0.5]), unit([-1, -0.01, 0.3]), unit([-1, 0.01, 0.05])):
             dome = np.full((32, 128, 3), 0.2) + splat_direction(d, np.array([50.0, 50, 50]), 32, 128)
             assert angle_deg(find_peak(dome), d) < 0.3
             assert angle_deg(peak_centroid(dome), d) < 0.3
@@ -150,7 +138,7 @@ class TestSkyModel:
         errs = []
         for dome in _held_in_skies(6):
             f = encode_dome(dome, sky_model)
-            for new_dir in (f.direction, _unit([0.2, -0.9, 0.4]), _unit([-0.7, 0.3, 0.65])):
+            for new_dir in (f.direction, unit([0.2, -0.9, 0.4]), unit([-0.7, 0.3, 0.65])):
                 g = SkyVector(f.intensity_rgb, new_dir, f.latent)
                 decoded = decode_sky(g, sky_model)
                 errs.append(angle_deg(peak_centroid(decoded), new_dir))
@@ -300,7 +288,7 @@ class TestLightAndRefine:
 
     def test_refinement_fits_the_visible_sky(self, models):
         # an image of a known sky (camera pitched up: mostly sky), refined from another sky's vector
-        sky_true = SynthSky(_unit([0.6, 0.3, 0.5]), turbidity=2.5)
+        sky_true = SynthSky(unit([0.6, 0.3, 0.5]), turbidity=2.5)
         K = intrinsics_from_fov(160, 96, 90.0)
         R_wc = camera_from_angles(0.0, np.radians(30.0))
         u, v = np.meshgrid(np.arange(160), np.arange(96))
@@ -311,12 +299,12 @@ class TestLightAndRefine:
         image = np.clip(np.round(hdr_to_ldr(rad * k) * 255), 0, 255).astype(np.uint8)
         up_cam = R_wc.T @ [0, 0, 1]
         mask = (d[:, 2] > 0.05).reshape(96, 160)
-        start = encode_dome(D.expose_dome(SynthSky(_unit([-0.5, -0.5, 0.3]), turbidity=8.0, haze=0.6).dome(32, 128), None),
+        start = encode_dome(D.expose_dome(SynthSky(unit([-0.5, -0.5, 0.3]), turbidity=8.0, haze=0.6).dome(32, 128), None),
                             models[0])
         sun_cam = R_wc.T @ sky_true.sun_dir
         out = refine_sky(start, image, K, mask, up_cam, sun_cam, steps=20, models=models)
         R_h = heading_from_camera(up_cam)
-        np.testing.assert_allclose(out.direction, _unit(R_h @ sun_cam), atol=1e-6)  # the ephemeris direction is kept
+        np.testing.assert_allclose(out.direction, unit(R_h @ sun_cam), atol=1e-6)  # the ephemeris direction is kept
 
         def sky_error(f):
             dome = decode_sky(f, models[0])

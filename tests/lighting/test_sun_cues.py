@@ -195,13 +195,6 @@ def test_in_view_penalty_only_hits_bright_unclipped_pixels_in_front():
 # ----------------------------------------------------------------------------- predict_sky with the cues
 
 
-@pytest.fixture(scope="module")
-def models():
-    from streetaug.augment.lighting.skynet.predict import get_models
-
-    return get_models()
-
-
 def test_predict_reports_a_sun_in_view_precisely(models):
     from streetaug.augment.lighting.skynet.predict import predict_sky
 

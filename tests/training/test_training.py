@@ -13,10 +13,9 @@ import pytest
 import torch
 from click.testing import CliRunner
 
-from conftest import HDRI, needs_hdri
+from conftest import HDRI, needs_hdri, unit
 from streetaug.augment.lighting.skynet.inputs import view_rays
 from streetaug.augment.lighting.skynet.model import LightNet
-from streetaug.augment.lighting.skynet.predict import get_models
 from streetaug.augment.lighting.skynet.weights import load_light_model, load_sky_model
 from streetaug.augment.training import data as D
 from streetaug.augment.training.synth import SynthSky, random_sky, random_waves
@@ -30,17 +29,6 @@ from streetaug.augment.training.train import (
 )
 from streetaug.cli.main import main
 
-
-
-def unit(v):
-    v = np.asarray(v, dtype=np.float64)
-    return v / np.linalg.norm(v)
-
-
-@pytest.fixture(scope="module")
-def models():
-    torch.set_num_threads(1)
-    return get_models()
 
 
 class TestSynth:
