@@ -55,12 +55,23 @@ from .types import ENVMAP_HEIGHT, ENVMAP_WIDTH, LightingEstimate, ParametricFit,
 GROUND_ALBEDO = 0.15  # assumed road albedo (asphalt 0.1-0.2)
 DEFAULT_TURBIDITY = 3.0
 DEFAULT_CAMERA_HEIGHT_M = 1.5
-OBJECT_SHADOW_MIN_CONTRAST = 1.5  # an object's shadow at least this marked proves a visible sun
+# An object's predicted shadow at least this much darker than the road around it is a sun shadow: under a
+# diffuse sky the road next to an object loses at most about half its sky (ambient occlusion <= 2x; the foot of
+# an endless wall), times ~1.25 for the road's own patchiness; a visible sun at 30-70 deg elevation makes
+# 1 + E_sun / E_sky ~ 3.8-7 (clear) -- 2.5 is its visibility ~0.45-0.6.
+OBJECT_SHADOW_MIN_CONTRAST = 2.5
+# Sun shadows must be on at least this fraction of the usable objects: in sunshine a good part of the objects
+# on a street stand in the sun; under clouds a "shadow" that marked is a coincidence (a canopy's or shelter's
+# shade, a dark wet patch) on a few objects of many.
+OBJECT_SHADOW_MIN_FRACTION = 0.2
+# With at least this many usable objects and too few sun shadows on them, the objects say "no visible sun":
+# the ground's lit/shadow split is then read as albedo (grass, wet patches), not sun and shade.
+NO_SHADOW_MIN_OBJECTS = 3
 CAMERA_CLEAR_BLUE_RED = 1.35
 CLOUD_GRID = np.linspace(0.0, 1.0, 41)
 # Lit/shadow ground contrast above which a night timestamp contradicts the image (sun shadows).
 NIGHT_SUSPICIOUS_CONTRAST = 2.5
-CLOUD_SOURCE_RANK = ("object_shadows", "ground_contrast", "sky_colour", "night", "assumed")
+CLOUD_SOURCE_RANK = ("object_shadows", "no_object_shadows", "ground_contrast", "sky_colour", "night", "assumed")
 
 
 def up_rotation(up_cam: np.ndarray) -> np.ndarray:
@@ -163,16 +174,50 @@ def l1_evidence(work: PreparedImage, up_cam: np.ndarray, sun_dir_cam: np.ndarray
     return L1Evidence(e_sun, e_sky0, e_sky1, ground, sky, sky_clear_lum, sky_over_lum, cloud_sky, box_shadows)
 
 
+def object_shadow_verdict(per_object_contrast: Sequence[float]) -> tuple[str, int, int, float | None]:
+    """What the objects' predicted shadows say: ("sun" | "no_sun" | "unknown", usable objects, sun-shadowed
+    objects, median contrast of the sun-shadowed ones or None).
+
+    "sun": at least one object, and ``OBJECT_SHADOW_MIN_FRACTION`` of them, with a shadow at least
+    ``OBJECT_SHADOW_MIN_CONTRAST`` darker than the road around it; "no_sun": fewer than that among at least
+    ``NO_SHADOW_MIN_OBJECTS``; "unknown" otherwise (too few objects).
+    """
+    c = np.asarray(list(per_object_contrast), dtype=np.float64)
+    hard = c[c >= OBJECT_SHADOW_MIN_CONTRAST]
+    n, k = len(c), len(hard)
+    if k >= 1 and k >= OBJECT_SHADOW_MIN_FRACTION * n:
+        return "sun", n, k, float(np.median(hard))
+    if n >= NO_SHADOW_MIN_OBJECTS:
+        return "no_sun", n, k, None
+    return "unknown", n, k, None
+
+
+def _no_shadow_cloud(ev: L1Evidence, cloud_sky: float | None) -> float:
+    """Cloud cover when the objects show no sun shadows: the sky colour's, but at least the cover whose sun
+    would have drawn shadows of ``OBJECT_SHADOW_MIN_CONTRAST``; overcast (1) without a sky colour."""
+    if cloud_sky is None:
+        return 1.0
+    floor = cloud_from_contrast(OBJECT_SHADOW_MIN_CONTRAST, ev.e_sun, ev.e_sky0, ev.e_sky1)
+    return float(max(cloud_sky, floor))
+
+
 def cloud_from_evidence(ev: L1Evidence) -> tuple[float, str, str]:
     """Cloud cover from one image's evidence: (cloud, source, note); source ranks the evidence
-    (:data:`CLOUD_SOURCE_RANK`)."""
+    (:data:`CLOUD_SOURCE_RANK`). The objects' shadows (:func:`object_shadow_verdict`) decide first; when they
+    show none, the ground split is not read as sun and shade."""
     ground, sky, boxes = ev.ground, ev.sky, ev.box_shadows
     if ev.e_sun <= 0:
         return (1.0 if ev.cloud_sky is None else ev.cloud_sky), "night", "sun below the horizon"
-    if boxes is not None and boxes["contrast"] >= OBJECT_SHADOW_MIN_CONTRAST:
-        cloud = cloud_from_contrast(boxes["contrast"], ev.e_sun, ev.e_sky0, ev.e_sky1)
-        return cloud, "object_shadows", (f"sun visibility from the road in/out of {boxes['objects']} annotated "
-                                         f"objects' predicted shadows (contrast {boxes['contrast']:.2f})")
+    verdict, n, k, hard = object_shadow_verdict(boxes["per_object_contrast"] if boxes else [])
+    if verdict == "sun":
+        cloud = cloud_from_contrast(hard, ev.e_sun, ev.e_sky0, ev.e_sky1)
+        return cloud, "object_shadows", (f"sun visibility from the road in/out of the predicted shadows of {k} of "
+                                         f"{n} annotated objects (median contrast {hard:.2f})")
+    if verdict == "no_sun":
+        cloud = _no_shadow_cloud(ev, ev.cloud_sky)
+        how = f"sky colour (blue/red {sky['blue_red']:.2f})" if ev.cloud_sky is not None else "no sky colour"
+        return cloud, "no_object_shadows", (f"no sun shadow on {n - k} of {n} annotated objects: cloud cover "
+                                            f"{cloud:.2f} from {how}")
     if ground is not None and ground["bimodal"]:
         cloud = cloud_from_contrast(ground["contrast"], ev.e_sun, ev.e_sky0, ev.e_sky1)
         return cloud, "ground_contrast", f"sun visibility from ground lit/shadow contrast {ground['contrast']:.2f}"
@@ -182,20 +227,49 @@ def cloud_from_evidence(ev: L1Evidence) -> tuple[float, str, str]:
 
 
 def shared_cloud(inputs: Sequence[ViewInputs]) -> tuple[float | None, str | None, dict]:
-    """Cloud cover pooled over views: the median of the views with the best kind of evidence
-    -> (cloud or None, the note, {source: [[channel, cloud], ...]})."""
+    """Cloud cover pooled over the views of one moment -> (cloud or None, the note, {source: [[channel, cloud],
+    ...]} of the views' own decisions).
+
+    The annotated objects of all views are judged together (:func:`object_shadow_verdict`; an object seen by
+    several cameras counts once, with its strongest contrast): sun shadows on them give the cloud cover from
+    their median contrast; none on enough objects, the views' median sky colour (floored as in
+    :func:`cloud_from_evidence`). Otherwise the median of the views with the best-ranked own evidence.
+    """
     found: dict[str, list] = {}
+    objects: dict[str, float] = {}
+    skies: list[float] = []
+    ref_ev = None
     for vi in inputs:
         if vi.evidence is None:
             continue
-        cloud, source, _ = cloud_from_evidence(vi.evidence)
+        ev = vi.evidence
+        cloud, source, _ = cloud_from_evidence(ev)
         found.setdefault(source, []).append((vi.view.channel, cloud))
+        if ev.e_sun <= 0:
+            continue
+        ref_ev = ref_ev or ev
+        if ev.cloud_sky is not None:
+            skies.append(ev.cloud_sky)
+        boxes = ev.box_shadows or {}
+        for i, (token, c) in enumerate(zip(boxes.get("per_object_token", []), boxes.get("per_object_contrast", []))):
+            key = token or f"{vi.view.channel}:{i}"  # boxes without a token: one object per view and box
+            objects[key] = max(objects.get(key, 0.0), float(c))
+    record = {k: [list(x) for x in v] for k, v in found.items()}
+    if ref_ev is not None:
+        verdict, n, k, hard = object_shadow_verdict(list(objects.values()))
+        if verdict == "sun":
+            cloud = cloud_from_contrast(hard, ref_ev.e_sun, ref_ev.e_sky0, ref_ev.e_sky1)
+            return cloud, (f"cloud cover {cloud:.2f} from the predicted shadows of {k} of {n} annotated objects in "
+                           f"the views (median contrast {hard:.2f})"), record
+        if verdict == "no_sun":
+            cloud = _no_shadow_cloud(ref_ev, float(np.median(skies)) if skies else None)
+            return cloud, (f"cloud cover {cloud:.2f}: no sun shadow on {n - k} of {n} annotated objects in the "
+                           f"views; " + (f"sky colour of {len(skies)} views" if skies else "no sky colour")), record
     for source in CLOUD_SOURCE_RANK:
         if source in found:
             channels = [c for c, _ in found[source]]
             cloud = float(np.median([v for _, v in found[source]]))
-            return cloud, f"cloud cover {cloud:.2f} from {source.replace('_', ' ')} of {', '.join(channels)}", {
-                k: [list(x) for x in v] for k, v in found.items()}
+            return cloud, f"cloud cover {cloud:.2f} from {source.replace('_', ' ')} of {', '.join(channels)}", record
     return None, None, {}
 
 
@@ -231,13 +305,18 @@ def solve_l1(ev: L1Evidence, cloud: float | None = None,
     sc = _scales(ev, cloud)
     e_lit, sun_h, sky_h = sc.pop("e_lit"), sc["model_sun_horizontal"], sc["model_sky_horizontal"]
     scale_lit, scale_shadow, scale_sky = sc["scale_from_ground_lit"], sc["scale_from_ground_shadow"], sc["scale_from_sky"]
-    if boxes is not None and boxes["contrast"] >= OBJECT_SHADOW_MIN_CONTRAST and sun_h > 0.5 * sky_h:
-        scale = np.pi * boxes["lit"] / (GROUND_ALBEDO * e_lit)
-        notes.append("scale from the sunlit road next to the objects")
-    elif ground is not None and ground["bimodal"]:
+    lit_objects = [lit for c, lit in zip(boxes["per_object_contrast"], boxes["per_object_lit"])
+                   if c >= OBJECT_SHADOW_MIN_CONTRAST] if boxes is not None and "per_object_lit" in boxes else []
+    if lit_objects and sun_h > 0.5 * sky_h:
+        scale = np.pi * float(np.median(lit_objects)) / (GROUND_ALBEDO * e_lit)
+        notes.append("scale from the sunlit road next to the sun-shadowed objects")
+    elif ground is not None and ground["bimodal"] and sun_h > 0.5 * sky_h:
         scale = scale_lit
         notes.append("scale from the sunlit ground")
     elif ground is not None:
+        # the ground median (a bimodal ground without a visible sun is two albedos, not sun and shade)
+        scale_lit = np.pi * ground["median"] / (GROUND_ALBEDO * e_lit)
+        scale_shadow = np.pi * ground["median"] / (GROUND_ALBEDO * sky_h)
         scale = scale_lit
         if scale_sky is not None and sun_h > 0.5 * sky_h:
             if abs(np.log(scale_shadow / scale_sky)) < abs(np.log(scale_lit / scale_sky)):
