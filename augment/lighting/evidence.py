@@ -11,8 +11,7 @@ the camera frame.
 * **Sky** (:func:`sky_mask`, :func:`sky_evidence`): pixels at least 3 deg above the horizon, bright, smooth (low
   gradient), in regions touching the top of the image, not saturated; their median level and blue/red ratio.
 * **Object shadows** (:func:`box_shadow_evidence`): the road inside each annotated object's cast shadow (its box
-  projected along the sun's rays onto the ground under it) against a ring of road around it, as a whole and on
-  each of its three sides away from the object.
+  projected along the sun's rays onto the ground under it) against a ring of road around it.
 """
 
 from __future__ import annotations
@@ -21,7 +20,7 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
-from shapely.geometry import MultiPoint, Polygon
+from shapely.geometry import MultiPoint
 from shapely.ops import unary_union
 
 from ...datasets.sample import Box
@@ -36,10 +35,6 @@ SKY_SURFACE_MIN_DENSITY = 5e-3
 SKY_MIN_UNCLIPPED_FRACTION = 0.15
 SURFACE_MIN_RANGE_M = 2.0  # nearer returns (the ego car, the camera's own mount) say nothing about the sky
 SATURATED_LDR = 0.97
-# the sides of an object's cast shadow compared with it (degrees from the shadow's direction: beyond its tip,
-# left, right; the fourth side is the object itself), and the fewest ring pixels a side needs
-SHADOW_SIDES = (0.0, 90.0, -90.0)
-SIDE_MIN_PIXELS = 8
 
 
 @dataclass(frozen=True)
@@ -103,15 +98,12 @@ def box_shadow_evidence(work: PreparedImage, T_cam_from_global: np.ndarray, boxe
 
     Each box (4-40 m ahead, >= 1 m tall) casts its shadow on the ground plane under it (its corners projected
     along the sun's rays); the road inside that shadow and in a ring 0.7-2.5 m around it (outside every box's
-    shadow and image silhouette) is compared, over the whole ring and over its three sides away from the
-    object (beyond the shadow's tip, left and right of it, :data:`SHADOW_SIDES`; a side with fewer than
-    ``SIDE_MIN_PIXELS`` pixels is skipped). A real sun shadow is darker than the road on every side; a box
-    that merely stands at the edge of a canopy's or a building's shade is darker than one side only.
+    shadow and image silhouette) is compared.
 
     Returns None (sun below ~8 deg, no usable object) or, over the objects with >= 12 pixels in both:
-    ``objects`` (count), ``contrast`` and ``lit`` (the largest whole-ring lit/shadow luminance ratio and that
-    object's lit road median), per object ``per_object_contrast``, ``per_object_min_side`` (the smallest of
-    the whole-ring and side ratios), ``per_object_lit`` and ``per_object_token`` (the box's annotation token).
+    ``objects`` (count), ``contrast`` and ``lit`` (the largest lit/shadow luminance ratio and that object's
+    lit road median), and per object ``per_object_contrast``, ``per_object_lit`` and ``per_object_token`` (the
+    box's annotation token: an object seen by several cameras is one object).
     """
     if sun_dir_global[2] < np.sin(np.radians(8.0)) or not boxes:
         return None
@@ -138,10 +130,9 @@ def box_shadow_evidence(work: PreparedImage, T_cam_from_global: np.ndarray, boxe
     if not items:
         return None
     all_shadows = unary_union(shadows)
-    away = -sun[:2] / max(float(np.linalg.norm(sun[:2])), 1e-9)  # the shadows' direction on the ground
 
     free = (silhouettes == 0) & (lum_ldr < SATURATED_LDR)
-    ratios, lit_values, min_sides, tokens = [], [], [], []
+    ratios, lit_values, tokens = [], [], []
     for shadow, z0, token in items:
         in_shadow = _rasterise_ground(shadow, z0, T_cam_from_global, work.K, (h, w)) & free
         ring = shadow.buffer(2.5).difference(shadow.buffer(0.7)).difference(all_shadows)
@@ -152,32 +143,13 @@ def box_shadow_evidence(work: PreparedImage, T_cam_from_global: np.ndarray, boxe
             ratios.append(lit_med / shadow_med)
             lit_values.append(lit_med)
             tokens.append(token)
-            centre = np.array(shadow.centroid.coords[0])
-            sides = []
-            for angle in SHADOW_SIDES:
-                side = ring.intersection(_wedge(centre, away, angle))
-                px = _rasterise_ground(side, z0, T_cam_from_global, work.K, (h, w)) & lit
-                if px.sum() >= SIDE_MIN_PIXELS:
-                    sides.append(float(np.median(lum[px])) / shadow_med)
-            min_sides.append(min([ratios[-1]] + sides))
     if not ratios:
         return None
     # The strongest contrast (and its lit road) is kept for the callers that want the single best object;
     # the decision (parametric.cloud_from_evidence) uses the per-object lists.
     best = int(np.argmax(ratios))
     return {"objects": len(ratios), "contrast": float(ratios[best]), "lit": float(lit_values[best]),
-            "per_object_contrast": [float(r) for r in ratios], "per_object_min_side": [float(r) for r in min_sides],
-            "per_object_lit": [float(v) for v in lit_values], "per_object_token": tokens}
-
-
-def _wedge(centre: np.ndarray, direction: np.ndarray, angle_deg: float, half_width_deg: float = 45.0,
-           radius_m: float = 50.0) -> Polygon:
-    """A ground-plane wedge (global xy) from ``centre`` (2,) around ``direction`` (2,) turned by ``angle_deg``
-    (counter-clockwise), ``half_width_deg`` either side, ``radius_m`` long."""
-    base = np.arctan2(direction[1], direction[0]) + np.radians(angle_deg)
-    a = base + np.radians(np.linspace(-half_width_deg, half_width_deg, 7))
-    arc = centre[None] + radius_m * np.stack([np.cos(a), np.sin(a)], axis=1)
-    return Polygon([tuple(centre)] + [tuple(p) for p in arc])
+            "per_object_contrast": [float(r) for r in ratios], "per_object_lit": [float(v) for v in lit_values], "per_object_token": tokens}
 
 
 def _rasterise_ground(poly, z0: float, T_cam_from_global: np.ndarray, K: np.ndarray,
