@@ -84,7 +84,8 @@ def predict_light(dataroot, version, scene, sample_token, camera, image, fov_deg
       streetaug predict-light --image photo.jpg --fov-deg 70 --out out/light-photo
     """
     from streetaug.augment.core import read_image_rgb
-    from streetaug.augment.lighting import estimate_lighting, estimate_lighting_from_image, write_lighting_outputs
+    from streetaug.augment.lighting import estimate_lighting_from_image, write_lighting_outputs
+    from streetaug.augment.lighting.api import estimate_instant_lighting
 
     at_cam = parse_floats(at, 3, "--at")
     if image is not None:
@@ -93,7 +94,7 @@ def predict_light(dataroot, version, scene, sample_token, camera, image, fov_deg
         refuse_overwriting_inputs(out, ["lighting.json", "envmap_camera.exr", "preview.png"], {"--image": image})
         rgb = read_image_rgb(image)
         K = intrinsics_option(intrinsics, fov_deg, rgb.shape[1], rgb.shape[0])
-        estimate = estimate_lighting_from_image(rgb, K, level=level)
+        estimate = estimate_lighting_from_image(rgb, K, level=level, for_map=True)
         query = at_cam or [0.0, 1.5, 15.0]
     else:
         reader = open_dataset(dataroot, version)
@@ -107,8 +108,8 @@ def predict_light(dataroot, version, scene, sample_token, camera, image, fov_deg
             y = -(offset + normal[2] * 15.0) / normal[1] if abs(normal[1]) > 1e-6 else 1.5
             at_cam = [0.0, float(y), 15.0]
         query = at_cam
-        estimate = estimate_lighting(view, sample.location, level=level, lidar=sample.lidar, boxes=sample.boxes,
-                                     query_point_cam=np.asarray(query, dtype=float))
+        estimate = estimate_instant_lighting(sample, view.channel, level, np.asarray(query, dtype=float),
+                                             for_map=True)
     write_lighting_outputs(estimate, out, rgb, query_point_cam=np.asarray(query, dtype=float))
     click.echo(f"wrote {out}/lighting.json, envmap_camera.exr, preview.png "
                f"(sun: {estimate.sun_source}, visibility {estimate.sun_visibility:.2f}, level {estimate.level})")

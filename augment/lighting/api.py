@@ -23,10 +23,14 @@ import time
 from dataclasses import replace
 from typing import Sequence
 
+import cv2
 import numpy as np
 
 from ...datasets.sample import Box, CameraView, LidarSweep, Sample
 from ..core import InputError, check_shape, make_transform
+from .evidence import prepare_image
+from .exposure import exposure_ratios
+from .image_dome import image_corrected_envmap, seen_pixels
 from .learned import learned_sky_estimate
 from .multiview import volume_frame, volume_sample_lighting
 from .parametric import (
@@ -39,8 +43,73 @@ from .parametric import (
     shared_cloud,
     view_inputs,
 )
-from .types import LightingEstimate, SampleLighting, check_level, json_clean, view_key
+from .predicted_view import predicted_ldr
+from .types import LightingEstimate, SampleLighting, check_level, join_reasons, json_clean, view_key
 from .volume import LogGrid
+
+
+def _work(vi: ViewInputs):
+    return vi.work if vi.work is not None else prepare_image(np.asarray(vi.view.image), vi.view.K, vi.up_cam)
+
+
+def seen_estimate(est: LightingEstimate, vi: ViewInputs) -> LightingEstimate:
+    """An L1 estimate whose map takes the image's radiance where the camera saw something
+    (:func:`.image_dome.image_corrected_envmap`): on the image's scale in every direction it saw, the model's
+    shape corrected per elevation elsewhere. The sun is unchanged."""
+    t0 = time.perf_counter()
+    envmap, stats = image_corrected_envmap(est.light_cam.envmap, seen_pixels(_work(vi)), vi.up_cam)
+    timing = dict(est.timing_s) | {"image_envmap": time.perf_counter() - t0}
+    return replace(est, light_cam=replace(est.light_cam, envmap=envmap),
+                   params=json_clean(dict(est.params) | {"image_envmap": stats}), timing_s=timing,
+                   reason=f"{est.reason}; map: the image's radiance where seen ({100 * stats['seen_fraction']:.0f} % "
+                          f"of the sphere), the model corrected per elevation elsewhere")
+
+
+def instant_estimates(per_view: dict[str, LightingEstimate], inputs: Sequence[ViewInputs],
+                      lidar: LidarSweep | None) -> tuple[dict[str, LightingEstimate], dict[str, float], dict]:
+    """One L1 light for all cameras of an instant: the reference's (``inputs[0]``) sun and sky model, its map
+    corrected by every camera's pixels (each on the reference's scale through its exposure ratio,
+    :func:`.exposure.exposure_ratios`), given to each camera turned into its frame and times its ratio.
+
+    Returns (channel -> estimate, channel -> exposure ratio, the exposure report).
+    """
+    t0 = time.perf_counter()
+    views = [vi.view for vi in inputs]
+    ratios, report = exposure_ratios(views, lidar.points_global if lidar is not None else None)
+    ref_vi = inputs[0]
+    ref = per_view[ref_vi.view.channel]
+    for vi in inputs[1:]:  # no shared LiDAR points: the ratio of the two images' own L1 scales
+        c = vi.view.channel
+        how = report.get("per_camera", {}).get(c, "no overlap")
+        if how.startswith("no overlap") and ref.fit is not None and per_view[c].fit is not None:
+            ratios[c] = float(per_view[c].fit.scale / max(ref.fit.scale, 1e-12))
+            report.setdefault("per_camera", {})[c] = "ratio of the images' own L1 scales (no shared LiDAR points)"
+    R_ref_from_global = np.asarray(ref_vi.view.T_cam_from_global)[:3, :3]
+    pixels = [seen_pixels(_work(vi), R_ref_from_global @ np.asarray(vi.view.T_global_from_cam)[:3, :3],
+                          1.0 / ratios[vi.view.channel]) for vi in inputs]
+    envmap, stats = image_corrected_envmap(ref.light_cam.envmap, pixels, ref_vi.up_cam)
+    ref_light = replace(ref.light_cam, envmap=envmap)
+    seconds = time.perf_counter() - t0
+    note = (f"map: the {len(views)} cameras' radiance where seen ({100 * stats['seen_fraction']:.0f} % of the "
+            f"sphere), the model corrected per elevation elsewhere; one light for the instant "
+            f"({ref_vi.view.channel}'s sun and sky)")
+    out = {}
+    for vi in inputs:
+        c = vi.view.channel
+        R = np.asarray(vi.view.T_cam_from_global)[:3, :3] @ R_ref_from_global.T
+        light = ref_light.rotated(R)
+        k = float(ratios[c])
+        light = replace(light, envmap=light.envmap * np.float32(k),
+                        sun=None if light.sun is None else replace(light.sun, irradiance_rgb=light.sun.irradiance_rgb * k))
+        sun_dir = None if ref.sun_dir_cam is None else R @ ref.sun_dir_cam
+        est = per_view[c]
+        out[c] = replace(est, light_cam=light, sun_dir_cam=sun_dir, sun_source=ref.sun_source,
+                         sun_visibility=ref.sun_visibility,
+                         params=json_clean(dict(est.params) | {"image_envmap": stats, "exposure_ratio": k}),
+                         timing_s=dict(est.timing_s) | {"image_envmap": seconds},
+                         reason=f"{ref.reason}; {note}" if c == ref_vi.view.channel else
+                         f"{ref.reason}; {note}; exposure x{k:.3f} of {ref_vi.view.channel}")
+    return out, ratios, report
 
 
 def view_estimate(vi: ViewInputs, timing: dict, cloud: float | None = None,
@@ -55,6 +124,17 @@ def view_estimate(vi: ViewInputs, timing: dict, cloud: float | None = None,
     if vi.sun_pos.elevation_deg <= 0.0:
         return night_estimate(vi, timing)
     return ephemeris_estimate(vi, timing, cloud, cloud_note)
+
+
+def seen_l1(l1: SampleLighting, inputs: Sequence[ViewInputs], lidar: LidarSweep | None) -> SampleLighting:
+    """L1 of a sample with the maps taken from its images: one camera's own (:func:`seen_estimate`), several
+    cameras' one light for the instant (:func:`instant_estimates`)."""
+    if len(inputs) == 1:
+        vi = inputs[0]
+        return replace(l1, per_view={vi.view.channel: seen_estimate(l1.per_view[vi.view.channel], vi)})
+    per_view, ratios, report = instant_estimates(l1.per_view, inputs, lidar)
+    params = dict(l1.params) | {"exposure_ratio": ratios, "exposure": report}
+    return replace(l1, per_view=per_view, exposure_ratio=ratios, params=json_clean(params))
 
 
 def estimate_views_lighting(views: Sequence[CameraView], location: str | None, level: str,
@@ -105,9 +185,13 @@ def estimate_views_lighting(views: Sequence[CameraView], location: str | None, l
     l1 = replace(base, level="L1", reason=ref_est.reason, per_view=per_view, params=json_clean(params),
                  sun_source=ref_est.sun_source, sun_visibility=float(ref_est.sun_visibility))
     if level == "L1":
+        l1 = seen_l1(l1, inputs, lidar)
         timing["total"] = time.perf_counter() - t0
         return l1
+    # the volume levels build on the model's sky (the images correct it themselves, in the sky dome)
     out = volume_sample_lighting(l1, views, inputs, level, lidar, query_point_cam, grid, timing, t0)
+    if out.level == "L1":  # auto chose L1
+        out = seen_l1(out, inputs, lidar)
     if out.hybrid is not None:
         timing["wall_with_decode"] = time.perf_counter() - t_start
     return out
@@ -156,7 +240,8 @@ def estimate_lighting(view: CameraView, location: str | None, level: str = "L1",
     timing = {"decode": time.perf_counter() - t0}
     if level == "L0":
         return l0_estimate(image, timing)
-    return view_estimate(view_inputs(view, location, timing, boxes, lidar), timing)
+    vi = view_inputs(view, location, timing, boxes, lidar)
+    return seen_estimate(view_estimate(vi, timing), vi)
 
 
 def image_only_view(image_rgb: np.ndarray, K: np.ndarray,
@@ -170,11 +255,13 @@ def image_only_view(image_rgb: np.ndarray, K: np.ndarray,
                       0).with_image(image_rgb)
 
 
-def estimate_lighting_from_image(image_rgb: np.ndarray, K: np.ndarray, level: str = "L1") -> LightingEstimate:
+def estimate_lighting_from_image(image_rgb: np.ndarray, K: np.ndarray, level: str = "L1",
+                                 for_map: bool = False) -> LightingEstimate:
     """Lighting of an image without metadata: a level camera (up = -y) 1.5 m above the ground; the sun from the
     learned image model when it is confident, else none (a diffuse sky), at every level.
 
     L2/L3/auto add a volume built from the image alone: the ground plane and vertical facades standing on it.
+    ``for_map``: ``auto`` judges the levels by their maps (:func:`estimate_views_lighting_for_map`).
     """
     image_rgb = np.asarray(image_rgb)
     check_shape(image_rgb, ("H", "W", 3), "image_rgb")
@@ -185,5 +272,87 @@ def estimate_lighting_from_image(image_rgb: np.ndarray, K: np.ndarray, level: st
     if level == "L0":
         return l0_estimate(image_rgb, {})
     if level == "L1":
-        return view_estimate(view_inputs(view, None, {}), {})
-    return estimate_views_lighting([view], None, level).for_view(view)
+        vi = view_inputs(view, None, {})
+        return seen_estimate(view_estimate(vi, {}), vi)
+    build = estimate_views_lighting_for_map if for_map else estimate_views_lighting
+    return build([view], None, level).for_view(view)
+
+
+MAP_LEVELS = ("L1", "L2", "L3")
+MAP_JUDGE_WIDTH_PX = 160
+
+
+def map_error(lighting: SampleLighting, views: Sequence[CameraView], width: int = MAP_JUDGE_WIDTH_PX) -> float:
+    """Mean squared LDR error of the views the lighting predicts for its input cameras (their own centres, EV 0)
+    against their images: how far the written map is from what the cameras saw."""
+    errs = []
+    for v in views:
+        pred = predicted_ldr(lighting, v, width)
+        h = pred.shape[0]
+        real = cv2.resize(np.asarray(v.image), (width, h), interpolation=cv2.INTER_AREA) / 255.0
+        errs.append(float(np.mean((pred - real) ** 2)))
+    return float(np.mean(errs))
+
+
+def estimate_views_lighting_for_map(views: Sequence[CameraView], location: str | None, level: str,
+                                    lidar: LidarSweep | None = None, boxes: list[Box] | None = None,
+                                    query_point_cam: np.ndarray | None = None) -> SampleLighting:
+    """:func:`estimate_views_lighting` for a caller that writes the map (``predict-light``): ``auto`` judges the
+    levels by the error of their maps against the images (:func:`map_error`), cheapest first, and never keeps a
+    level whose map is further from the images than the next level's; any other level is built as asked."""
+    if level != "auto":
+        return estimate_views_lighting(views, location, level, lidar, boxes, query_point_cam)
+    errors: dict[str, float] = {}
+    chosen = None
+    for i, lv in enumerate(MAP_LEVELS):
+        sl = estimate_views_lighting(views, location, lv, lidar, boxes, query_point_cam)
+        errors[lv] = map_error(sl, views)
+        if chosen is not None and errors[lv] >= errors[chosen[0]]:
+            break
+        chosen = (lv, sl)
+    level_chosen, sl = chosen
+    listing = ", ".join(f"{k} {10 * np.log10(1.0 / max(v, 1e-12)):.1f} dB" for k, v in errors.items())
+    reason = (f"auto (map): {level_chosen}, the cheapest level whose map is no further from the images than the "
+              f"next level's (PSNR of each level's map rendered into the input cameras: {listing})")
+    params = dict(sl.params) | {"auto_map_psnr_db": {k: float(10 * np.log10(1.0 / max(v, 1e-12)))
+                                                     for k, v in errors.items()}}
+    return replace(sl, reason=join_reasons(reason, sl.reason), params=json_clean(params))
+
+
+def estimate_instant_lighting(sample: Sample, camera: str, level: str, query_point_cam: np.ndarray | None = None,
+                              for_map: bool = False) -> LightingEstimate:
+    """One camera's lighting from the estimate of its whole instant: all the sample's cameras (``camera`` the
+    reference), so that every camera of a sample reports the same sun and sky.
+
+    A camera other than ``camera`` whose image cannot be read is left out (the reason and ``params["instant"]``
+    name it and why); ``camera``'s own image must be readable (its error names the file).
+
+    Args:
+        sample: the sample.
+        camera: the camera whose lighting is returned (its frame and scale).
+        level: "L0" | "L1" | "L2" | "L3" | "auto".
+        query_point_cam: placement (``camera``'s frame, metres) for L2's centre and the placement judgement.
+        for_map: ``auto`` judges by the written map (:func:`estimate_views_lighting_for_map`), not the placement.
+    """
+    if camera not in sample.cameras:
+        raise InputError(f"sample {sample.token}: camera {camera!r} not found; available: "
+                         f"{', '.join(sorted(sample.cameras))}")
+    view = sample.cameras[camera]
+    np.asarray(view.image)  # the asked camera must be readable: its error names the file
+    used, skipped = [view], {}
+    for c in sorted(sample.cameras):
+        if c == camera:
+            continue
+        try:
+            np.asarray(sample.cameras[c].image)
+            used.append(sample.cameras[c])
+        except InputError as exc:
+            skipped[c] = str(exc)
+    build = estimate_views_lighting_for_map if for_map else estimate_views_lighting
+    sl = build(used, sample.location, level, lidar=sample.lidar, boxes=sample.boxes, query_point_cam=query_point_cam)
+    est = sl.for_view(view)
+    note = f"one estimate for the instant from {len(used)} camera(s) ({', '.join(v.channel for v in used)})"
+    if skipped:
+        note += "; left out (image unreadable): " + "; ".join(f"{c}: {why}" for c, why in skipped.items())
+    params = dict(est.params) | {"instant": {"cameras": [v.channel for v in used], "skipped": skipped}}
+    return replace(est, reason=join_reasons(est.reason, note), params=json_clean(params))

@@ -30,7 +30,7 @@ from typing import Sequence
 import numpy as np
 
 from ...datasets.sample import Box, CameraView, LidarSweep
-from ..core import ldr_uint8_to_hdr, luminance
+from ..core import ldr_to_hdr, ldr_uint8_to_hdr, luminance
 from .evidence import (
     PreparedImage,
     box_shadow_evidence,
@@ -333,14 +333,17 @@ def solve_l1(ev: L1Evidence, cloud: float | None = None,
 
 
 def l0_estimate(image: np.ndarray, timing: dict) -> LightingEstimate:
-    """L0: a constant dome of the image's mean linear radiance, no sun."""
+    """L0: a constant dome on the image's scale, no sun: the radiance the camera records as the image's mean
+    colour (rendered from the camera and passed through the response, it gives that colour: the best constant
+    view of the image; the mean *linear* radiance would be brighter by the response's curvature)."""
     t1 = time.perf_counter()
-    mean = ldr_uint8_to_hdr(image).reshape(-1, 3).mean(axis=0)
+    mean_ldr = np.asarray(image, np.float64).reshape(-1, 3).mean(axis=0) / 255.0
+    mean = ldr_to_hdr(mean_ldr).astype(np.float32)
     light = DistantLight(np.broadcast_to(mean.astype(np.float32), (ENVMAP_HEIGHT, ENVMAP_WIDTH, 3)).copy(), None)
     timing["fit"] = time.perf_counter() - t1
     timing["total"] = time.perf_counter() - t1
     return LightingEstimate(
-        light, None, "none", 0.0, "L0", "L0: constant dome of the image's mean linear radiance",
+        light, None, "none", 0.0, "L0", "L0: constant dome of the radiance recorded as the image's mean colour",
         {"mean_radiance_rgb": mean.tolist()}, timing,
     )
 

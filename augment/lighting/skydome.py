@@ -70,7 +70,7 @@ def _sky_log_gain(log_ratio: np.ndarray, rows: np.ndarray, lon: np.ndarray, view
     return log_gain
 
 
-def _blend(corrected: np.ndarray, observed: np.ndarray, mean_obs: np.ndarray, blur_deg: float) -> np.ndarray:
+def blend_observed(corrected: np.ndarray, observed: np.ndarray, mean_obs: np.ndarray, blur_deg: float) -> np.ndarray:
     """The observations pasted into the corrected model, blended into their neighbourhood (normalised
     convolution of the log ratio, Gaussian of ``blur_deg``, wrapping in longitude)."""
     W = corrected.shape[1]
@@ -138,7 +138,7 @@ def build_sky_dome(model_world: np.ndarray, observations: list[ViewObservation],
         log_gain = _sky_log_gain(log_ratio, row[sel], lon[sel], view, len(observations), H, W)
     log_gain = np.clip(log_gain, np.log(0.1), np.log(10.0))
     corrected = model * np.where(upper[..., None], np.exp(log_gain), 1.0)
-    dome = _blend(corrected, observed, mean_obs, blur_deg)
+    dome = blend_observed(corrected, observed, mean_obs, blur_deg)
     lum = np.maximum(luminance(dome), 1e-12)
     dome = dome * np.maximum(1.0, floor / lum)[..., None]
     stats.update(observed_fraction=float(observed.mean()), sky_gain_rgb=gain.tolist())

@@ -163,8 +163,10 @@ def view_key(view: CameraView) -> ViewKey:
 
 
 def join_reasons(a: str, b: str) -> str:
-    """``a; b`` unless ``b`` is empty or already said in ``a``."""
-    return a if not b or b in a else f"{a}; {b}"
+    """``a; b`` unless ``b`` is empty or already said in ``a`` (``b`` alone if it already says ``a``)."""
+    if not b or b in a:
+        return a
+    return b if a and a in b else f"{a}; {b}"
 
 
 @dataclass(frozen=True)

@@ -250,14 +250,18 @@ def test_without_location_the_learned_model_finds_the_sun():
     assert np.degrees(np.arccos(np.clip(est.sun_dir_cam @ sun_cam, -1.0, 1.0))) < 10.0
 
 
-def test_l0_is_constant_dome_of_image_mean():
+def test_l0_is_constant_dome_recorded_as_the_image_mean_colour():
     view, _, _ = _synthetic(0.0, 0.004, stripes=True)
     est = estimate_lighting(view, "singapore-onenorth", level="L0")
-    from streetaug.augment.core import ldr_uint8_to_hdr
+    from streetaug.augment.core import hdr_to_ldr, ldr_uint8_to_hdr
 
-    mean = ldr_uint8_to_hdr(view.image).reshape(-1, 3).mean(axis=0)
+    mean_ldr = view.image.reshape(-1, 3).mean(axis=0) / 255.0
     assert est.level == "L0" and est.light_cam.sun is None
-    assert np.allclose(est.light_cam.envmap, mean, rtol=1e-5)
+    env = est.light_cam.envmap
+    assert np.allclose(env, env[0, 0], rtol=1e-6)  # constant
+    assert np.allclose(hdr_to_ldr(env[0, 0]), mean_ldr, atol=2e-3)  # on the image's scale
+    # darker than the mean linear radiance (the response is concave), by a margin on a striped image
+    assert np.all(env[0, 0] < 0.95 * ldr_uint8_to_hdr(view.image).reshape(-1, 3).mean(axis=0))
 
 
 def test_from_image_without_metadata():

@@ -1,0 +1,57 @@
+"""The view a lighting estimate predicts for a camera: its light field at the camera's centre along the pixels' rays.
+
+This is how a map is checked against an image (and how ``auto`` chooses the level of a written map): a map
+on the image's scale, rendered from the camera's own centre and passed through the contract's response at
+EV 0, reproduces the image's colours where the camera saw something.
+
+* L0/L1 (distant light): the camera's own estimate if it was an input (its frame and exposure), else the
+  reference camera's distant light turned into its frame (reference exposure);
+* L2/L3: the volume's radiance traced from the camera's centre (lifted out of solid voxels) along each pixel's
+  ray, sun excluded, times the camera's exposure ratio if it was an input.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+
+from ...datasets.sample import CameraView
+from ..core import hdr_to_ldr, invert_transform, pixel_rays
+from .types import SampleLighting
+
+PREDICTED_WIDTH_PX = 320
+
+
+def view_rays(view: CameraView, width: int = PREDICTED_WIDTH_PX) -> tuple[np.ndarray, int]:
+    """Camera-frame unit rays (h * width, 3) through the pixel centres of the view shrunk to ``width``, and h."""
+    H, W = view.height, view.width
+    h = max(int(round(H * width / W)), 1)
+    u, v = np.meshgrid((np.arange(width) + 0.5) * W / width - 0.5, (np.arange(h) + 0.5) * H / h - 0.5)
+    return pixel_rays(view.K, np.stack([u.ravel(), v.ravel()], 1)), h
+
+
+def predicted_radiance(lighting: SampleLighting, view: CameraView, width: int = PREDICTED_WIDTH_PX) -> np.ndarray:
+    """Linear radiance (h, width, 3) that ``lighting`` predicts for ``view`` (see module doc); nothing is
+    fitted to the view's image."""
+    rays, h = view_rays(view, width)
+    same = lighting.is_input(view)
+    if lighting.hybrid is None:
+        if same:
+            light = lighting.per_view[view.channel].light_cam
+        else:
+            ref = lighting.per_view[lighting.reference]
+            R = np.asarray(view.T_cam_from_global)[:3, :3] @ np.asarray(lighting.T_global_from_ref_cam)[:3, :3]
+            light = ref.light_cam.rotated(R)
+        return light.radiance(np.zeros_like(rays), rays).reshape(h, width, 3)
+    T = invert_transform(lighting.T_global_from_vol) @ np.asarray(view.T_global_from_cam)
+    centre = lighting.hybrid.lift_out_of_solid(T[:3, 3])
+    dirs = rays @ T[:3, :3].T
+    with torch.no_grad():
+        rad = lighting.hybrid.radiance(np.repeat(centre[None], len(dirs), axis=0), dirs, include_sun=False).numpy()
+    ratio = float(lighting.exposure_ratio.get(view.channel, 1.0)) if same else 1.0
+    return rad.reshape(h, width, 3) * ratio
+
+
+def predicted_ldr(lighting: SampleLighting, view: CameraView, width: int = PREDICTED_WIDTH_PX) -> np.ndarray:
+    """:func:`predicted_radiance` through the contract's response at EV 0: (h, width, 3) in [0, 1]."""
+    return hdr_to_ldr(predicted_radiance(lighting, view, width))

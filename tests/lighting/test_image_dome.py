@@ -1,0 +1,103 @@
+"""L1's map from the pixels the cameras see (augment/lighting/image_dome.py), on synthetic images."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from streetaug.augment.core import camera_dir_to_lonlat, hdr_to_ldr, ldr_to_hdr, lonlat_to_camera_dir
+from streetaug.augment.lighting.evidence import prepare_image
+from streetaug.augment.lighting.image_dome import band_log_gains, image_corrected_envmap, seen_pixels
+from streetaug.augment.lighting.light import DistantLight
+
+H_MAP, W_MAP = 128, 256
+UP = np.array([0.0, -1.0, 0.0])  # a level camera
+
+
+def _K(w=640, h=360, fov_deg=70.0):
+    f = 0.5 * w / np.tan(np.radians(fov_deg) / 2)
+    return np.array([[f, 0, (w - 1) / 2], [0, f, (h - 1) / 2], [0, 0, 1.0]])
+
+
+def _image(w=640, h=360, seed=0):
+    """Rows: bright sky (top third), a dark facade band, a mid-grey road (bottom third), with some texture."""
+    rng = np.random.default_rng(seed)
+    img = np.empty((h, w, 3), np.uint8)
+    img[: h // 3] = (200, 210, 225)
+    img[h // 3 : 2 * h // 3] = (70, 60, 50)
+    img[2 * h // 3 :] = (120, 120, 118)
+    noise = rng.integers(-12, 13, size=(h, w, 1))
+    return np.clip(img.astype(int) + noise, 0, 254).astype(np.uint8)
+
+
+def _model(value=0.5):
+    return np.full((H_MAP, W_MAP, 3), value, np.float32)
+
+
+def _psnr(a, b):
+    return float(10 * np.log10(1.0 / np.mean((a - b) ** 2)))
+
+
+def test_the_map_reproduces_the_image_from_the_camera_centre():
+    img, K = _image(), _K()
+    work = prepare_image(img, K, UP)
+    env, stats = image_corrected_envmap(_model(), seen_pixels(work), UP)
+    rays = work.rays_cam.reshape(-1, 3)
+    pred = hdr_to_ldr(DistantLight(env).radiance(np.zeros_like(rays), rays)).reshape(work.ldr.shape)
+    before = hdr_to_ldr(DistantLight(_model()).radiance(np.zeros_like(rays), rays)).reshape(work.ldr.shape)
+    assert _psnr(pred, work.ldr) > 25.0  # the map on the image's scale where seen
+    assert _psnr(before, work.ldr) < 15.0  # the uncorrected model is far off (the test can fail)
+    assert 0.02 < stats["seen_fraction"] < 0.3
+
+
+def test_unseen_directions_follow_the_seen_elevation_bands():
+    img, K = _image(), _K()
+    work = prepare_image(img, K, UP)
+    env, _ = image_corrected_envmap(_model(), seen_pixels(work), UP)
+    behind = lambda elev_deg: DistantLight(env).radiance(  # noqa: E731
+        np.zeros((1, 3)), lonlat_to_camera_dir(np.array([np.pi]), np.radians(np.array([elev_deg]))))[0]
+    facade = ldr_to_hdr(np.array([70, 60, 50]) / 255.0)
+    road = ldr_to_hdr(np.array([120, 120, 118]) / 255.0)
+    sky = ldr_to_hdr(np.array([200, 210, 225]) / 255.0)
+    # the facade band and the road continue behind the camera; the zenith is the seen sky
+    assert np.allclose(behind(0.0), facade, rtol=0.35)
+    assert np.allclose(behind(-40.0), road, rtol=0.25)
+    assert np.allclose(behind(80.0), sky, rtol=0.25)
+    assert behind(80.0)[2] > 3 * behind(0.0)[2]
+
+
+def test_clipped_pixels_are_lower_bounds():
+    img, K = _image(), _K()
+    img[: 360 // 3, 200:440] = 255  # clipped sky
+    work = prepare_image(img, K, UP)
+    env, stats = image_corrected_envmap(_model(0.01), seen_pixels(work), UP)
+    assert stats["clipped_pixels"] > 0
+    lon, lat = camera_dir_to_lonlat(np.array([[0.0, -0.3, 1.0]]))  # 17 deg up ahead: inside the clipped patch
+    v = DistantLight(env).radiance(np.zeros((1, 3)), lonlat_to_camera_dir(lon, lat))[0]
+    assert np.all(hdr_to_ldr(v) > 0.97)
+
+
+def test_two_cameras_fill_one_map_on_the_reference_scale():
+    img, K = _image(), _K()
+    back = np.clip(img.astype(int) // 2, 0, 255).astype(np.uint8)  # the rear camera sees the same, darker
+    work_f = prepare_image(img, K, UP)
+    work_b = prepare_image(back, K, UP)
+    R_front_from_back = np.diag([-1.0, 1.0, -1.0])  # 180 deg about the up axis
+    ratio_b = float(np.median(ldr_to_hdr(back / 255.0) / np.maximum(ldr_to_hdr(img / 255.0), 1e-6)))
+    env, stats = image_corrected_envmap(
+        _model(), [seen_pixels(work_f), seen_pixels(work_b, R_front_from_back, 1.0 / ratio_b)], UP)
+    one, _ = image_corrected_envmap(_model(), seen_pixels(work_f), UP)
+    d = lonlat_to_camera_dir(np.array([np.pi]), np.array([0.0]))  # behind, horizon: the rear camera's centre
+    v = DistantLight(env).radiance(np.zeros((1, 3)), d)[0]
+    facade = ldr_to_hdr(np.array([70, 60, 50]) / 255.0)
+    assert np.allclose(v, facade, rtol=0.2)  # the rear camera's pixels, back on the front camera's scale
+    assert stats["seen_fraction"] > 1.8 * image_corrected_envmap(_model(), seen_pixels(work_f), UP)[1]["seen_fraction"]
+    assert not np.allclose(env, one)
+
+
+def test_band_gains_interpolate_and_extrapolate():
+    elev = np.array([-10.0, -10.0, -10.0, 10.0, 10.0, 10.0])
+    log_ratio = np.log(np.array([[2.0] * 3] * 3 + [[0.5] * 3] * 3))
+    g = band_log_gains(log_ratio, elev, np.array([-60.0, -10.0, 0.0, 10.0, 80.0]), np.log(np.full(3, 4.0)))
+    assert np.allclose(np.exp(g[0]), 2.0) and np.allclose(np.exp(g[1]), 2.0)  # below: the lowest band
+    assert 0.5 < np.exp(g[2, 0]) < 2.0  # between bands: interpolated
+    assert np.allclose(np.exp(g[4]), 4.0)  # above the highest band: the sky's ratio
