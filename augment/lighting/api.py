@@ -314,9 +314,10 @@ def estimate_views_lighting_for_map(views: Sequence[CameraView], location: str |
     listing = ", ".join(f"{k} {10 * np.log10(1.0 / max(v, 1e-12)):.1f} dB" for k, v in errors.items())
     reason = (f"auto (map): {level_chosen}, the cheapest level whose map is no further from the images than the "
               f"next level's (PSNR of each level's map rendered into the input cameras: {listing})")
-    params = dict(sl.params) | {"auto_map_psnr_db": {k: float(10 * np.log10(1.0 / max(v, 1e-12)))
-                                                     for k, v in errors.items()}}
-    return replace(sl, reason=join_reasons(reason, sl.reason), params=json_clean(params))
+    judged = {"auto_map_psnr_db": {k: float(10 * np.log10(1.0 / max(v, 1e-12))) for k, v in errors.items()}}
+    per_view = {c: replace(e, params=json_clean(dict(e.params) | judged)) for c, e in sl.per_view.items()}
+    return replace(sl, reason=join_reasons(reason, sl.reason), params=json_clean(dict(sl.params) | judged),
+                   per_view=per_view)
 
 
 def estimate_instant_lighting(sample: Sample, camera: str, level: str, query_point_cam: np.ndarray | None = None,

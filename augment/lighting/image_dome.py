@@ -114,29 +114,31 @@ def image_corrected_envmap(model_envmap: np.ndarray, pixels: SeenPixels | list[S
     row = np.clip(((0.5 - lat / np.pi) * H).astype(np.int64), 0, H - 1)
     cell = row * W + col
     ok = ~clipped
-    count = np.bincount(cell[ok], minlength=H * W).astype(np.float64)
-    sums = np.stack([np.bincount(cell[ok], rad[ok, c], minlength=H * W) for c in range(3)], axis=1)
+    # a cell's mean over all its pixels, clipped ones at their recorded value: exact where nothing clipped, a
+    # lower bound where something did (a fully clipped cell keeps the model if that is brighter)
+    count = np.bincount(cell, minlength=H * W).astype(np.float64)
+    sums = np.stack([np.bincount(cell, rad[:, c], minlength=H * W) for c in range(3)], axis=1)
     seen = (count > 0).reshape(H, W)
     mean_obs = (sums / np.maximum(count, 1)[:, None]).reshape(H, W, 3)
-    floor = np.zeros(H * W)
-    if clipped.any():
-        np.maximum.at(floor, cell[clipped], luminance(rad[clipped]))
-    floor = floor.reshape(H, W)
+    n_clipped = np.bincount(cell[clipped], minlength=H * W)
+    all_clipped = ((n_clipped == count) & (count > 0)).reshape(H, W)
+    floor = np.where(all_clipped, luminance(mean_obs), 0.0)
     up = np.asarray(up_cam, np.float64) / np.linalg.norm(up_cam)
     elev = np.degrees(np.arcsin(np.clip(camera_envmap_directions(H, W) @ up, -1.0, 1.0)))
     stats = {"seen_fraction": float(seen.mean()), "bands": 0, "pixels": int(len(rays)), "clipped_pixels": int(clipped.sum())}
     if not seen.any():
         return model_envmap.astype(np.float32), stats
-    log_ratio = np.log(np.maximum(mean_obs[seen], 1e-9) / model[seen])
+    unclipped = seen & ~all_clipped
+    log_ratio = np.log(np.maximum(mean_obs[unclipped], 1e-9) / model[unclipped])
     is_sky = np.concatenate([p.sky for p in pixels]) & ok
     sky_gain = None
     if is_sky.sum() >= MIN_SKY_PIXELS:
         sky_model = model.reshape(-1, 3)[cell[is_sky]].mean(axis=0)
         sky_gain = np.log(np.maximum(rad[is_sky].mean(axis=0), 1e-9) / sky_model)
-    gains = band_log_gains(log_ratio, elev[seen], elev.reshape(-1), sky_gain)
+    gains = band_log_gains(log_ratio, elev[unclipped], elev.reshape(-1), sky_gain)
     gains = np.clip(gains, -MAX_LOG_GAIN, MAX_LOG_GAIN).reshape(H, W, 3)
     corrected = model * np.exp(gains)
-    out = blend_observed(corrected, seen, mean_obs, BLEND_DEG)
+    out = blend_observed(corrected, unclipped, mean_obs, BLEND_DEG)
     lum = np.maximum(luminance(out), 1e-12)
     out = out * np.maximum(1.0, floor / lum)[..., None]
     edges = np.arange(-90.0, 90.0 + BAND_DEG, BAND_DEG)
