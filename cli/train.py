@@ -66,22 +66,36 @@ def train_sky(seed, steps, batch, threads, out, cache_dir, hdri_dir, debug, n_sy
 @click.option("--n-streets", type=click.IntRange(min=1), default=None, help="Generated streets (2 views each).")
 @click.option("--sky-weights", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Sky model weights (default: the package's).")
+@click.option("--preset", type=click.Choice(["v2", "v3"]), default="v3", show_default=True,
+              help="v2: from scratch on synthetic streets and 4 panoramas; v3 (shipped): v2 fine-tuned with the "
+                   "real dev scene's training keyframes and 11 panoramas.")
+@click.option("--init-weights", type=click.Path(dir_okay=False, exists=True, path_type=Path), default=None,
+              help="Weights to fine-tune from (v3 needs v2's: git show e6b26cc:augment/lighting/skynet/weights/"
+                   "light_model_v2.pt > v2.pt).")
+@click.option("--real", "real_dataroot", type=click.Path(file_okay=False, path_type=Path), default=None,
+              help="nuScenes folder of the real dev scene (default ../shared/data/nuscenes-seq).")
 @runtime_errors
-def train_light(seed, steps, batch, threads, out, cache_dir, hdri_dir, debug, n_streets, sky_weights):
+def train_light(seed, steps, batch, threads, out, cache_dir, hdri_dir, debug, n_streets, sky_weights, preset,
+                init_weights, real_dataroot):
     """Train the image -> sky-vector predictor (sun direction, visibility, sky latent) on top of the sky model.
 
     \b
-    Example (the shipped weights; ~30 min training after rendering 1200 street views, ~5-25 min):
-      streetaug train-light --seed 0
+    Examples (1 thread):
+      streetaug train-light --preset v3 --init-weights v2.pt   # the shipped v3 (see the model card)
+      streetaug train-light --preset v2 --seed 0               # v2 (~30 min after rendering 1200 street views)
     """
     from dataclasses import replace
 
     from streetaug.augment.training import LightTrainConfig  # defers torch: only training needs it
     from streetaug.augment.training import train_light as run
+    from streetaug.augment.training.train import LIGHT_V3
 
-    cfg = replace(LightTrainConfig(), **_overrides(seed=seed, steps=steps, batch=batch, threads=threads, out=out,
-                                                   cache_dir=cache_dir, hdri_dir=hdri_dir, n_streets=n_streets,
-                                                   sky_weights=sky_weights))
+    base = LIGHT_V3 if preset == "v3" else LightTrainConfig()
+    if preset == "v3" and init_weights is None:
+        raise click.UsageError("--preset v3 fine-tunes v2: pass --init-weights (v2's file, see --help)")
+    cfg = replace(base, **_overrides(seed=seed, steps=steps, batch=batch, threads=threads, out=out,
+                                     cache_dir=cache_dir, hdri_dir=hdri_dir, n_streets=n_streets,
+                                     sky_weights=sky_weights, init_weights=init_weights, real_dataroot=real_dataroot))
     report = run(cfg, log=lambda s: click.echo(s))
     click.echo(f"held-out panorama crops: sun direction median error {report['val']['sun_err_deg_median']:.1f} deg")
 

@@ -15,6 +15,7 @@ Nothing here writes into the repository; caches go to :func:`default_cache_dir`.
 
 from __future__ import annotations
 
+import hashlib
 import os
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
@@ -45,9 +46,26 @@ VAL_PANORAMAS = ("sky", "sunrise", "venice")
 # Fraction of the clear-sky sun reaching the ground, by eye from the panoramas (index.json "sun").
 PANORAMA_SUN_VISIBILITY = {"city": 0.0, "dawn": 0.0, "forest": 0.5, "night": 0.0, "sky": 1.0, "sunrise": 1.0,
                            "venice": 0.0}
+# name -> (sun direction source in index.json or None, visibility by eye): "gt_peak" is the luminance-weighted
+# peak region; industrial_sunset's gt_peak is the glow 17 deg above the sun, so its brightest pixel is used.
+PANORAMA_SUN = {
+    "city": (None, 0.0), "dawn": (None, 0.0), "night": (None, 0.0), "venice": (None, 0.0),
+    "forest": ("gt_peak", 0.5), "sky": ("gt_peak", 1.0), "sunrise": ("gt_peak", 1.0),
+    "crystal_falls_1k": ("gt_peak", 1.0), "drakensberg_solitary_mountain_1k": ("gt_peak", 1.0),
+    "hilly_terrain_01_1k": ("gt_peak", 1.0), "industrial_sunset_02_1k": ("brightest_pixel", 0.6),
+    "kloppenheim_05_1k": ("gt_peak", 1.0), "noon_grass_1k": ("gt_peak", 1.0), "quarry_02_1k": ("gt_peak", 1.0),
+    "resting_place": ("gt_peak", 0.8), "snowy_field_1k": ("gt_peak", 1.0), "spiaggia_di_mondello_1k": ("gt_peak", 1.0),
+    "wasteland_clouds_puresky_1k": ("gt_peak", 0.3),
+}
 DOME_MEDIAN_TARGET = 0.25  # sky-model exposure: the dome's median luminance -> this (LDR ~0.53) at EV 0
 VIEW_KEY_VALUE = 0.18  # camera auto-exposure: geometric mean luminance of a view -> this
 CACHE_VERSION = 2  # 2: camera pitch sign fixed in dome.camera_from_angles (street and crop views)
+
+
+def panorama_visibility() -> dict[str, float]:
+    """Sun visibility (0..1, by eye) of every known panorama: :data:`PANORAMA_SUN_VISIBILITY` and the 11 added
+    for issue 16 (:data:`PANORAMA_SUN`)."""
+    return {**{n: v for n, (_, v) in PANORAMA_SUN.items()}, **PANORAMA_SUN_VISIBILITY}
 
 
 def default_cache_dir() -> Path:
@@ -204,7 +222,8 @@ class View:
         ldr: (h, w, 3) uint8 image (contract camera response of the radiance x exposure).
         K: (3, 3) intrinsics of ``ldr``.
         R_heading_from_cam: (3, 3) camera -> heading frame.
-        dome: (H, W, 3) float32 sky dome (heading frame), on the image's radiometric scale.
+        dome: (H, W, 3) float32 sky dome (heading frame), on the image's radiometric scale; None for a real
+            photo (only its sun is known: ``sun_dir_heading`` is then required).
         visibility: 0..1 fraction of the clear-sky sun that reaches the ground.
         sun_dir_heading: (3,) true sun direction (heading frame), or None if unknown.
     """
@@ -212,7 +231,7 @@ class View:
     ldr: np.ndarray
     K: np.ndarray
     R_heading_from_cam: np.ndarray
-    dome: np.ndarray
+    dome: np.ndarray | None
     visibility: float
     sun_dir_heading: np.ndarray | None = None
 
@@ -352,26 +371,29 @@ def street_view_pool(n_streets: int, seed: int, dome_hw: tuple[int, int], cache_
 
 def _crop_chunk(args: tuple) -> list[View]:
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-    seed, start, stop, H, W, hdri_dir = args
-    panos = load_panoramas(hdri_dir, TRAIN_PANORAMAS)
-    names = list(panos)
+    seed, start, stop, H, W, hdri_dir, names = args
+    panos = load_panoramas(hdri_dir, names)
+    visibility = panorama_visibility()
     out = []
     for i in range(start, stop):
         rng = np.random.default_rng([seed, 13, i])
         if i % 2 == 0:
             name = names[(i // 2) % len(names)]
-            out.append(panorama_view(panos[name], PANORAMA_SUN_VISIBILITY[name], rng, (H, W)))
+            out.append(panorama_view(panos[name], visibility[name], rng, (H, W)))
         else:
             out.append(synthetic_sky_view(rng, (H, W)))
     return out
 
 
 def crop_view_pool(n: int, seed: int, dome_hw: tuple[int, int], hdri_dir: str | Path,
-                   cache_dir: str | Path | None = None, workers: int = 2, log=print) -> tuple[list[View], list[View]]:
-    """(n/2 crops of the real training panoramas, n/2 crops of synthetic skies over a flat ground); cached."""
+                   cache_dir: str | Path | None = None, workers: int = 2, log=print,
+                   panoramas: tuple[str, ...] = TRAIN_PANORAMAS) -> tuple[list[View], list[View]]:
+    """(n/2 crops of the real training ``panoramas`` (in turn), n/2 crops of synthetic skies over a flat ground);
+    cached (the cache name holds the panorama list)."""
     H, W = dome_hw
-    cache = Path(cache_dir or default_cache_dir()) / f"crop_views_v{CACHE_VERSION}_s{seed}_{H}x{W}_n{n}.npz"
-    chunks = [(seed, a, min(a + 100, n), H, W, str(hdri_dir)) for a in range(0, n, 100)]
+    tag = "" if tuple(panoramas) == TRAIN_PANORAMAS else "_p" + hashlib.sha256(",".join(panoramas).encode()).hexdigest()[:8]
+    cache = Path(cache_dir or default_cache_dir()) / f"crop_views_v{CACHE_VERSION}_s{seed}_{H}x{W}_n{n}{tag}.npz"
+    chunks = [(seed, a, min(a + 100, n), H, W, str(hdri_dir), tuple(panoramas)) for a in range(0, n, 100)]
     views = _cached_views(cache, _crop_chunk, chunks, workers, log, f"{n} panorama and synthetic-sky crops")
     return views[0::2], views[1::2]
 
@@ -384,21 +406,36 @@ def flip_view(v: View) -> View:
     K[0, 1] = -K[0, 1]
     Fc, Fh = np.diag([-1.0, 1.0, 1.0]), np.diag([1.0, -1.0, 1.0])
     sun = None if v.sun_dir_heading is None else Fh @ v.sun_dir_heading
-    return View(np.ascontiguousarray(v.ldr[:, ::-1]), K, Fh @ v.R_heading_from_cam @ Fc,
-                np.ascontiguousarray(v.dome[:, ::-1]), v.visibility, sun)
+    dome = None if v.dome is None else np.ascontiguousarray(v.dome[:, ::-1])
+    return View(np.ascontiguousarray(v.ldr[:, ::-1]), K, Fh @ v.R_heading_from_cam @ Fc, dome, v.visibility, sun)
 
 
-def views_batch(views: list[View]) -> dict[str, np.ndarray]:
+def views_batch(views: list[View], dome_hw: tuple[int, int] | None = None) -> dict[str, np.ndarray]:
     """Network tensors (numpy) of views: ``ldr`` (B, 3, h, w), ``rays`` (B, 3, h, w), ``dome_ldr``, ``log_hdr``
-    (B, 3, H, W), ``dir``, ``log_int`` (B, 3) peak targets, ``vis`` (B,)."""
+    (B, 3, H, W), ``dir``, ``log_int`` (B, 3) peak targets, ``vis`` (B,), ``has_dome`` (B,) 1 where the view
+    has a sky dome.  Real photos (``dome`` None) get zero dome tensors and ``dir`` = their ``sun_dir_heading``;
+    ``dome_hw`` gives the dome size when no view of the batch has one."""
     h, w = VIEW_SIZE
     ldr, rays = [], []
     for v in views:
         img, K = (v.ldr, v.K) if v.ldr.shape[:2] == (h, w) else resize_view(v.ldr, v.K, h, w)
         ldr.append(img.astype(np.float32).transpose(2, 0, 1) / 255.0)
         rays.append(view_rays(K, v.R_heading_from_cam, h, w))
-    out = dome_batch([v.dome for v in views])
+    has = np.array([v.dome is not None for v in views])
+    shape = next((v.dome.shape for v in views if v.dome is not None), None)
+    if shape is None:
+        if dome_hw is None:
+            raise ValueError("views_batch: no view has a sky dome; pass dome_hw")
+        shape = (*dome_hw, 3)
+    blank = np.full(shape, 1e-3, np.float32)
+    out = dome_batch([v.dome if v.dome is not None else blank for v in views])
+    for i in np.nonzero(~has)[0]:
+        if views[i].sun_dir_heading is None:
+            raise ValueError(f"views_batch: view {i} has neither a dome nor a sun direction")
+        out["dir"][i] = views[i].sun_dir_heading
+        out["log_int"][i] = 0.0
     out.update(ldr=np.ascontiguousarray(np.stack(ldr)), rays=np.ascontiguousarray(np.stack(rays)),
-               vis=np.array([v.visibility for v in views], np.float32), dome_ldr=out.pop("ldr"))
+               vis=np.array([v.visibility for v in views], np.float32), dome_ldr=out.pop("ldr"),
+               has_dome=has.astype(np.float32))
     return out
 

@@ -30,7 +30,8 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from ..core import atomic_path, write_json_atomic
+from ..core import InputError, atomic_path, read_image_rgb, write_json_atomic
+from ..lighting.skynet.inputs import VIEW_SIZE
 from .data import (
     PANORAMA_SUN_VISIBILITY,
     TRAIN_PANORAMAS,
@@ -42,12 +43,14 @@ from .data import (
     dome_batch,
     flip_view,
     expose_dome,
+    panorama_visibility,
     load_panoramas,
     panorama_view,
     street_view_pool,
     synthetic_sky_pool,
     views_batch,
 )
+from .real import HELDOUT_PANORAMAS, TRAIN_KEYFRAMES, TRAIN_PANORAMAS_V3, jitter_photo, photo_view, street_photos
 from ..lighting.skynet.dome import angle_deg, find_peak, panorama_to_dome
 from ..lighting.skynet.model import LightNet, LightNetConfig, SkyModel, SkyNetConfig, count_parameters
 from ..lighting.skynet.weights import (
@@ -100,8 +103,23 @@ class LightTrainConfig(TrainConfig):
     lr: float = 2e-3
     n_streets: int = 600  # x 2 rendered views
     n_crops: int = 3000  # half real-panorama crops, half synthetic-sky crops
-    mix: tuple[float, float, float] = (0.5, 0.25, 0.25)  # street renders, real panorama crops, synthetic sky crops
+    mix: tuple[float, ...] = (0.5, 0.25, 0.25, 0.0)  # street renders, panorama crops, synthetic sky crops, real photos
     sky_weights: str | None = None
+    init_weights: str | None = None  # fine-tune from these image-predictor weights (None: from scratch)
+    train_panoramas: tuple[str, ...] = TRAIN_PANORAMAS  # panoramas the crops are cut from
+    val_panoramas: tuple[str, ...] = VAL_PANORAMAS  # logged during training (never used to choose anything)
+    real_dataroot: str | None = None  # nuScenes folder of the real street photos (mix[3] > 0)
+    real_keyframes: tuple[int, ...] = TRAIN_KEYFRAMES  # keyframes of the dev scene trained on
+    version: int = LIGHT_VERSION  # written into the weights file
+
+
+# The shipped image predictor v3: v2 fine-tuned on the dev scene's training keyframes, crops of 11 panoramas
+# (the 4 of v2 + 7 of the 11 new ones) and v2's synthetic pools (see MODEL_CARD.md).
+LIGHT_V3 = LightTrainConfig(
+    steps=1600, batch=16, lr=5e-4, val_every=400, n_streets=150, mix=(0.25, 0.3, 0.1, 0.35),
+    init_weights=None,  # v2's weights file (git history: e6b26cc augment/lighting/skynet/weights/light_model_v2.pt)
+    train_panoramas=TRAIN_PANORAMAS_V3, val_panoramas=HELDOUT_PANORAMAS,
+    real_dataroot=str(default_hdri_dir().parent / "nuscenes-seq"), version=3)
 
 
 def _config_hash(cfg) -> str:
@@ -110,9 +128,11 @@ def _config_hash(cfg) -> str:
 
 
 def _lr(cfg_lr: float, step: int, steps: int, warmup: int = 30) -> float:
+    """Learning rate at ``step``: linear warm-up, then cosine decay to 2 %.  A Python float: a numpy scalar in the
+    optimiser state would make the checkpoint unreadable with ``torch.load(weights_only=True)``."""
     if step < warmup:
-        return cfg_lr * (step + 1) / warmup
-    return cfg_lr * (0.02 + 0.98 * 0.5 * (1 + np.cos(np.pi * min(step / max(steps, 1), 1.0))))
+        return float(cfg_lr * (step + 1) / warmup)
+    return float(cfg_lr * (0.02 + 0.98 * 0.5 * (1 + np.cos(np.pi * min(step / max(steps, 1), 1.0)))))
 
 
 def _angular_l1(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
@@ -284,50 +304,87 @@ def soft_direction_targets(target: torch.Tensor, bin_dirs: torch.Tensor, bin_ome
 
 @dataclass
 class LightBatches:
-    """Random batches of views for the image predictor from three pools (street renders, real-panorama
-    crops, synthetic-sky crops) mixed by ``mix``; each view is mirrored with probability 1/2."""
+    """Random batches of views for the image predictor from up to four pools (street renders, real-panorama
+    crops, synthetic-sky crops, real street photos) mixed by ``mix``; each view is mirrored with probability
+    1/2, and a real photo is first randomly cropped and re-exposed (:func:`.real.jitter_photo`)."""
 
-    pools: tuple[list, list, list]
-    mix: tuple[float, float, float]
+    pools: tuple[list, ...]
+    mix: tuple[float, ...]
+    dome_hw: tuple[int, int] = (32, 128)
 
     def batch(self, n: int, rng: np.random.Generator) -> dict[str, np.ndarray]:
         p = np.array([m if len(pool) else 0.0 for m, pool in zip(self.mix, self.pools)], dtype=np.float64)
         p = p / p.sum()
         views = []
         for _ in range(n):
-            pool = self.pools[int(rng.choice(3, p=p))]
-            v = pool[int(rng.integers(len(pool)))]
+            k = int(rng.choice(len(p), p=p))
+            v = self.pools[k][int(rng.integers(len(self.pools[k])))]
+            if k == 3:
+                v = jitter_photo(v, rng, VIEW_SIZE)
             views.append(flip_view(v) if rng.uniform() < 0.5 else v)
-        return views_batch(views)
+        return views_batch(views, self.dome_hw)
 
 
 def light_losses(net: LightNet, sky: SkyModel, b: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
-    """The image predictor's loss terms on one batch (see module doc)."""
+    """The image predictor's loss terms on one batch (see module doc).  Real photos (``has_dome`` 0) have
+    only a sun: their direction is supervised (L1 and cross-entropy, whatever the visibility: the ephemeris
+    knows it) and their visibility; the intensity, latent and dome terms skip them."""
     o = net(b["ldr"], b["rays"])
+    has = b["has_dome"] if "has_dome" in b else torch.ones_like(b["vis"])
+    n_dome = has.sum().clamp(min=1.0)
     with torch.no_grad():
         _, _, latent_t = sky.encoder(b["dome_ldr"])
-    sunny = (b["vis"] > SUNNY_VISIBILITY).float()
+    sunny = ((b["vis"] > SUNNY_VISIBILITY) | (has < 0.5)).float()
     l_dir = (_angular_l1(o["dir"], b["dir"]) * sunny).sum() / sunny.sum().clamp(min=1.0)
     q = soft_direction_targets(b["dir"], net.bin_dirs, net.bin_omega)
     l_ce = -(q * o["dir_logp"]).sum(dim=1).mean()
     l_vis = F.binary_cross_entropy_with_logits(o["vis_logit"], b["vis"])
-    l_int = ((o["log_int"] - b["log_int"]) ** 2).mean()
-    l_lat = (o["latent"] - latent_t).abs().mean()
+    l_int = (((o["log_int"] - b["log_int"]) ** 2).mean(dim=1) * has).sum() / n_dome
+    l_lat = ((o["latent"] - latent_t).abs().mean(dim=1) * has).sum() / n_dome
     y = sky.decoder(o["log_int"], o["dir"], o["latent"])
-    l_hdr = ((y - b["log_hdr"]) ** 2).mean()
+    l_hdr = (((y - b["log_hdr"]) ** 2).mean(dim=(1, 2, 3)) * has).sum() / n_dome
     total = l_dir + l_ce + l_vis + 0.25 * l_int + 0.5 * l_lat + l_hdr
     return {"total": total, "dir": l_dir, "ce": l_ce, "vis": l_vis, "int": l_int, "lat": l_lat, "hdr": l_hdr}
+
+
+def real_photo_pool(dataroot: str | Path | None, keyframes: tuple[int, ...], cache_dir: str | Path, log=print) -> list:
+    """Training views (:func:`.real.photo_view`) of the dev scene's ``keyframes`` with ephemeris sun labels and
+    shadow-evidence visibilities; cached as one ``.npz`` (outside the repository: the images are CC BY-NC-SA)."""
+    from .data import View
+    from .real import DEV_SCENE
+
+    if dataroot is None or not Path(dataroot).is_dir():
+        raise InputError(f"{dataroot}: real street photos folder not found (the nuScenes dev scene; set real_dataroot)")
+    tag = hashlib.sha256(json.dumps([str(Path(dataroot).resolve()), list(keyframes), "control-v1"]).encode()).hexdigest()[:10]
+    cache = Path(cache_dir) / f"real_photos_{DEV_SCENE}_{tag}.npz"
+    if cache.is_file():
+        with np.load(cache) as z:
+            ldr, K, R, vis, sun = (z[k] for k in ("ldr", "K", "R", "vis", "sun"))
+        return [View(ldr[i], K[i], R[i], None, float(vis[i]), sun[i]) for i in range(len(vis))]
+    log(f"reading {len(keyframes)} keyframes of {DEV_SCENE} (sun labels, object shadows) -> {cache}")
+    photos = street_photos(dataroot, keyframes=keyframes, shadows=True)
+    views = [photo_view(p, read_image_rgb(p.image_path)) for p in photos]
+    cache.parent.mkdir(parents=True, exist_ok=True)
+    with atomic_path(cache) as tmp:
+        with open(tmp, "wb") as f:
+            np.savez(f, ldr=np.stack([v.ldr for v in views]), K=np.stack([v.K for v in views]),
+                     R=np.stack([v.R_heading_from_cam for v in views]),
+                     vis=np.array([v.visibility for v in views], np.float32),
+                     sun=np.stack([v.sun_dir_heading for v in views]),
+                     contrast=np.array([np.nan if p.shadow_contrast is None else p.shadow_contrast for p in photos]))
+    return views
 
 
 def light_validation(net: LightNet, panoramas: dict[str, np.ndarray], dome_hw: tuple[int, int], seed: int = 12345,
                      per_pano: int = 8) -> dict:
     """Sun-direction error (deg) on fixed random crops of ``panoramas`` whose sun is visible."""
     rng = np.random.default_rng(seed)
+    visibility = panorama_visibility()
     errs = []
     net.eval()
     with torch.no_grad():
         for name, pano in panoramas.items():
-            if PANORAMA_SUN_VISIBILITY[name] < 0.5:
+            if visibility[name] < 0.5:
                 continue
             views = [panorama_view(pano, 1.0, rng, dome_hw) for _ in range(per_pano)]
             b = views_batch(views)
@@ -349,14 +406,25 @@ def train_light(cfg: LightTrainConfig, log=print) -> dict:
         p.requires_grad_(False)
     dome_hw = (sky.cfg.height, sky.cfg.width)
     t_data = time.perf_counter()
-    val_panos = load_panoramas(hdri, VAL_PANORAMAS)
-    street = street_view_pool(cfg.n_streets, cfg.seed, dome_hw, cache, workers=cfg.threads, log=log) if cfg.mix[0] > 0 else []
-    pano_crops, sky_crops = crop_view_pool(cfg.n_crops, cfg.seed, dome_hw, hdri, cache, workers=cfg.threads, log=log)
+    val_panos = load_panoramas(hdri, cfg.val_panoramas)
+    mix = tuple(cfg.mix) + (0.0,) * (4 - len(cfg.mix))
+    street = street_view_pool(cfg.n_streets, cfg.seed, dome_hw, cache, workers=cfg.threads, log=log) if mix[0] > 0 else []
+    pano_crops, sky_crops = crop_view_pool(cfg.n_crops, cfg.seed, dome_hw, hdri, cache, workers=cfg.threads, log=log,
+                                           panoramas=tuple(cfg.train_panoramas))
+    photos = real_photo_pool(cfg.real_dataroot, tuple(cfg.real_keyframes), cache, log) if mix[3] > 0 else []
     t_data = time.perf_counter() - t_data
-    data = LightBatches((street, pano_crops, sky_crops), cfg.mix)
-    net_cfg = LightNetConfig()
-    net = LightNet(net_cfg)
-    log(f"image predictor: {count_parameters(net)} parameters, {len(street)} street views, {cfg.steps} steps of {cfg.batch}")
+    data = LightBatches((street, pano_crops, sky_crops, photos), mix, dome_hw)
+    if cfg.init_weights:
+        init = cfg.init_weights
+        init = packaged_weights(init.removeprefix("packaged:")) if init.startswith("packaged:") else Path(init)
+        net = load_light_model(init).train()
+        net_cfg = net.cfg
+        log(f"fine-tuning {init}")
+    else:
+        net_cfg = LightNetConfig()
+        net = LightNet(net_cfg)
+    log(f"image predictor: {count_parameters(net)} parameters, {len(street)} street views, {len(pano_crops)} panorama "
+        f"crops, {len(photos)} real photos, {cfg.steps} steps of {cfg.batch}")
     history, train_s = _optimise(
         net, cfg, rng, _Checkpoint(cache / f"ckpt_light_{_config_hash(cfg)}.pt"),
         lambda: {k: _t(v) for k, v in data.batch(cfg.batch, rng).items()}, lambda step, b: light_losses(net, sky, b),
@@ -366,11 +434,11 @@ def train_light(cfg: LightTrainConfig, log=print) -> dict:
     report = {
         "kind": "light", "config": asdict(cfg), "architecture": net_cfg.to_dict(), "parameters": count_parameters(net),
         "train_time_s": train_s, "data_time_s": t_data, "threads": cfg.threads, "street_views": len(street),
-        "train_panoramas": list(TRAIN_PANORAMAS), "val_panoramas": list(VAL_PANORAMAS),
+        "real_photos": len(photos), "train_panoramas": list(cfg.train_panoramas), "val_panoramas": list(cfg.val_panoramas),
         "val": light_validation(net, val_panos, dome_hw), "history": history, "torch": torch.__version__,
     }
     out = Path(cfg.out) if cfg.out else packaged_weights(LIGHT_WEIGHTS)
-    save_weights(out, net, "light", LIGHT_VERSION, net_cfg.to_dict(), {k: report[k] for k in report if k != "history"})
+    save_weights(out, net, "light", cfg.version, net_cfg.to_dict(), {k: report[k] for k in report if k != "history"})
     write_json_atomic(cache / f"report_light_{_config_hash(cfg)}.json", report)
     log(f"wrote {out} ({out.stat().st_size / 1e6:.2f} MB) after {train_s / 60:.1f} min")
     return report
