@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import threading
 import time
+from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -125,6 +126,24 @@ def get_models(sky_weights: str | Path | None = None, light_weights: str | Path 
             torch.set_grad_enabled(True)
             _models[key] = (load_sky_model(sky_weights), load_light_model(light_weights))
         return _models[key]
+
+
+@contextmanager
+def default_models(models):
+    """Within the block, :func:`get_models` without arguments (what the lighting front door uses) returns
+    ``models`` = (sky model, image predictor): e.g. to measure other weights through the product path."""
+    key = (str(None), str(None))
+    with _lock:
+        saved = _models.get(key)
+        _models[key] = models
+    try:
+        yield models
+    finally:
+        with _lock:
+            if saved is None:
+                _models.pop(key, None)
+            else:
+                _models[key] = saved
 
 
 def encode_dome(dome_hdr: np.ndarray, sky_model=None) -> SkyVector:
