@@ -68,7 +68,9 @@ from streetaug.augment.lighting.exposure import auto_exposure_ev  # noqa: E402
 from streetaug.augment.lighting.levels import L3_GRID  # noqa: E402
 from streetaug.augment.lighting.light import DistantLight  # noqa: E402
 from streetaug.augment.lighting.volume import sample_world_equirect  # noqa: E402
-from streetaug.augment.evaluation.metrics import env_log_error, psnr_db  # noqa: E402
+from streetaug.augment.evaluation.metrics import env_log_error  # noqa: E402
+from streetaug.augment.evaluation.novel_view import psnr, si_psnr  # noqa: E402
+from streetaug.augment.lighting.predicted_view import view_rays  # noqa: E402
 from streetaug.augment.scenegen.ground_truth import GroundTruthScene, ground_truth_light, read_ground_truth  # noqa: E402
 from streetaug.augment.scenegen.make import SAMPLE_SCENES  # noqa: E402
 from streetaug.datasets.bundled import bundled_dataroot  # noqa: E402
@@ -115,24 +117,6 @@ def sun_sky_ratio(light: DistantLight, up_cam: np.ndarray) -> float:
     e = irradiance(DistantLight(light.envmap, None), up_cam[None])[0]
     sun = 0.0 if light.sun is None else float(luminance(light.sun.irradiance_rgb)) * max(float(light.sun.direction @ up_cam), 0.0)
     return sun / max(float(luminance(e)), 1e-12)
-
-
-def psnr(a: np.ndarray, b: np.ndarray) -> float:
-    """PSNR (dB) of images in [0, 1]."""
-    return psnr_db(a, b, peak=1.0)
-
-
-def si_psnr(pred: np.ndarray, gt: np.ndarray) -> float:
-    s = float((pred * gt).sum() / max(float((pred * pred).sum()), 1e-12))
-    return psnr(np.clip(s * pred, 0.0, 1.0), gt)
-
-
-def view_rays(view, width: int = NOVEL_W) -> tuple[np.ndarray, int]:
-    """Camera-frame rays (h * width, 3) through the pixel centres of the view shrunk to ``width``, and h."""
-    H, W = view.height, view.width
-    h = int(round(H * width / W))
-    u, v = np.meshgrid((np.arange(width) + 0.5) * W / width - 0.5, (np.arange(h) + 0.5) * H / h - 0.5)
-    return pixel_rays(view.K, np.stack([u.ravel(), v.ravel()], 1)), h
 
 
 def sources_mean_ldr(sample, sources: list[str]) -> float:

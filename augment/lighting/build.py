@@ -37,7 +37,7 @@ from scipy.optimize import nnls
 
 from ...datasets.sample import LidarSweep
 from ..core import transform_points
-from .fill import lateral_offsets_m, street_axis_xy, street_extrusion
+from .fill import UNSEEN_KEEP, lateral_offsets_m, mean_colour_radiance, shrink_unseen, street_axis_xy, street_extrusion
 from .observe import ViewObservation
 from .volume import CH_ALPHA, CH_AXIS, CH_COLOR, CH_SIGMA, N_CHANNELS, HybridLighting, LogGrid
 
@@ -287,10 +287,12 @@ def surface_lighting(grid: LogGrid, occ: np.ndarray, surface: np.ndarray, normal
 
 
 def shade_surfaces(grid: LogGrid, surf: Surfaces, obs_rgb: np.ndarray, light: DistantSun, ground_albedo: float,
-                   ego_forward: np.ndarray | None, stats: dict) -> np.ndarray:
+                   ego_forward: np.ndarray | None, stats: dict, anchor_rgb: np.ndarray | None = None,
+                   keep: float = UNSEEN_KEEP) -> np.ndarray:
     """(S, 3) radiance of the surfaces: the shading model fitted per class, then the street prior (see .fill):
     the materials of the observed surfaces continue along the street; an unobserved surface keeps its own
-    shading (sun, shadow, sky) times the observed/shaded ratio of its street cell."""
+    shading (sun, shadow, sky) times the observed/shaded ratio of its street cell, shrunk towards the seen
+    mean colour ``anchor_rgb`` (:func:`.fill.shrink_unseen`, keeping ``keep`` of its log-radiance) when given."""
     Z = grid.shape[2]
     s_idx, obs_s, direct, sky_view = surf.idx, surf.observed, surf.direct, surf.sky_view
     shaded = np.zeros((len(s_idx), 3))
@@ -312,6 +314,9 @@ def shade_surfaces(grid: LogGrid, surf: Surfaces, obs_rgb: np.ndarray, light: Di
                                 STREET_PRIOR_WEIGHT, Z)
         shaded[unobs] *= sums[:, :3] / np.maximum(sums[:, 3:], 1e-9)
         stats["street_axis_xy"] = axis_xy.tolist()
+    if anchor_rgb is not None:  # what no camera saw: towards the seen mean colour (.fill.shrink_unseen)
+        shaded[~obs_s] = shrink_unseen(shaded[~obs_s], anchor_rgb, keep)
+        stats["unseen_keep"] = float(keep)
     return shaded
 
 
@@ -346,7 +351,8 @@ def assemble_params(grid: LogGrid, occ: np.ndarray, obs: ObservedVoxels, surf: S
 
 
 def build_volume(grid: LogGrid, observations: list[ViewObservation], lidar_points_vol: np.ndarray | None,
-                 light: DistantSun, sky_world: np.ndarray, ground_albedo: float = 0.15) -> tuple[torch.Tensor, dict]:
+                 light: DistantSun, sky_world: np.ndarray, ground_albedo: float = 0.15,
+                 unseen_keep: float = UNSEEN_KEEP) -> tuple[torch.Tensor, dict]:
     """VSG parameters (X, Y, Z, 8) float32 tensor of a scene (see module doc), and build statistics."""
     stats: dict = {}
     obs = observed_voxels(grid, observations)
@@ -355,7 +361,9 @@ def build_volume(grid: LogGrid, observations: list[ViewObservation], lidar_point
     surface, normal = surfaces_and_normals(grid, occ)
     surf = surface_lighting(grid, occ, surface, normal, obs.observed, light, sky_world)
     ego_forward = next((o.ego_forward for o in observations if o.ego_forward is not None), None)
-    shaded = shade_surfaces(grid, surf, obs.obs_rgb, light, ground_albedo, ego_forward, stats)
+    seen = [o.radiance for o in observations if len(o.radiance)]
+    anchor = mean_colour_radiance(np.concatenate(seen)) if seen else None
+    shaded = shade_surfaces(grid, surf, obs.obs_rgb, light, ground_albedo, ego_forward, stats, anchor, unseen_keep)
     params = assemble_params(grid, occ, obs, surf, shaded)
     stats["surface_voxels"] = int(len(surf.idx))
     stats["sun_shadowed_surface_fraction"] = float((surf.tau_sun < 0.5).mean()) if len(surf.tau_sun) else 0.0

@@ -17,6 +17,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..core import hdr_to_ldr, ldr_to_hdr
+
 
 def street_axis_xy(forward_vol: np.ndarray | None) -> np.ndarray:
     """Unit (2,) xy direction of the street: the horizontal part of the ego's forward axis (3,) in the volume
@@ -69,3 +71,25 @@ def street_extrusion(lat_obs_m: np.ndarray, z_obs: np.ndarray, values_obs: np.nd
     win = cum[hi + 1, zq] - cum[lo, zq]  # (Q, 1 + C)
     fb = np.asarray(fallback_q, dtype=np.float64).reshape(len(lat_q), v.shape[1])
     return (win[:, 1:] + prior_weight * fb) / (win[:, 0] + prior_weight)[:, None]
+
+
+UNSEEN_KEEP = 0.25  # what no camera saw: this much of the model's log-radiance, the rest the seen mean colour
+# (fitted by benchmarks/fit_unseen_prior.py on the dev scene's even keyframes; see there)
+
+
+def mean_colour_radiance(radiance: np.ndarray) -> np.ndarray:
+    """(3,) the linear radiance the contract's response records as the mean colour of radiance samples (N, 3):
+    the best constant guess of a view of them (the mean *linear* radiance overweights the bright ones)."""
+    r = np.asarray(radiance, dtype=np.float64).reshape(-1, 3)
+    if not len(r):
+        return np.zeros(3)
+    return np.maximum(ldr_to_hdr(np.clip(hdr_to_ldr(r), 0.0, 1.0).mean(axis=0)), 1e-9)
+
+
+def shrink_unseen(radiance: np.ndarray, anchor_rgb: np.ndarray, keep: float = UNSEEN_KEEP) -> np.ndarray:
+    """Radiance (..., 3) of unseen directions or surfaces shrunk towards ``anchor_rgb`` (3,) in log space:
+    ``exp(keep log L + (1 - keep) log anchor)``: a model's guess of what no camera saw is uncertain, and the seen
+    mean colour is the guess with the least expected error; ``keep`` = 1 leaves the model as is."""
+    rad = np.maximum(np.asarray(radiance, dtype=np.float64), 1e-12)
+    anchor = np.maximum(np.asarray(anchor_rgb, dtype=np.float64), 1e-12)
+    return np.exp(keep * np.log(rad) + (1.0 - keep) * np.log(anchor))

@@ -13,6 +13,8 @@ nothing and takes the image's radiance everywhere it saw something:
   (gravity up; the street's symmetry: what stands on one side at an elevation stands on the other),
   interpolated between bands; above the highest band seen, the ratio of the seen sky (the zenith is sky),
   below the lowest, the lowest band's ratio (the road continues);
+* below the highest elevation seen, the unseen cells are then shrunk towards the seen mean colour
+  (:func:`.fill.shrink_unseen`: the band statistics of one street are a noisy guess of another direction's);
 * the two are blended over ``BLEND_DEG`` around what was seen (normalised convolution of the log ratio).
 
 Radiance is on the image's scale (contract response, EV 0), like the model it corrects. The sun (a separate
@@ -27,6 +29,7 @@ from dataclasses import dataclass
 
 from ..core import camera_dir_to_lonlat, camera_envmap_directions, check_shape, luminance
 from .evidence import SATURATED_LDR, PreparedImage, image_sky_mask
+from .fill import UNSEEN_KEEP, mean_colour_radiance, shrink_unseen
 from .skydome import blend_observed
 
 BAND_DEG = 4.0  # elevation bands of the row correction
@@ -90,7 +93,7 @@ def band_log_gains(log_ratio_cells: np.ndarray, cell_elev_deg: np.ndarray, all_e
 
 
 def image_corrected_envmap(model_envmap: np.ndarray, pixels: SeenPixels | list[SeenPixels],
-                           up_cam: np.ndarray) -> tuple[np.ndarray, dict]:
+                           up_cam: np.ndarray, keep: float = UNSEEN_KEEP) -> tuple[np.ndarray, dict]:
     """The model map (H, W, 3) (camera-frame equirect, image scale, sun excluded) corrected by the image.
 
     Args:
@@ -99,6 +102,8 @@ def image_corrected_envmap(model_envmap: np.ndarray, pixels: SeenPixels | list[S
             instant give one map); the sky pixels' image/model ratio continues above the highest seen band (the
             zenith is sky).
         up_cam: (3,) unit gravity up, the map's camera frame.
+        keep: unseen cells below the highest seen elevation keep this much of the corrected model's
+            log-radiance, the rest is the seen mean colour (:func:`.fill.shrink_unseen`).
     Returns:
         (envmap (H, W, 3) float32, stats: seen fraction of the sphere, band count, mean gain).
     """
@@ -138,6 +143,10 @@ def image_corrected_envmap(model_envmap: np.ndarray, pixels: SeenPixels | list[S
     gains = band_log_gains(log_ratio, elev[unclipped], elev.reshape(-1), sky_gain)
     gains = np.clip(gains, -MAX_LOG_GAIN, MAX_LOG_GAIN).reshape(H, W, 3)
     corrected = model * np.exp(gains)
+    # below the highest elevation seen, what no camera saw is shrunk towards the seen mean colour (.fill); the
+    # sky above it stays the corrected model
+    below_sky = (elev <= elev[unclipped].max())[..., None]
+    corrected = np.where(below_sky, shrink_unseen(corrected, mean_colour_radiance(rad), keep), corrected)
     out = blend_observed(corrected, unclipped, mean_obs, BLEND_DEG)
     lum = np.maximum(luminance(out), 1e-12)
     out = out * np.maximum(1.0, floor / lum)[..., None]

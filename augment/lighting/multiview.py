@@ -31,6 +31,7 @@ from ..core import (
 )
 from .build import DistantSun, build_volume, lidar_points_in_volume, structure_heights
 from .exposure import exposure_ratios
+from .fill import mean_colour_radiance
 from .levels import L2_GRID, L3_GRID, HeightMap, choose_level, predicted_errors, region_points
 from .observe import ViewObservation, observe_view, restrict_to_grid
 from .parametric import DEFAULT_TURBIDITY, GROUND_ALBEDO, ViewInputs, l0_estimate
@@ -143,7 +144,10 @@ def build_hybrid(ref_est: LightingEstimate, T_vol_from_cam: np.ndarray, observat
     """Sky dome (model corrected by the images), the sun (L1's, following the dome's correction) and the volume."""
     t = time.perf_counter()
     model = sky_model_world(ref_est, T_vol_from_cam, DOME_HEIGHT, DOME_WIDTH)
-    dome, dome_stats = build_sky_dome(model, observations)
+    seen = [o.radiance for o in observations if len(o.radiance)] + [o.far_radiance for o in observations
+                                                                    if len(o.far_radiance)]
+    anchor = mean_colour_radiance(np.concatenate(seen)) if seen else None
+    dome, dome_stats = build_sky_dome(model, observations, anchor_rgb=anchor)
     timing["sky_dome"] = time.perf_counter() - t
     t = time.perf_counter()
     out = {"grid": grid.to_json(), "sky_dome": dome_stats}

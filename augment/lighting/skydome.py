@@ -12,6 +12,7 @@ import cv2
 import numpy as np
 
 from ..core import camera_dir_to_lonlat, check_shape, luminance, sample_equirect
+from .fill import UNSEEN_KEEP, shrink_unseen
 from .observe import ViewObservation
 from .sky import sky_radiance
 from .volume import world_envmap_directions
@@ -88,12 +89,15 @@ def blend_observed(corrected: np.ndarray, observed: np.ndarray, mean_obs: np.nda
 
 
 def build_sky_dome(model_world: np.ndarray, observations: list[ViewObservation],
-                   blur_deg: float = 12.0) -> tuple[np.ndarray, dict]:
+                   blur_deg: float = 12.0, anchor_rgb: np.ndarray | None = None,
+                   keep: float = UNSEEN_KEEP) -> tuple[np.ndarray, dict]:
     """Sky dome (H, W, 3) float32 (world convention, sun excluded): the model corrected by observed pixels at infinity.
 
     Args:
         model_world: (H, W, 3) sky model (+ ground below the horizon) on the reference scale.
         observations: their ``far_*`` pixels are used.
+        anchor_rgb: (3,) the seen mean colour's radiance: unseen directions below the highest seen far pixel are
+            shrunk towards it (:func:`.fill.shrink_unseen`, keeping ``keep``); None: no shrinking.
     Returns:
         (dome, stats) with the global sky correction (per channel) and the observed fraction of the dome.
     """
@@ -138,6 +142,10 @@ def build_sky_dome(model_world: np.ndarray, observations: list[ViewObservation],
         log_gain = _sky_log_gain(log_ratio, row[sel], lon[sel], view, len(observations), H, W)
     log_gain = np.clip(log_gain, np.log(0.1), np.log(10.0))
     corrected = model * np.where(upper[..., None], np.exp(log_gain), 1.0)
+    if anchor_rgb is not None:  # below the highest seen direction, what no camera saw: towards the seen mean
+        elev = np.arcsin(np.clip(world_envmap_directions(H, W)[..., 2], -1.0, 1.0))
+        below = (elev <= float(lat[~sat].max()) if (~sat).any() else np.zeros((H, W), bool))[..., None]
+        corrected = np.where(below, shrink_unseen(corrected, anchor_rgb, keep), corrected)
     dome = blend_observed(corrected, observed, mean_obs, blur_deg)
     lum = np.maximum(luminance(dome), 1e-12)
     dome = dome * np.maximum(1.0, floor / lum)[..., None]

@@ -49,12 +49,17 @@ def test_the_map_reproduces_the_image_from_the_camera_centre():
     assert 0.02 < stats["seen_fraction"] < 0.3
 
 
+def _behind(env, elev_deg):
+    """Radiance of a map straight behind the camera at an elevation (deg)."""
+    return DistantLight(env).radiance(
+        np.zeros((1, 3)), lonlat_to_camera_dir(np.array([np.pi]), np.radians(np.array([elev_deg]))))[0]
+
+
 def test_unseen_directions_follow_the_seen_elevation_bands():
     img, K = _image(), _K()
     work = prepare_image(img, K, UP)
-    env, _ = image_corrected_envmap(_model(), seen_pixels(work), UP)
-    behind = lambda elev_deg: DistantLight(env).radiance(  # noqa: E731
-        np.zeros((1, 3)), lonlat_to_camera_dir(np.array([np.pi]), np.radians(np.array([elev_deg]))))[0]
+    env, _ = image_corrected_envmap(_model(), seen_pixels(work), UP, keep=1.0)  # the bands alone, no shrinking
+    behind = lambda elev_deg: _behind(env, elev_deg)  # noqa: E731
     facade = ldr_to_hdr(np.array([70, 60, 50]) / 255.0)
     road = ldr_to_hdr(np.array([120, 120, 118]) / 255.0)
     sky = ldr_to_hdr(np.array([200, 210, 225]) / 255.0)
@@ -63,6 +68,26 @@ def test_unseen_directions_follow_the_seen_elevation_bands():
     assert np.allclose(behind(-40.0), road, rtol=0.25)
     assert np.allclose(behind(80.0), sky, rtol=0.25)
     assert behind(80.0)[2] > 3 * behind(0.0)[2]
+
+
+def test_unseen_directions_below_the_sky_shrink_towards_the_seen_mean_colour():
+    img, K = _image(), _K()
+    work = prepare_image(img, K, UP)
+    env0, _ = image_corrected_envmap(_model(), seen_pixels(work), UP, keep=0.0)
+    env_half, _ = image_corrected_envmap(_model(), seen_pixels(work), UP, keep=0.5)
+    env1, _ = image_corrected_envmap(_model(), seen_pixels(work), UP, keep=1.0)
+    mean_colour = ldr_to_hdr(img.reshape(-1, 3).mean(axis=0) / 255.0)
+    assert np.allclose(_behind(env0, 0.0), mean_colour, rtol=0.1)  # keep 0: the seen mean colour
+    assert np.allclose(_behind(env0, -40.0), mean_colour, rtol=0.1)
+    geo = np.sqrt(_behind(env0, 0.0) * _behind(env1, 0.0))  # keep 0.5: halfway in log
+    assert np.allclose(_behind(env_half, 0.0), geo, rtol=0.05)
+    # the zenith (above every seen elevation) is the sky's, whatever keep
+    assert np.allclose(_behind(env0, 80.0), _behind(env1, 80.0), rtol=1e-4)
+    # what was seen (away from the image's border, where the map's bilinear lookup mixes in unseen cells) is
+    # unchanged
+    rays = work.rays_cam[20:-20, 20:-20].reshape(-1, 3)[::97]
+    assert np.allclose(DistantLight(env0).radiance(np.zeros_like(rays), rays),
+                       DistantLight(env1).radiance(np.zeros_like(rays), rays), rtol=0.05, atol=1e-3)
 
 
 def test_clipped_pixels_are_lower_bounds():
