@@ -51,3 +51,17 @@ def luminance(rgb: np.ndarray) -> np.ndarray:
     """Rec. 709 luminance of linear RGB (..., 3) -> (...)."""
     rgb = np.asarray(rgb)
     return 0.2126 * rgb[..., 0] + 0.7152 * rgb[..., 1] + 0.0722 * rgb[..., 2]
+
+
+SATURATION_LDR = 0.97  # LDR values at or above this (any channel) are clipped
+
+
+def clipped_to_lower_bound(hdr: np.ndarray, ldr: np.ndarray) -> np.ndarray:
+    """Linear radiance (..., 3) with clipped pixels (``ldr`` (..., 3) in [0, 1], any channel >= ``SATURATION_LDR``)
+    set to the radiance where the response saturates: what a clipped pixel proves is "at least this bright".
+    The inverse response of an LDR 1.0 is the soft clip's far tail (~2.4x that level), not a measurement."""
+    hdr = np.asarray(hdr, dtype=np.float64)
+    clipped = np.asarray(ldr).max(axis=-1) >= SATURATION_LDR
+    floor = ldr_to_hdr(np.full(3, SATURATION_LDR))
+    return np.where(clipped[..., None], np.minimum(hdr, floor), hdr)
+

@@ -27,7 +27,7 @@ import numpy as np
 
 from dataclasses import dataclass
 
-from ..core import camera_dir_to_lonlat, camera_envmap_directions, check_shape, luminance
+from ..core import camera_dir_to_lonlat, camera_envmap_directions, check_shape, clipped_to_lower_bound, luminance
 from .evidence import SATURATED_LDR, PreparedImage, image_sky_mask
 from .fill import UNSEEN_KEEP, mean_colour_radiance, shrink_unseen
 from .skydome import blend_observed
@@ -66,7 +66,8 @@ def seen_pixels(work: PreparedImage, R_map_from_cam: np.ndarray | None = None, g
         rays = rays @ np.asarray(R_map_from_cam, np.float64).T
     clipped = work.ldr.reshape(-1, 3).max(axis=1) >= SATURATED_LDR
     is_sky = (image_sky_mask(work) if sky is None else np.asarray(sky, bool)).reshape(-1)
-    return SeenPixels(rays, work.hdr.reshape(-1, 3) * float(gain), clipped, is_sky)
+    rad = clipped_to_lower_bound(work.hdr.reshape(-1, 3), work.ldr.reshape(-1, 3))  # clipped: a lower bound
+    return SeenPixels(rays, rad * float(gain), clipped, is_sky)
 
 
 def band_log_gains(log_ratio_cells: np.ndarray, cell_elev_deg: np.ndarray, all_elev_deg: np.ndarray,

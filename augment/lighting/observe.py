@@ -16,7 +16,7 @@ import cv2
 import numpy as np
 
 from ...datasets.sample import CameraView
-from ..core import PinholeCamera, check_shape, ldr_uint8_to_hdr, transform_points
+from ..core import PinholeCamera, check_shape, clipped_to_lower_bound, ldr_uint8_to_hdr, transform_points
 from ..core.depth import densify_lidar_depth
 from .evidence import PreparedImage, downscale_image, image_sky_mask, prepare_image
 from .volume import LogGrid
@@ -126,7 +126,8 @@ def observe_view(view: CameraView, T_vol_from_cam: np.ndarray, exposure_ratio: f
         depth = canyon_depth(Ks, w, h, T_vol_from_cam)
     depth = np.where(sky, np.inf, depth)
     depth, capped_cols = extend_facades(depth, sky)
-    hdr = ldr_uint8_to_hdr(small).astype(np.float32) / np.float32(exposure_ratio)
+    # clipped pixels at the radiance where the response saturates (a lower bound), not its far tail
+    hdr = (clipped_to_lower_bound(ldr_uint8_to_hdr(small), small / 255.0) / exposure_ratio).astype(np.float32)
     ldr_max = small.max(axis=-1) / 255.0
     rays = PinholeCamera(Ks, w, h).rays(unit=False)  # z = 1
     near = np.isfinite(depth)
