@@ -103,9 +103,15 @@ def instant_estimates(per_view: dict[str, LightingEstimate], inputs: Sequence[Vi
                         sun=None if light.sun is None else replace(light.sun, irradiance_rgb=light.sun.irradiance_rgb * k))
         sun_dir = None if ref.sun_dir_cam is None else R @ ref.sun_dir_cam
         est = per_view[c]
+        fit, params = est.fit, dict(est.params)
+        if ref.fit is not None:  # the metadata says what the light is: the reference's sky on this exposure
+            own = est.fit
+            fit = replace(ref.fit, scale=float(ref.fit.scale * k), sky_sun_dir_cam=R @ np.asarray(ref.fit.sky_sun_dir_cam),
+                          up_cam=vi.up_cam, camera_height_m=own.camera_height_m if own is not None else vi.camera_height_m)
+            params = fit.to_json() | {"own_fit": None if own is None else own.to_json()}
         out[c] = replace(est, light_cam=light, sun_dir_cam=sun_dir, sun_source=ref.sun_source,
-                         sun_visibility=ref.sun_visibility,
-                         params=json_clean(dict(est.params) | {"image_envmap": stats, "exposure_ratio": k}),
+                         sun_visibility=ref.sun_visibility, fit=fit,
+                         params=json_clean(params | {"image_envmap": stats, "exposure_ratio": k}),
                          timing_s=dict(est.timing_s) | {"image_envmap": seconds},
                          reason=f"{ref.reason}; {note}" if c == ref_vi.view.channel else
                          f"{ref.reason}; {note}; exposure x{k:.3f} of {ref_vi.view.channel}")

@@ -146,7 +146,7 @@ def image_corrected_envmap(model_envmap: np.ndarray, pixels: SeenPixels | list[S
     corrected = model * np.exp(gains)
     # below the highest elevation seen, what no camera saw is shrunk towards the seen mean colour (.fill); the
     # sky above it stays the corrected model
-    below_sky = (elev <= elev[unclipped].max())[..., None]
+    below_sky = (elev <= np.percentile(elev[unclipped], 99.0))[..., None]  # robust top of what was seen
     corrected = np.where(below_sky, shrink_unseen(corrected, mean_colour_radiance(rad), keep), corrected)
     out = blend_observed(corrected, unclipped, mean_obs, BLEND_DEG)
     lum = np.maximum(luminance(out), 1e-12)

@@ -144,7 +144,9 @@ def build_sky_dome(model_world: np.ndarray, observations: list[ViewObservation],
     corrected = model * np.where(upper[..., None], np.exp(log_gain), 1.0)
     if anchor_rgb is not None:  # below the highest seen direction, what no camera saw: towards the seen mean
         elev = np.arcsin(np.clip(world_envmap_directions(H, W)[..., 2], -1.0, 1.0))
-        below = (elev <= float(lat[~sat].max()) if (~sat).any() else np.zeros((H, W), bool))[..., None]
+        # the top of what was seen: a high percentile, not the single highest pixel (noise must not move it)
+        top = float(np.percentile(lat[~sat], 99.0)) if (~sat).any() else -np.pi / 2
+        below = (elev <= top)[..., None]
         corrected = np.where(below, shrink_unseen(corrected, anchor_rgb, keep), corrected)
     dome = blend_observed(corrected, observed, mean_obs, blur_deg)
     lum = np.maximum(luminance(dome), 1e-12)

@@ -149,3 +149,17 @@ def test_auto_for_the_map_never_keeps_a_worse_level(sample):
     for lower in order[:k]:
         assert psnr[lower] <= psnr[order[order.index(lower) + 1]]
     assert est.reason.startswith("auto (map)")
+
+
+def test_pooled_metadata_matches_the_light(sample):
+    """Each camera's reported fit scale is the reference's times its exposure ratio (what its light carries)."""
+    sl = estimate_views_lighting([sample.cameras[c] for c in ("CAM_FRONT", "CAM_BACK", "CAM_FRONT_LEFT")],
+                                 sample.location, "L1", lidar=sample.lidar, boxes=sample.boxes)
+    ref = sl.per_view["CAM_FRONT"]
+    for c in ("CAM_BACK", "CAM_FRONT_LEFT"):
+        e = sl.per_view[c]
+        k = sl.exposure_ratio[c]
+        assert e.params["scale"] == pytest.approx(ref.params["scale"] * k, rel=1e-9)
+        assert e.fit.scale == pytest.approx(ref.fit.scale * k, rel=1e-9)
+        assert e.params["cloud_cover"] == ref.params["cloud_cover"]
+        assert "own_fit" in e.params
