@@ -535,7 +535,8 @@ def _view_row(image, K, sun_cam, models, product: bool) -> dict:
     return row
 
 
-def section_real_streets(models, product: bool = True, quick: bool = False) -> dict:
+def section_real_streets(models, product: bool = True, quick: bool = False,
+                         parts: tuple[str, ...] = ("streets", "one_north", "panoramas")) -> dict:
     """Single-image sun direction (no metadata) on real street views and on panoramas, for one set of weights.
 
     * ``street_test`` / ``street_train``: scene-0916 (``../shared/data/nuscenes-seq``), keyframes 27-40 (never
@@ -553,7 +554,7 @@ def section_real_streets(models, product: bool = True, quick: bool = False) -> d
 
     seq, one = D.default_hdri_dir().parent / "nuscenes-seq", D.default_hdri_dir().parent / "nuscenes-real"
     out: dict = {}
-    if seq.is_dir():
+    if seq.is_dir() and "streets" in parts:
         photos = R.street_photos(seq, shadows=False)
         train_labels = {}
         for p in photos:
@@ -570,7 +571,7 @@ def section_real_streets(models, product: bool = True, quick: bool = False) -> d
                            sun_elevation_deg=p.sun_elevation_deg, tilt_deg=_angle(p.up_cam, R.LEVEL_UP_CAM))
                 rows.append(row)
             out[key] = {"summary": _summary(rows), "views": rows}
-    if one.is_dir():
+    if one.is_dir() and "one_north" in parts:
         rows = []
         for p in R.street_photos(one, sample_tokens=(R.ONE_NORTH_SAMPLE,), shadows=False):
             row = _view_row(read_image_rgb(p.image_path), p.K, p.sun_dir_cam, models, product)
@@ -579,6 +580,8 @@ def section_real_streets(models, product: bool = True, quick: bool = False) -> d
         out["one_north"] = {"summary": _summary(rows), "views": rows}
     suns = R.panorama_sun(HDRI)
     for key, names, prod in (("pano_heldout", R.HELDOUT_PANORAMAS, product), ("pano_train", R.TRAIN_PANORAMAS_V3, False)):
+        if "panoramas" not in parts:
+            break
         rows = []
         for name in names:
             sun_w, vis = suns[name]
@@ -628,9 +631,16 @@ def run_real(args) -> dict:
     t0 = time.perf_counter()
     sky_model, net = get_models()
     res = {"machine": {"load_avg_start": os.getloadavg(), "torch_threads": 1}, "weights": {}}
-    runs = [("after", packaged_weights(LIGHT_WEIGHTS), (sky_model, net))]
+    after = getattr(args, "after_weights", None)
+    runs = [("after", after, (sky_model, load_light_model(after)))] if after else \
+        [("after", packaged_weights(LIGHT_WEIGHTS), (sky_model, net))]
     if args.before_weights is not None:
         runs.insert(0, ("before", args.before_weights, (sky_model, load_light_model(args.before_weights))))
+    for extra in getattr(args, "merge", None) or []:  # parts measured by another process (--real-parts)
+        other = json.loads(Path(extra).read_text())
+        for key in ("before", "after"):
+            if key in other:
+                res.setdefault(key, {}).update(other[key])
     if getattr(args, "before_from", None) is not None:
         earlier = json.loads(Path(args.before_from).read_text())
         res["before"] = earlier["after"]
@@ -639,7 +649,8 @@ def run_real(args) -> dict:
     for key, path, models in runs:
         meta = read_weights(path, "light")
         res["weights"][key] = {"file": Path(path).name, "version": meta.get("version")}
-        res[key] = section_real_streets(models, product=not args.no_product, quick=args.quick)
+        res[key] = res.get(key, {}) | section_real_streets(models, product=not args.no_product, quick=args.quick,
+                                        parts=tuple(args.real_parts.split(",")))
     for key in ("before", "after"):
         if key in res:
             for name, sec in res[key].items():
@@ -669,6 +680,12 @@ def main() -> None:
                     help="take section 8's 'before' from the 'after' of an earlier --real JSON (the run of the "
                          "previous weights) instead of re-measuring it")
     ap.add_argument("--no-product", action="store_true", help="section 8 without the (slow) front-door runs")
+    ap.add_argument("--after-weights", type=Path, default=None,
+                    help="section 8's 'after' with this image-predictor weights file (default: the shipped one)")
+    ap.add_argument("--real-parts", default="streets,one_north,panoramas",
+                    help="comma list of section 8's parts to measure (streets, one_north, panoramas)")
+    ap.add_argument("--merge", type=Path, nargs="*", default=None,
+                    help="--real JSON files of other parts (another process) merged into this one's result")
     args = ap.parse_args()
     if not (HDRI / "index.json").is_file():
         print(f"skipped: {HDRI} not found (the held-out panoramas are needed)")
