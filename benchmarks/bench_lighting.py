@@ -64,6 +64,11 @@ from streetaug.augment.core import (  # noqa: E402
     transform_points,
 )
 from streetaug.augment.lighting.api import estimate_lighting, estimate_sample_lighting, estimate_views_lighting  # noqa: E402
+
+try:  # the instant front door (absent in older revisions this script is compared with)
+    from streetaug.augment.lighting.api import estimate_instant_lighting  # noqa: E402
+except ImportError:  # pragma: no cover
+    estimate_instant_lighting = None
 from streetaug.augment.lighting.exposure import auto_exposure_ev  # noqa: E402
 from streetaug.augment.lighting.levels import L3_GRID  # noqa: E402
 from streetaug.augment.lighting.light import DistantLight  # noqa: E402
@@ -426,6 +431,16 @@ def speed_section(runs: int) -> dict:
                       "with_lidar_cpu_s_median": cpu_lidar, "chosen": [est.level, est2.level]}
         print(f"speed {level}: image-only {t_cli:.3f} s (cpu {cpu_cli:.3f}), with LiDAR {t_lidar:.3f} s "
               f"(cpu {cpu_lidar:.3f}) (chosen {est.level}/{est2.level})", flush=True)
+        if estimate_instant_lighting is not None:  # what predict-light --dataroot runs: the whole instant
+            def instant_path():
+                est = estimate_instant_lighting(sample, "CAM_FRONT", level, query, for_map=True)
+                est.light_at(query).to_envmap(128, 256)
+                return est
+            est3, t_inst, all_inst = timed(instant_path, runs)
+            out[level] |= {"instant_s_median": t_inst, "instant_runs": all_inst, "instant_cameras": len(sample.cameras),
+                           "instant_chosen": est3.level}
+            print(f"speed {level}: predict-light instant ({len(sample.cameras)} cameras, map-judged auto) "
+                  f"{t_inst:.3f} s (chosen {est3.level})", flush=True)
     return out
 
 

@@ -88,7 +88,7 @@ def _wall_colour_behind(axis_deg: float, ego_forward_deg: float | None) -> np.nd
     obs, lidar = _wall_observation(axis, fwd)
     sky = np.full((16, 32, 3), 0.05, np.float32)
     light = DistantSun(np.array([0.0, 0.6, 0.8]), np.array([1.0, 1.0, 1.0]), np.array([0.2, 0.2, 0.2]))
-    params, stats = build_volume(GRID, [obs], lidar, light, sky)
+    params, stats = build_volume(GRID, [obs], lidar, light, sky, unseen_keep=1.0)  # the street prior alone
     hy = HybridLighting(torch.from_numpy(sky), grid=GRID, params=params)
     across = np.array([-axis[1], axis[0]])
     p = np.array([np.r_[-20.0 * axis + 2.0 * across, h] for h in (1.2, 5.0)])
