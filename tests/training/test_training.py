@@ -212,7 +212,7 @@ def test_train_light_fine_tunes_with_real_photos(tmp_path, monkeypatch):
     net = load_light_model(tmp_path / "light.pt")
     # fine-tuned: started from init (close to it after 2 small steps), but moved
     p0, p1 = dict(net0.named_parameters()), dict(net.named_parameters())
-    diffs = [float((p1[k] - p0[k]).abs().max()) for k in p0]
+    diffs = [float((p1[k] - p0[k]).detach().abs().max()) for k in p0]
     assert max(diffs) > 0 and max(diffs) < 0.05
     from streetaug.augment.lighting.skynet.weights import read_weights
 
