@@ -66,9 +66,9 @@ def train_sky(seed, steps, batch, threads, out, cache_dir, hdri_dir, debug, n_sy
 @click.option("--n-streets", type=click.IntRange(min=1), default=None, help="Generated streets (2 views each).")
 @click.option("--sky-weights", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Sky model weights (default: the package's).")
-@click.option("--preset", type=click.Choice(["v2", "v3"]), default="v3", show_default=True,
-              help="v2: from scratch on synthetic streets and 4 panoramas; v3 (shipped): v2 fine-tuned with the "
-                   "real dev scene's training keyframes and 11 panoramas.")
+@click.option("--preset", type=click.Choice(["v2", "v3"]), default="v2", show_default=True,
+              help="v2 (shipped): from scratch on synthetic streets and 4 panoramas; v3 (measured, not shipped: "
+                   "see the model card): v2 fine-tuned with the real dev scene's training keyframes and 11 panoramas.")
 @click.option("--init-weights", type=click.Path(dir_okay=False, exists=True, path_type=Path), default=None,
               help="Weights to fine-tune from (v3 needs v2's: git show e6b26cc:augment/lighting/skynet/weights/"
                    "light_model_v2.pt > v2.pt).")
@@ -81,8 +81,8 @@ def train_light(seed, steps, batch, threads, out, cache_dir, hdri_dir, debug, n_
 
     \b
     Examples (1 thread):
-      streetaug train-light --preset v3 --init-weights v2.pt   # the shipped v3 (see the model card)
-      streetaug train-light --preset v2 --seed 0               # v2 (~30 min after rendering 1200 street views)
+      streetaug train-light --seed 0                           # the shipped v2 (~30 min + 1200 street renders)
+      streetaug train-light --preset v3 --init-weights v2.pt   # the v3 candidate of the model card (~32 min)
     """
     from dataclasses import replace
 

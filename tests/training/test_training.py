@@ -226,3 +226,10 @@ def test_learning_rate_is_a_python_float():
     for step in (0, 29, 30, 500, 999):
         assert type(_lr(1e-3, step, 1000)) is float
     assert _lr(1e-3, 30, 1000) > _lr(1e-3, 999, 1000) > 0
+
+
+def test_cli_train_light_v3_needs_the_weights_it_fine_tunes(tmp_path):
+    r = CliRunner().invoke(main, ["train-light", "--preset", "v3", "--steps", "1", "--cache", str(tmp_path),
+                                  "--out", str(tmp_path / "w.pt")])
+    assert r.exit_code == 2
+    assert "--init-weights" in r.output
