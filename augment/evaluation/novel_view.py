@@ -18,22 +18,15 @@ from __future__ import annotations
 
 from typing import Sequence
 
-import cv2
 import numpy as np
 
 from ...datasets.sample import CameraView
 from ..core import hdr_to_ldr
 from ..lighting.predicted_view import PREDICTED_WIDTH_PX as NOVEL_WIDTH_PX
+from ..lighting.predicted_view import observed_ldr as real_view
 from ..lighting.predicted_view import predicted_radiance
 from ..lighting.types import SampleLighting
 from .metrics import psnr_db
-
-
-def real_view(view: CameraView, width: int = NOVEL_WIDTH_PX) -> np.ndarray:
-    """The camera's real image (h, width, 3) in [0, 1], shrunk with an area filter."""
-    H, W = view.height, view.width
-    h = int(round(H * width / W))
-    return cv2.resize(np.asarray(view.image), (width, h), interpolation=cv2.INTER_AREA).astype(np.float64) / 255.0
 
 
 def psnr(pred: np.ndarray, truth: np.ndarray) -> float:

@@ -23,7 +23,6 @@ import time
 from dataclasses import replace
 from typing import Sequence
 
-import cv2
 import numpy as np
 
 from ...datasets.sample import Box, CameraView, LidarSweep, Sample
@@ -43,7 +42,7 @@ from .parametric import (
     shared_cloud,
     view_inputs,
 )
-from .predicted_view import predicted_ldr
+from .predicted_view import observed_ldr, predicted_ldr
 from .types import LightingEstimate, SampleLighting, check_level, join_reasons, json_clean, view_key
 from .volume import LogGrid
 
@@ -159,6 +158,14 @@ def estimate_views_lighting(views: Sequence[CameraView], location: str | None, l
         grid: override of the level's volume grid (benchmarks).
     """
     check_level(level)
+    base, inputs, started = _model_l1(views, location, level, lidar, boxes)
+    return base if level == "L0" else _from_model_l1(base, inputs, started, level, lidar, query_point_cam, grid)
+
+
+def _model_l1(views: Sequence[CameraView], location: str | None, level: str, lidar: LidarSweep | None,
+              boxes: list[Box] | None) -> tuple[SampleLighting, list[ViewInputs], tuple[float, float]]:
+    """The sample's L0 (``level`` "L0"), else its L1 with the sky model's maps (the sun, cloud and scale every
+    level builds on); the views' L1 inputs; ``perf_counter`` at the start of the estimate and of the decoding."""
     views = list(views)
     if not views:
         raise ValueError("estimate_views_lighting: no views given")
@@ -175,7 +182,7 @@ def estimate_views_lighting(views: Sequence[CameraView], location: str | None, l
     if level == "L0":
         per_view = {v.channel: l0_estimate(np.asarray(v.image), {}) for v in views}
         timing["total"] = time.perf_counter() - t0
-        return replace(base, per_view=per_view)
+        return replace(base, per_view=per_view), [], (t0, t_start)
     inputs = [view_inputs(v, location, {}, boxes, lidar) for v in views]
     cloud, cloud_note, cloud_evidence = shared_cloud(inputs) if len(views) > 1 else (None, None, {})
     per_view = {vi.view.channel: view_estimate(vi, {}, cloud, cloud_note) for vi in inputs}
@@ -188,13 +195,23 @@ def estimate_views_lighting(views: Sequence[CameraView], location: str | None, l
         "cloud_evidence": cloud_evidence,
         "sun_source": ref_est.sun_source, "sun_visibility": ref_est.sun_visibility, "turbidity": DEFAULT_TURBIDITY,
     }
-    l1 = replace(base, level="L1", reason=ref_est.reason, per_view=per_view, params=json_clean(params),
-                 sun_source=ref_est.sun_source, sun_visibility=float(ref_est.sun_visibility))
+    return replace(base, level="L1", reason=ref_est.reason, per_view=per_view, params=json_clean(params),
+                   sun_source=ref_est.sun_source, sun_visibility=float(ref_est.sun_visibility)), inputs, (t0, t_start)
+
+
+def _from_model_l1(l1: SampleLighting, inputs: list[ViewInputs], started: tuple[float, float], level: str,
+                   lidar: LidarSweep | None, query_point_cam: np.ndarray | None, grid: LogGrid | None) -> SampleLighting:
+    """A level ("L1" | "L2" | "L3" | "auto") of a sample from its model L1 (:func:`_model_l1`; left unchanged, so
+    one model L1 can serve several levels)."""
+    t0, t_start = started
+    timing = dict(l1.timing_s)
+    l1 = replace(l1, timing_s=timing)
     if level == "L1":
         l1 = seen_l1(l1, inputs, lidar)
         timing["total"] = time.perf_counter() - t0
         return l1
     # the volume levels build on the model's sky (the images correct it themselves, in the sky dome)
+    views = [vi.view for vi in inputs]
     out = volume_sample_lighting(l1, views, inputs, level, lidar, query_point_cam, grid, timing, t0)
     if out.level == "L1":  # auto chose L1
         out = seen_l1(out, inputs, lidar)
@@ -291,13 +308,7 @@ MAP_JUDGE_WIDTH_PX = 160
 def map_error(lighting: SampleLighting, views: Sequence[CameraView], width: int = MAP_JUDGE_WIDTH_PX) -> float:
     """Mean squared LDR error of the views the lighting predicts for its input cameras (their own centres, EV 0)
     against their images: how far the written map is from what the cameras saw."""
-    errs = []
-    for v in views:
-        pred = predicted_ldr(lighting, v, width)
-        h = pred.shape[0]
-        real = cv2.resize(np.asarray(v.image), (width, h), interpolation=cv2.INTER_AREA) / 255.0
-        errs.append(float(np.mean((pred - real) ** 2)))
-    return float(np.mean(errs))
+    return float(np.mean([np.mean((predicted_ldr(lighting, v, width) - observed_ldr(v, width)) ** 2) for v in views]))
 
 
 def estimate_views_lighting_for_map(views: Sequence[CameraView], location: str | None, level: str,
@@ -308,10 +319,11 @@ def estimate_views_lighting_for_map(views: Sequence[CameraView], location: str |
     level whose map is further from the images than the next level's; any other level is built as asked."""
     if level != "auto":
         return estimate_views_lighting(views, location, level, lidar, boxes, query_point_cam)
+    model, inputs, started = _model_l1(views, location, "L1", lidar, boxes)  # one L1 fit for every candidate
     errors: dict[str, float] = {}
     chosen = None
-    for i, lv in enumerate(MAP_LEVELS):
-        sl = estimate_views_lighting(views, location, lv, lidar, boxes, query_point_cam)
+    for lv in MAP_LEVELS:
+        sl = _from_model_l1(model, inputs, started, lv, lidar, query_point_cam, None)
         errors[lv] = map_error(sl, views)
         if chosen is not None and errors[lv] >= errors[chosen[0]]:
             break

@@ -12,6 +12,7 @@ EV 0, reproduces the image's colours where the camera saw something.
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 import torch
 
@@ -25,9 +26,21 @@ PREDICTED_WIDTH_PX = 320
 def view_rays(view: CameraView, width: int = PREDICTED_WIDTH_PX) -> tuple[np.ndarray, int]:
     """Camera-frame unit rays (h * width, 3) through the pixel centres of the view shrunk to ``width``, and h."""
     H, W = view.height, view.width
-    h = max(int(round(H * width / W)), 1)
+    h = view_height_px(view, width)
     u, v = np.meshgrid((np.arange(width) + 0.5) * W / width - 0.5, (np.arange(h) + 0.5) * H / h - 0.5)
     return pixel_rays(view.K, np.stack([u.ravel(), v.ravel()], 1)), h
+
+
+def view_height_px(view: CameraView, width: int) -> int:
+    """Rows of the view shrunk to ``width`` columns (aspect kept)."""
+    return max(int(round(view.height * width / view.width)), 1)
+
+
+def observed_ldr(view: CameraView, width: int = PREDICTED_WIDTH_PX) -> np.ndarray:
+    """The camera's real image (h, width, 3) in [0, 1], shrunk with an area filter (what a prediction is judged
+    against)."""
+    h = view_height_px(view, width)
+    return cv2.resize(np.asarray(view.image), (width, h), interpolation=cv2.INTER_AREA).astype(np.float64) / 255.0
 
 
 def predicted_radiance(lighting: SampleLighting, view: CameraView, width: int = PREDICTED_WIDTH_PX) -> np.ndarray:

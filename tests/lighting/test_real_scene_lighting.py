@@ -16,9 +16,11 @@ import pytest
 from click.testing import CliRunner
 
 from conftest import SHARED_DATA
-from streetaug.augment.evaluation.novel_view import constant_colour_scores, real_view, score_lighting
-from streetaug.augment.lighting.api import estimate_instant_lighting, estimate_views_lighting
+from streetaug.augment.evaluation.novel_view import constant_colour_scores, real_view, score_lighting, view_scores
+from streetaug.augment.lighting.api import estimate_instant_lighting, estimate_views_lighting, view_estimate
 from streetaug.augment.lighting.levels import L3_GRID
+from streetaug.augment.lighting.parametric import view_inputs
+from streetaug.augment.lighting.predicted_view import view_rays
 from streetaug.cli.main import main
 from streetaug.datasets.nuscenes import NuScenesReader
 
@@ -57,11 +59,6 @@ def test_every_level_self_view_is_on_the_image_scale(sample, level):
 
 def test_l1_self_view_was_off_scale_with_the_model_sky_alone(sample):
     """The same check fails for the uncorrected sky model (what L1 wrote before): the test can fail."""
-    from streetaug.augment.lighting.api import view_estimate
-    from streetaug.augment.lighting.parametric import view_inputs
-    from streetaug.augment.lighting.predicted_view import view_rays
-    from streetaug.augment.evaluation.novel_view import view_scores
-
     view = sample.cameras["CAM_FRONT"]
     est = view_estimate(view_inputs(view, sample.location, {}, sample.boxes, sample.lidar), {})
     rays, h = view_rays(view)
@@ -82,9 +79,6 @@ def test_one_estimate_per_instant(sample):
     # each camera's map is on its own exposure: its self view matches its image
     for c, e in ests.items():
         view = sample.cameras[c]
-        from streetaug.augment.evaluation.novel_view import view_scores
-        from streetaug.augment.lighting.predicted_view import view_rays
-
         rays, h = view_rays(view)
         s = view_scores(e.light_cam.radiance(np.zeros_like(rays), rays).reshape(h, -1, 3), real_view(view))
         assert s["si_psnr"] - s["psnr"] <= 1.5 and s["psnr"] > 17.0, (c, s)
