@@ -53,6 +53,9 @@ class InsertedObject:
         visibility_token: "1".."4" (nuScenes visibility bins, over all cameras).
         seed: the batch seed (part of the tokens).
         num_lidar_pts: points of the (augmented) keyframe LiDAR sweep inside the box.
+        instance_key: the instance it belongs to when it is one annotation of a track through several samples
+            (e.g. ``"<scene token>/<track index>"``); objects of one key become one ``instance`` whose
+            annotations are chained by ``prev``/``next`` in sample order. None: its own one-annotation instance.
     """
 
     sample_token: str
@@ -65,6 +68,7 @@ class InsertedObject:
     visibility_token: str
     seed: int = 0
     num_lidar_pts: int = 0
+    instance_key: str | None = None
 
     @property
     def annotation_token(self) -> str:
@@ -72,6 +76,8 @@ class InsertedObject:
 
     @property
     def instance_token(self) -> str:
+        if self.instance_key is not None:
+            return new_token("instance", self.seed, "track", self.instance_key)
         return new_token("instance", self.seed, self.sample_token, self.object_index)
 
 
@@ -202,6 +208,10 @@ def _changed_tables(src_tables: Path, augmented_files: dict[str, str], objects: 
     instances = _load(src_tables, "instance")
     annotations = [{**a, "num_lidar_pts": num_lidar_pts[a["token"]]} if a["token"] in num_lidar_pts else a
                    for a in _load(src_tables, "sample_annotation")]
+    new_instances: dict[str, dict] = {}  # instance token -> its row (a track's annotations: one instance)
+    last_of: dict[str, dict] = {}  # instance token -> its latest annotation row so far
+    sample_order = {s["token"]: i for i, s in enumerate(_samples_in_time_order(src_tables))}
+    objects = sorted(objects, key=lambda o: (sample_order.get(o.sample_token, len(sample_order)), o.object_index))
     for obj in objects:
         if obj.sample_token not in samples:
             raise InputError(f"{src_tables / 'sample.json'}: inserted object refers to unknown sample "
@@ -226,18 +236,32 @@ def _changed_tables(src_tables: Path, augmented_files: dict[str, str], objects: 
             visibility.append({"token": obj.visibility_token, "level": level, "description": description})
             visibility_tokens.add(obj.visibility_token)
         ann, inst = obj.annotation_token, obj.instance_token
-        instances.append({"token": inst, "category_token": category_token[obj.category], "nbr_annotations": 1,
-                          "first_annotation_token": ann, "last_annotation_token": ann})
-        annotations.append({
+        if inst not in new_instances:
+            new_instances[inst] = {"token": inst, "category_token": category_token[obj.category],
+                                   "nbr_annotations": 0, "first_annotation_token": ann, "last_annotation_token": ann}
+        chain = new_instances[inst]
+        chain["nbr_annotations"] += 1
+        chain["last_annotation_token"] = ann
+        previous = last_of.get(inst)
+        if previous is not None:
+            previous["next"] = ann
+        last_of[inst] = annotation = {
             "token": ann, "sample_token": obj.sample_token, "instance_token": inst,
             "visibility_token": obj.visibility_token, "attribute_tokens": attribute_tokens,
             "translation": [float(v) for v in obj.translation], "size": [float(v) for v in obj.size],
-            "rotation": [float(v) for v in obj.rotation], "prev": "", "next": "",
+            "rotation": [float(v) for v in obj.rotation], "prev": previous["token"] if previous else "", "next": "",
             "num_lidar_pts": int(obj.num_lidar_pts), "num_radar_pts": 0,
-        })
+        }
+        annotations.append(annotation)
+    instances.extend(new_instances.values())
     out.update(category=categories, attribute=attributes, visibility=visibility, instance=instances,
                sample_annotation=annotations)
     return out
+
+
+def _samples_in_time_order(src_tables: Path) -> list[dict]:
+    """The ``sample`` rows by timestamp (a track's annotations are chained in time)."""
+    return sorted(_load(src_tables, "sample"), key=lambda s: (s.get("timestamp", 0), s["token"]))
 
 
 def _relinked(row: dict) -> dict:

@@ -12,7 +12,7 @@ from ..core import InputError, write_json_atomic
 CONFIG_FILE = "batch_config.json"
 CONFIG_SCHEMA = "streetaug.batch/1"
 # Fields added after the schema's first release: a batch_config.json without them means their default.
-OPTIONAL_FIELDS = {"limit", "match_camera"}
+OPTIONAL_FIELDS = {"limit", "match_camera", "tracks"}
 # Fields that may change between runs into the same output folder (everything else must match to resume).
 _MAY_CHANGE = ("limit",)
 
@@ -34,6 +34,9 @@ class BatchConfig:
         n_objects: objects placed in each camera's view (each then rendered into every camera that sees it).
         yaw_sigma_deg: yaw noise around the ego heading (15 for augmentation, as the paper).
         asset, assets_dir, asset_front, asset_length: asset choice (see ``streetaug insert``); none = procedural cars.
+        tracks: 0 = objects per sample (independent in each keyframe); N > 0 = N tracks per scene, each an
+            instance through the scene's keyframes (parked or moving; :mod:`streetaug.placement.track`),
+            rendered into every camera of every keyframe that sees it (``n_objects`` is then not used).
     """
 
     dataroot: str
@@ -51,6 +54,11 @@ class BatchConfig:
     assets_dir: str | None = None
     asset_front: str = "+z"
     asset_length: float | None = None
+    tracks: int = 0
+
+    def __post_init__(self) -> None:
+        if self.tracks < 0:
+            raise InputError(f"--tracks must be >= 0 (tracks per scene; 0 = objects per sample), got {self.tracks}")
 
     def to_json(self) -> dict:
         return {"schema": CONFIG_SCHEMA, **asdict(self), "cameras": list(self.cameras)}

@@ -3,16 +3,19 @@
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 from pathlib import Path
 
 from streetaug.datasets.nuscenes import NuScenesReader
 from streetaug.datasets.sample import CameraView, Sample
 
 from ..assets.select import select_assets
-from ..pipeline import InsertOptions, insert_into_sample, item_seed, place_in_sample
+from ..pipeline import InsertOptions, SamplePlacement, insert_into_sample, insert_placed_into_sample, item_seed, \
+    place_in_sample
 from .config import BatchConfig
 from .layout import output_file
 from .row import LogRow
+from .tracks import SceneTracks, track_assets
 from .write import plan_rows, with_file_checks, write_camera, write_lidar
 
 
@@ -86,3 +89,66 @@ def ordered(cameras: list[str], rows: list[LogRow], failed: dict[str, LogRow]) -
     """One row per camera in the order of ``cameras``: the failed cameras' rows among the others."""
     by_camera = {r.camera: r for r in rows}
     return [failed[c] if c in failed else by_camera[c] for c in cameras]
+
+
+def augment_track_sample(reader: NuScenesReader, config: BatchConfig, out_dir: Path, token: str, cameras: list[str],
+                         scene: SceneTracks, dry_run: bool = False, fail_fast: bool = False) -> list[LogRow]:
+    """Render the tracks of ``scene`` annotated at sample ``token`` into its ``cameras`` (``--tracks``).
+
+    Every track annotated here is logged once (on the first readable camera's row) with its instance
+    (``track``) and velocity, whether or not a camera sees it (its visibility then says so, as nuScenes).
+    """
+    if scene.failed:  # inconsistent scene tables: every sample of the scene fails with the reason
+        return [LogRow(token, c, "failed", scene.reason or "the scene's tracks could not be planned") for c in cameras]
+    t0 = time.perf_counter()
+    sample = reader.sample(token)
+    views, unreadable = readable_views(sample, cameras, fail_fast)
+    failed = {c: LogRow(token, c, "failed", reason, sample_data_token=sample.cameras[c].sample_data_token)
+              for c, reason in unreadable.items()}
+    here = scene.at(token)
+    if not views:
+        return [failed.get(c) or LogRow(token, c, "skipped", f"camera {c} not in this sample") for c in cameras]
+    if not here:
+        reason = "no track is annotated at this keyframe" + (f" ({scene.reason})" if scene.reason else "")
+        return ordered(cameras, [LogRow(token, c, "skipped", reason, sample_data_token=sample.cameras[c].sample_data_token)
+                                 for c in cameras if c not in failed and c in sample.cameras]
+                       + [LogRow(token, c, "skipped", f"camera {c} not in this sample") for c in cameras
+                          if c not in sample.cameras], failed)
+    assets_by_track = track_assets(config, scene.scene_token, max(t.track_index for t in scene.tracks) + 1)
+    cam_xy = views[0].T_global_from_cam[:2, 3]
+    placements = [t.placement_at(token, i, cam_xy) for i, t in enumerate(here)]
+    assets = [assets_by_track[t.track_index] for t in here]
+    load_s = time.perf_counter() - t0
+    if dry_run:
+        placed = SamplePlacement(placements, [views[0].channel] * len(placements), assets, {}, {})
+        rows = plan_rows(token, [c for c in cameras if c not in failed], placed)
+        return ordered(cameras, _with_tracks(rows, here, scene, token), failed)
+    label_fields = [{"track": f"{scene.scene_token}/{t.track_index}", "track_index": t.track_index,
+                     "motion": t.motion, "velocity": [round(float(v), 6) for v in t.velocity_global[t.index_of(token)]]}
+                    for t in here]
+    result = insert_placed_into_sample(sample, views, placements, assets, insert_options(config), label_fields)
+    t_lidar = time.perf_counter()
+    lidar = write_lidar(out_dir, reader, sample, result, config.version)
+    per_camera = {k: v / len(views) for k, v in {"load": load_s, "lidar": time.perf_counter() - t_lidar}.items()}
+    names = {v.channel: output_file(reader.get("sample_data", v.sample_data_token)["filename"], v.channel,
+                                    v.sample_data_token) for v in views}
+    rows = [write_camera(out_dir, sample, c, result, per_camera, lidar, names.get(c))
+            for c in cameras if c not in failed]
+    return ordered(cameras, with_file_checks(out_dir, _with_tracks(rows, here, scene, token)), failed)
+
+
+def _with_tracks(rows: list[LogRow], here: list, scene: SceneTracks, token: str) -> list[LogRow]:
+    """The rows with each logged object named by its track (index, instance key, velocity at ``token``)."""
+    out = []
+    for row in rows:
+        if row.objects:
+            objects = []
+            for o in row.objects:
+                track = here[o.object_index]
+                i = track.index_of(token)
+                objects.append(replace(o, object_index=track.track_index, attribute=track.attribute,
+                                       track=f"{scene.scene_token}/{track.track_index}",
+                                       velocity=[round(float(v), 6) for v in track.velocity_global[i]]))
+            row = replace(row, objects=tuple(objects))
+        out.append(row)
+    return out

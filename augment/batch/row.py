@@ -31,6 +31,9 @@ class LoggedObject:
         visible_px, coverage_px: visible / unoccluded pixels summed over the sample's rendered cameras.
         num_lidar_pts: LiDAR points inside its box after insertion.
         distance_m, ground_source, drivable_source: placement details (``plan.jsonl`` only).
+        track: ``--tracks``: ``"<scene token>/<track index>"``, the instance this annotation belongs to
+            (``object_index`` is then the track index); None for objects of one sample.
+        velocity: ``--tracks``: the trajectory's velocity [vx, vy, vz] (m/s, global) at this keyframe.
     """
 
     object_index: int
@@ -43,6 +46,8 @@ class LoggedObject:
     distance_m: float | None = None
     ground_source: str | None = None
     drivable_source: str | None = None
+    track: str | None = None
+    velocity: list[float] | None = None
 
     @property
     def visible_fraction(self) -> float:

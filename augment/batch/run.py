@@ -40,6 +40,8 @@ from .layout import (LIDARSEG_FOLDER, LOG_FILE, PLAN_FILE, SUMMARY_FILE, check_u
 from .log import append_rows, compact_log, done_samples, latest_rows, read_log, write_log
 from .report import contact_sheet, summarize
 from .row import LogRow
+from .tracks import SceneTracks, plan_scene, read_scene_tracks, saved_scene_tracks, scene_groups, scene_tables, \
+    summarize_tracks, write_scene_tracks
 from .worker import TableSlicer, process_sample
 
 
@@ -155,7 +157,12 @@ def _run_locked(config: BatchConfig, out_dir: Path, run: RunOptions, echo: Calla
     if done:
         echo(f"resuming: {len(tokens) - len(pending)} of {len(tokens)} samples already done")
     cameras = {t: expected(t) for t in pending}
-    tasks = ((config, str(out_dir), t, cameras[t], slicer.tables(t), run.dry_run, run.fail_fast) for t in pending)
+    scenes: dict[str, SceneTracks] = {}
+    if config.tracks:
+        scenes = plan_scenes(config, out_dir, reader, slicer, planned_samples(reader, config.limit), pending, run, echo)
+    scene_of = {t: reader.scene_of(t)["token"] for t in pending} if config.tracks else {}
+    tasks = ((config, str(out_dir), t, cameras[t], slicer.tables(t), run.dry_run, run.fail_fast,
+              scenes.get(scene_of.get(t))) for t in pending)
     workers = max(1, min(run.workers, len(pending)))
     if run.scheduler or run.dask_local:
         executor = f"Dask {run.scheduler or f'LocalCluster({run.dask_local})'}"
@@ -167,6 +174,41 @@ def _run_locked(config: BatchConfig, out_dir: Path, run: RunOptions, echo: Calla
         executor = "1 process (inline)"
         results = run_inline(process_sample, tasks)
     return _collect(config, out_dir, run, reader, log_path, results, cameras, tokens, executor)
+
+
+def plan_scenes(config: BatchConfig, out_dir: Path, reader: NuScenesReader, slicer: TableSlicer,
+                all_tokens: list[str], pending: list[str], run: RunOptions,
+                echo: Callable[[str], None]) -> dict[str, SceneTracks]:
+    """scene token -> its tracks, for the scenes of the ``pending`` samples (``--tracks``).
+
+    A scene is planned over all its samples among ``all_tokens`` (the batch's, whatever the shard), once: the
+    plan is saved in ``tracks/<scene token>.json`` and a rerun reads it. Scenes are planned in parallel like
+    samples. A scene that cannot be planned (inconsistent tables) is not saved: its samples fail with the
+    reason, the rest goes on, and a rerun tries it again.
+    """
+    groups = scene_groups(reader, all_tokens)
+    wanted = {reader.scene_of(t)["token"] for t in pending}
+    scenes, todo = {}, []
+    for scene_token, tokens in groups.items():
+        if scene_token not in wanted:
+            continue
+        saved = read_scene_tracks(out_dir, scene_token, config, tokens)
+        if saved is not None:
+            scenes[scene_token] = saved
+        else:
+            todo.append((config, scene_token, reader.get("scene", scene_token).get("name", ""), tokens,
+                         scene_tables(slicer, tokens)))
+    if todo:
+        echo(f"planning tracks in {len(todo)} scene(s)" + (f" ({len(scenes)} already planned)" if scenes else ""))
+        workers = max(1, min(run.workers, len(todo)))
+        results = run_processes(plan_scene, todo, workers) if workers > 1 else run_inline(plan_scene, todo)
+        for planned in results:
+            if run.fail_fast and planned.failed:
+                raise InputError(planned.reason or f"scene {planned.scene_token}: planning failed")
+            if not planned.failed:
+                write_scene_tracks(out_dir, planned, config)
+            scenes[planned.scene_token] = planned
+    return scenes
 
 
 def _collect(config: BatchConfig, out_dir: Path, run: RunOptions, reader: NuScenesReader, log_path: Path,
@@ -233,12 +275,14 @@ def finalize(out_dir: Path, config: BatchConfig, reader: NuScenesReader, rows: l
                 sample_token=r.sample_token, object_index=o.object_index, category=o.category,
                 attribute=o.attribute, translation=box["translation"], size=box["size"],
                 rotation=box["rotation"], visibility_token=visibility_token(o.visible_fraction), seed=config.seed,
-                num_lidar_pts=int(o.num_lidar_pts or 0)))
+                num_lidar_pts=int(o.num_lidar_pts or 0), instance_key=o.track))
     objects.sort(key=lambda o: (order.get(o.sample_token, len(order)), o.object_index))
     link_source(out_dir, config.dataroot)
     tables = write_augmented_tables(config.dataroot, config.version, out_dir, augmented, objects, lidarseg,
                                     recounted)
     summary = summarize(rows, this_run)
+    if config.tracks:
+        summary["tracks"] = summarize_tracks(saved_scene_tracks(out_dir))
     sheet = contact_sheet(out_dir, rows, contact_sheet_n, config.seed)
     summary["outputs"] = {"tables": str(tables.relative_to(out_dir)), "log": LOG_FILE,
                           "contact_sheet": sheet.name if sheet else None}

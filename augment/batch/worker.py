@@ -94,24 +94,29 @@ def peak_rss_mb() -> float:
 
 
 def process_sample(config: BatchConfig, out_dir: str, token: str, cameras: list[str], tables: dict,
-                   dry_run: bool = False, fail_fast: bool = False) -> list[LogRow]:
+                   dry_run: bool = False, fail_fast: bool = False, scene_tracks=None) -> list[LogRow]:
     """Augment ``cameras`` of sample ``token`` and write their images and labels under ``out_dir``.
 
     Returns one log row per camera (``status`` ok / skipped / failed; with ``dry_run`` planned /
     no_placement), with the sample's wall and CPU seconds shared evenly by its cameras (``seconds``,
     ``cpu_s``). A camera whose image cannot be read fails alone (the others are augmented without it);
     any other failure fails the whole sample (all its cameras), so a sample's cameras always show the same
-    inserted objects; with ``fail_fast`` the error is raised instead.
+    inserted objects; with ``fail_fast`` the error is raised instead. ``scene_tracks`` (``--tracks``): the
+    :class:`~.tracks.SceneTracks` of the sample's scene, rendered instead of placing objects here.
     """
     tune_malloc()  # in every kind of worker (inline, local process, Dask), before the heavy allocations
     # Deferred: the pipeline loads torch (the learned sky model); the driver imports this module only to
     # send this function to its workers and must not pay for it.
-    from .job import augment_sample
+    from .job import augment_sample, augment_track_sample
 
     t0, cpu0 = time.perf_counter(), time.process_time()
     try:
-        rows = augment_sample(dataset_reader(config).with_tables(tables), config, Path(out_dir), token, cameras,
-                              dry_run, fail_fast)
+        reader = dataset_reader(config).with_tables(tables)
+        if scene_tracks is not None:
+            rows = augment_track_sample(reader, config, Path(out_dir), token, cameras, scene_tracks, dry_run,
+                                        fail_fast)
+        else:
+            rows = augment_sample(reader, config, Path(out_dir), token, cameras, dry_run, fail_fast)
     except Exception as e:  # noqa: BLE001 - one failing sample is logged and the batch goes on
         if fail_fast:
             raise

@@ -41,6 +41,7 @@ class SamplePlacement:
         assets: the asset of each object.
         results: channel -> the placement in that view (candidates, rule report, reason).
         seconds: channel -> seconds spent placing in that view.
+        label_fields: per object, extra fields of its image labels (e.g. its track), or empty.
     """
 
     placements: list[Placement]
@@ -48,6 +49,7 @@ class SamplePlacement:
     assets: list[Asset]
     results: dict[str, PlacementResult]
     seconds: dict[str, float]
+    label_fields: tuple[dict, ...] = ()
 
     @property
     def reason(self) -> str | None:

@@ -5,11 +5,12 @@ from __future__ import annotations
 
 import time
 from dataclasses import replace
-from typing import Sequence
+from typing import Callable, Sequence
 
 import numpy as np
 
 from streetaug.datasets.sample import CameraView, Sample
+from streetaug.placement.place import Placement
 
 from ..assets.asset import Asset
 from ..lighting.api import estimate_views_lighting
@@ -60,6 +61,29 @@ def insert_into_sample(
         views: the cameras to augment; objects are placed in each view's field of view.
         assets_by_channel: channel -> the assets to place in that view (may be empty).
     """
+    return _insert(sample, views, options,
+                   lambda context: place_in_sample(sample, views, assets_by_channel, options, context))
+
+
+def insert_placed_into_sample(sample: Sample, views: Sequence[CameraView], placements: Sequence[Placement],
+                              assets: Sequence[Asset], options: InsertOptions,
+                              label_fields: Sequence[dict] = ()) -> SampleInsertResult:
+    """Render objects whose places are already decided (e.g. the tracks of a scene at this keyframe) into
+    ``views`` of ``sample``: lighting per sample, then every object or shadow each camera sees.
+
+    Args:
+        placements: the objects' placements (global frame), one per asset; ``asset_index`` = position.
+        assets: their assets.
+        label_fields: per object, extra fields for its image labels (e.g. ``{"track": ...}``), or empty.
+    Each object is logged under the first of ``views`` (``placed_for``): one annotation per sample.
+    """
+    placed = SamplePlacement(list(placements), [views[0].channel] * len(placements), list(assets), {},
+                             {v.channel: 0.0 for v in views}, tuple(label_fields))
+    return _insert(sample, views, options, lambda context: placed)
+
+
+def _insert(sample: Sample, views: Sequence[CameraView], options: InsertOptions,
+            place: Callable[[SampleContext], SamplePlacement]) -> SampleInsertResult:
     render_settings(options)  # a bad preset fails before any work
     check_insert_memory([(v.width, v.height) for v in views], options.quality, f"sample {sample.token}")
     t_start = time.perf_counter()
@@ -68,7 +92,7 @@ def insert_into_sample(
     _ = sample.lidar
     t0 = time.perf_counter()
     context = SampleContext.of(sample, views)
-    placed = place_in_sample(sample, views, assets_by_channel, options, context)
+    placed = place(context)
     t = time.perf_counter()
     lighting = sample_lighting(sample, views, options.level, placement_points_cam(views, placed))
     lighting_s = (time.perf_counter() - t) / max(len(views), 1)

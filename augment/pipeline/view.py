@@ -89,6 +89,8 @@ def render_into_view(context: ViewContext, token: str, placed: SamplePlacement, 
         label = object_label(obj.T_cam_from_object, obj.asset.wlh, obj.asset.category, context.camera, ins.mask,
                              ins.coverage, T_global_from_cam=view.T_global_from_cam, attribute=placements[i].attribute)
         label.update(object_index=i, placed_for=placed.placed_for[i])
+        if placed.label_fields:
+            label.update(placed.label_fields[i])
         objects.append(label)
     timing["total"] = timing["lighting"] + timing["placement"] + time.perf_counter() - t0
     result = InsertResult(image=rendered.image, objects=objects, mask=rendered.mask,
