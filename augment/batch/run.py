@@ -159,7 +159,7 @@ def _run_locked(config: BatchConfig, out_dir: Path, run: RunOptions, echo: Calla
     cameras = {t: expected(t) for t in pending}
     scenes: dict[str, SceneTracks] = {}
     if config.tracks:
-        scenes = plan_scenes(config, out_dir, reader, slicer, planned_samples(reader, config.limit), pending, run, echo)
+        scenes = plan_scenes(config, out_dir, reader, slicer, pending, run, echo)
     scene_of = {t: reader.scene_of(t)["token"] for t in pending} if config.tracks else {}
     tasks = ((config, str(out_dir), t, cameras[t], slicer.tables(t), run.dry_run, run.fail_fast,
               scenes.get(scene_of.get(t))) for t in pending)
@@ -177,21 +177,19 @@ def _run_locked(config: BatchConfig, out_dir: Path, run: RunOptions, echo: Calla
 
 
 def plan_scenes(config: BatchConfig, out_dir: Path, reader: NuScenesReader, slicer: TableSlicer,
-                all_tokens: list[str], pending: list[str], run: RunOptions,
+                pending: list[str], run: RunOptions,
                 echo: Callable[[str], None]) -> dict[str, SceneTracks]:
     """scene token -> its tracks, for the scenes of the ``pending`` samples (``--tracks``).
 
-    A scene is planned over all its samples among ``all_tokens`` (the batch's, whatever the shard), once: the
-    plan is saved in ``tracks/<scene token>.json`` and a rerun reads it. Scenes are planned in parallel like
+    A scene is planned over all its keyframes (whatever ``--limit`` or the shard renders of it), once: the plan
+    is saved in ``tracks/<scene token>.json`` and a rerun reads it. Scenes are planned in parallel like
     samples. A scene that cannot be planned (inconsistent tables) is not saved: its samples fail with the
     reason, the rest goes on, and a rerun tries it again.
     """
-    groups = scene_groups(reader, all_tokens)
-    wanted = {reader.scene_of(t)["token"] for t in pending}
+    wanted = scene_groups(reader, pending)
     scenes, todo = {}, []
-    for scene_token, tokens in groups.items():
-        if scene_token not in wanted:
-            continue
+    for scene_token in wanted:
+        tokens = reader.sample_tokens(scene_token)
         saved = read_scene_tracks(out_dir, scene_token, config, tokens)
         if saved is not None:
             scenes[scene_token] = saved
