@@ -12,7 +12,8 @@ Conventions chosen here:
   "4" [0.8, 1] (edges belong to the higher bin).
 * ``truncation`` = fraction of the projected 3D box (convex hull of its corners, clipped at z = 0.1 m)
   outside the image.
-* ``num_lidar_pts`` / ``num_radar_pts`` = 0: the inserted object was not seen by the real sensors.
+* ``num_lidar_pts`` / ``num_radar_pts`` = 0: the inserted object was not seen by the real sensors (``streetaug
+  batch`` then sets ``num_lidar_pts`` to the points of the sample's augmented LiDAR sweep on it, as its annotation).
 * ``box_global`` follows ``sample_annotation``: ``translation`` = box centre (not the bottom), ``size`` =
   [w, l, h], ``rotation`` = [w, x, y, z] box -> global. On tilted ground the rotation carries the
   ground's roll/pitch (the box is exactly the rendered object's box), so it is not yaw-only.

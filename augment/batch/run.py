@@ -11,6 +11,8 @@ folder (see :mod:`streetaug.datasets.nuscenes_writer` for the tables and links):
     OUTDIR/augment_log.jsonl              one line per attempted image (sample_token, camera, status, reason,
                                           timing_s, objects placed in that camera's view, ...)
     OUTDIR/summary.json, contact_sheet.png
+    OUTDIR/tracks/<scene token>.json       ``--tracks``: each scene's planned tracks (a rerun renders the same)
+    OUTDIR/tracks_sheet.png               ``--tracks``: each track through time
     OUTDIR/shards/<I>-of-<N>/             per-shard log and summary (``--shard``; ``merge`` joins them)
     OUTDIR/plan.jsonl                     ``--dry-run``: planned placements only
 """
@@ -42,6 +44,7 @@ from .report import contact_sheet, summarize
 from .row import LogRow
 from .tracks import SceneTracks, plan_scene, read_scene_tracks, saved_scene_tracks, scene_groups, scene_tables, \
     summarize_tracks, write_scene_tracks
+from .track_sheet import track_sheet
 from .worker import TableSlicer, process_sample
 
 
@@ -279,11 +282,14 @@ def finalize(out_dir: Path, config: BatchConfig, reader: NuScenesReader, rows: l
     tables = write_augmented_tables(config.dataroot, config.version, out_dir, augmented, objects, lidarseg,
                                     recounted)
     summary = summarize(rows, this_run)
-    if config.tracks:
-        summary["tracks"] = summarize_tracks(saved_scene_tracks(out_dir))
     sheet = contact_sheet(out_dir, rows, contact_sheet_n, config.seed)
     summary["outputs"] = {"tables": str(tables.relative_to(out_dir)), "log": LOG_FILE,
                           "contact_sheet": sheet.name if sheet else None}
+    if config.tracks:
+        scenes = saved_scene_tracks(out_dir)
+        summary["tracks"] = summarize_tracks(scenes)
+        tracks_sheet = track_sheet(out_dir, rows, scenes) if contact_sheet_n > 0 else None
+        summary["outputs"]["tracks_sheet"] = tracks_sheet.name if tracks_sheet else None
     write_json_atomic(out_dir / SUMMARY_FILE, summary)
     return summary
 

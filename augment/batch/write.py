@@ -93,6 +93,9 @@ def write_camera(out_dir: Path, sample: Sample, camera: str, result: SampleInser
     write_image_rgb(out_dir / image_rel, r.image)
     doc = labels_document(r, image_rel)
     doc.update(sample_token=sample.token, sample_data_token=view.sample_data_token, camera=camera)
+    if lidar is not None:  # the points of the sample's LiDAR sweep on each object, as its annotation has them
+        for obj in doc.get("objects", []):
+            obj["num_lidar_pts"] = int(lidar.num_lidar_pts[obj["object_index"]])
     write_json_atomic(out_dir / labels_rel, doc)
     timing["write"] = time.perf_counter() - t
     return LogRow(sample.token, camera, "ok", "", timing_s=timing, files=(image_rel, labels_rel, *files),
