@@ -47,6 +47,7 @@ bench: setup
 
 samples: setup
 	$(BIN)/streetaug make-samples --out examples/nuscenes-samples
+	$(BIN)/streetaug make-samples --sequence --out examples/nuscenes-sequence
 
 figure: setup
 	$(BIN)/python examples/readme_figure.py

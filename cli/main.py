@@ -193,22 +193,39 @@ def insert(dataroot, version, scene, sample_token, camera, asset, assets_dir, as
 @main.command("make-samples")
 @click.option("--out", required=True, type=click.Path(file_okay=False, path_type=Path), help="Output dataroot.")
 @click.option("--scenes", default=None, help="Comma-separated scene names (default: all).")
-@click.option("--width", type=int, default=1600, show_default=True)
-@click.option("--height", type=int, default=900, show_default=True)
+@click.option("--sequence", is_flag=True, help="Make the sequence scene (v1.0-sequence: keyframes 0.5 s apart, "
+              "the ego driving) instead of the one-keyframe sample scenes.")
+@click.option("--sweeps", is_flag=True, help="With --sequence: also render the camera (12 Hz) and LiDAR (20 Hz) "
+              "sweep files (the tables list them either way).")
+@click.option("--width", type=int, default=None, help="Image width [default: 1600; 800 with --sequence].")
+@click.option("--height", type=int, default=None, help="Image height [default: 900; 450 with --sequence].")
 @click.option("--seed", type=int, default=0, show_default=True)
 @click.option("--debug", is_flag=True, help="Show tracebacks.")
 @runtime_errors
-def make_samples(out, scenes, width, height, seed, debug):
+def make_samples(out, scenes, sequence, sweeps, width, height, seed, debug):
     """Generate the procedural sample scenes (nuScenes format + ground-truth lighting).
 
     \b
-    Example (regenerates the bundled scenes byte-identically):
+    Examples (regenerate the bundled scenes byte-identically):
       streetaug make-samples --out examples/nuscenes-samples
+      streetaug make-samples --sequence --out examples/nuscenes-sequence   (add --sweeps for the sweep files)
     """
+    if sweeps and not sequence:
+        raise click.UsageError("--sweeps needs --sequence (only the sequence scene has sweeps)")
+    if sequence and scenes:
+        raise click.UsageError("--scenes selects sample scenes; the sequence (--sequence) is one scene")
+    if sequence:
+        from streetaug.augment.scenegen.sequence import make_sequence_scene  # deferred: scipy, slow for `--help`
+
+        paths = make_sequence_scene(out, sweeps=sweeps, width=800 if width is None else width,
+                                    height=450 if height is None else height, seed=seed)
+        click.echo(f"wrote the sequence scene into {out} ({len(paths)} files{', sweeps included' if sweeps else ''})")
+        return
     from streetaug.augment.scenegen.make import make_sample_scenes  # deferred: scipy, slow for `--help`
 
     names = [s.strip() for s in scenes.split(",")] if scenes else None
-    paths = make_sample_scenes(out, names=names, width=width, height=height, seed=seed)
+    paths = make_sample_scenes(out, names=names, width=1600 if width is None else width,
+                                height=900 if height is None else height, seed=seed)
     click.echo(f"wrote {len(paths)} scene(s) into {out}")
 
 

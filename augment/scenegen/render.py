@@ -15,6 +15,7 @@ units (see :mod:`streetaug.augment.lighting.sky`); exposure is applied by the ca
 
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass
 
 import numpy as np
@@ -146,6 +147,20 @@ class StreetRenderer:
         self.sun_dir = self.sun_dir / np.linalg.norm(self.sun_dir)
         self.sun_e = sky.sun_irradiance_rgb if self.sun_dir[2] > 0 else np.zeros(3)
         self._sky_irradiance_map = self._sky_irradiance_by_normal(16, 32)
+
+    def with_scene(self, scene: StreetScene) -> "StreetRenderer":
+        """A renderer of ``scene`` under the same sky (sky tables shared, not recomputed).
+
+        For the same street at another time (objects moved, same faces and materials): a new ray scene,
+        new face normals; everything else is the sky's.
+        """
+        other = copy.copy(self)
+        other.scene = scene
+        other.rays = RayScene(scene.vertices_global, scene.faces)
+        other.normals = scene.face_normals_global
+        other.T_street_from_global = invert_transform(scene.T_global_from_street)
+        other.base_albedo = np.array([m.albedo for m in scene.materials])[scene.face_material]
+        return other
 
     # ------------------------------------------------------------------ sky helpers
 
