@@ -91,6 +91,24 @@ def sweeps_by_links(reader: NuScenesReader, sample_token: str, channel: str) -> 
     return out[::-1]
 
 
+def interpolation_of(reader: NuScenesReader, sample_data: dict) -> tuple[str, str, float]:
+    """Where a frame lies between two samples, as the devkit's ``NuScenes.get_boxes`` interpolates its boxes.
+
+    Returns:
+        (sample_before, sample_after, fraction): a sweep lies ``fraction`` (0..1, clamped) of the way from
+        ``sample_before`` (its sample's ``prev``) to ``sample_after`` (its ``sample_token``); boxes at its time
+        are ``before + fraction x (after - before)`` per instance. A keyframe, or a frame of a scene's first
+        sample, gives (its sample, its sample, 1.0).
+    """
+    sample = reader.get("sample", sample_data.get("sample_token", ""))
+    if sample_data.get("is_key_frame", False) or not sample.get("prev"):
+        return sample["token"], sample["token"], 1.0
+    before = reader.get("sample", sample["prev"])
+    t0, t1, t = int(before["timestamp"]), int(sample["timestamp"]), int(sample_data["timestamp"])
+    fraction = (min(max(t, t0), t1) - t0) / (t1 - t0) if t1 > t0 else 1.0
+    return before["token"], sample["token"], float(fraction)
+
+
 def sweep_path(reader: NuScenesReader, sample_data: dict) -> Path:
     """The file of a ``sample_data`` row (keyframe or sweep), resolved inside the dataroot."""
     return reader.path_field("sample_data", sample_data)
@@ -135,6 +153,6 @@ def sweeps_unavailable_reason(reader: NuScenesReader, sample_tokens: Iterable[st
 
 
 __all__ = [
-    "SWEEPS_HINT", "keyframe_of_sample", "missing_sweep_files", "sweep_path", "sweeps_by_links", "sweeps_of_sample",
+    "SWEEPS_HINT", "interpolation_of", "keyframe_of_sample", "missing_sweep_files", "sweep_path", "sweeps_by_links", "sweeps_of_sample",
     "sweeps_unavailable_reason",
 ]

@@ -175,6 +175,7 @@ class SequenceWorld:
         return cls(spec, base, s.timestamp_us, velocities, ego_velocity, object_vertices)
 
     def dt_s(self, timestamp_us: int) -> float:
+        """Seconds from the first sample to ``timestamp_us``."""
         return (int(timestamp_us) - self.t0_us) * 1e-6
 
     def T_global_from_ego(self, timestamp_us: int) -> np.ndarray:

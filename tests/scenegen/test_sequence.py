@@ -30,6 +30,7 @@ from streetaug.augment.scenegen.sequence import (
 from streetaug.datasets import DatasetError, NuScenesReader
 from streetaug.datasets.bundled import BUNDLED_SEQUENCE_VERSION, bundled_sequence_dataroot
 from streetaug.datasets.sweeps import (
+    interpolation_of,
     keyframe_of_sample,
     missing_sweep_files,
     sweeps_by_links,
@@ -305,6 +306,20 @@ def test_sweeps_of_sample_match_the_links(seq_root: Path) -> None:
     assert missing_sweep_files(reader, sweeps_of_sample(reader, tokens[1], "CAM_FRONT")) == []
     with pytest.raises(DatasetError, match="no sample with token"):
         sweeps_of_sample(reader, "not-a-sample", "CAM_FRONT")
+
+
+def test_interpolation_of_a_sweep_gives_the_true_boxes(seq_root: Path, world: SequenceWorld) -> None:
+    reader = NuScenesReader(seq_root, SEQUENCE_VERSION)
+    tokens = reader.sample_tokens()
+    boxes_by_sample = {t: world.boxes_at(reader.get("sample", t)["timestamp"]) for t in tokens}
+    for sd in sweeps_of_sample(reader, tokens[2], "CAM_BACK"):
+        before, after, fraction = interpolation_of(reader, sd)
+        assert (before, after) == (tokens[1], tokens[2]) and 0 < fraction < 1
+        truth = world.boxes_at(sd["timestamp"])
+        for b0, b1, bt in zip(boxes_by_sample[before], boxes_by_sample[after], truth):
+            np.testing.assert_allclose(b0.center + fraction * (b1.center - b0.center), bt.center, atol=1e-6)
+    key = keyframe_of_sample(reader, tokens[1], "CAM_BACK")
+    assert interpolation_of(reader, key) == (tokens[1], tokens[1], 1.0)
 
 
 def test_absent_sweep_files_give_one_reason(keyframes_root: Path) -> None:
