@@ -6,6 +6,7 @@ Layout read (as in nuScenes)::
     <dataroot>/samples/<CHANNEL>/...                          images (.jpg) and LiDAR (.pcd.bin)
     <dataroot>/lidarseg/<version>/<sd_token>_lidarseg.bin     optional lidarseg labels
     <dataroot>/maps/expansion/<location>.json                 optional map expansion (drivable_area, lanes)
+    <dataroot>/maps/<hash>.png                                semantic-prior raster (map.json), used without expansion
 
 Frames: ``calibrated_sensor`` gives sensor -> ego (``T_ego_from_cam``; nuScenes camera frames are
 OpenCV frames), ``ego_pose`` gives ego -> global at the sample_data's own timestamp.  Quaternions are
@@ -35,6 +36,7 @@ from streetaug.augment.core.paths import resolve_inside
 from .errors import DatasetError
 from .lidarseg import read_lidar_points, read_lidarseg_labels
 from .nuscenes_map import DrivableArea, LaneCenterlines, map_expansion_path, read_lanes, read_map_expansion
+from .raster_map import MAP_SOURCE_EXPANSION, MAP_SOURCE_RASTER, RasterDrivable, read_semantic_prior, semantic_prior_row
 from .sample import Box, CameraView, LidarSweep, Sample
 from .tables import integer_field, read_table_rows, rotation_field, row_where, size_field, token_index, vector_field
 
@@ -70,7 +72,8 @@ class NuScenesReader:
         dataroot: folder holding ``<version>/`` (the tables), ``samples/`` and optionally ``maps/``
             and ``lidarseg/``.
         version: table folder name, e.g. ``v1.0-mini`` or ``v1.0-trainval``.
-        with_map: attach the location's drivable area to each ``Sample`` (parsed once per location).
+        with_map: attach the location's drivable area to each ``Sample`` (parsed once per location: the map
+            expansion, else the semantic-prior raster of ``map.json``; see :meth:`map_source`).
 
     Raises:
         DatasetError: ``dataroot`` or ``dataroot/version`` is missing, or a required table file is
@@ -106,6 +109,8 @@ class NuScenesReader:
         self._drivable: dict[str, DrivableArea | None] = {}
         self._lanes: dict[str, LaneCenterlines | None] = {}
         self._map_errors: dict[str, InputError] = {}
+        self._map_source: dict[str, str | None] = {}  # location -> "expansion" / "semantic-prior raster" / None
+        self._rasters: dict[str, RasterDrivable] = {}  # raster file -> its vectorised drivable area
 
     def __repr__(self) -> str:
         return f"NuScenesReader({str(self.dataroot)!r}, {self.version!r})"
@@ -412,50 +417,113 @@ class NuScenesReader:
 
     # ------------------------------------------------------------------ map
 
-    def _read_map(self, location: str) -> None:
-        """Parse ``location``'s map expansion once, for both its drivable area and its lanes.
+    def _read_map(self, location: str, log_token: str | None = None) -> None:
+        """Read ``location``'s drivable area once: the map expansion if present, else the log's raster.
 
-        A corrupt map file is an error (remembered: every sample of the location fails with it), never a
-        silent fall back to another drivable-area source.
+        Sources, best first: ``maps/expansion/<location>.json`` (drivable area and lanes; ``map_source``
+        ``"expansion"``), else the ``semantic_prior`` PNG the ``map`` table names for the log (``log_token``,
+        or the logs of ``location`` in ``log.json``), vectorised (:mod:`.raster_map`; no lanes; ``map_source``
+        ``"semantic-prior raster"``). Neither (no expansion and a map row with an empty ``filename``): None.
+
+        A corrupt or inconsistent map (unreadable expansion, a raster that is missing, not a PNG or not
+        8-bit greyscale, a map row of another category, no map row for the log) is an error (remembered:
+        every sample of the location fails with it), never a silent fall back to another source.
         """
         if location in self._map_errors:
             raise self._map_errors[location]
         try:
             relative = map_expansion_path(".", location)
             path = resolve_inside(self.dataroot, str(relative), f"the map expansion of location {location!r} (log.json field 'location')")
-            if not path.is_file():
-                self._drivable[location] = self._lanes[location] = None
-                return
-            data = read_map_expansion(path)
-            drivable, lanes = DrivableArea.from_file(path, data), read_lanes(path, data=data)
+            if path.is_file():
+                data = read_map_expansion(path)
+                drivable, lanes = DrivableArea.from_file(path, data), read_lanes(path, data=data)
+                source = MAP_SOURCE_EXPANSION
+            else:
+                drivable, lanes = self._read_raster(location, log_token), None
+                source = None if drivable is None else MAP_SOURCE_RASTER
         except InputError as e:
             self._map_errors[location] = e
             raise
         self._drivable[location], self._lanes[location] = drivable, lanes
+        self._map_source[location] = source
 
-    def drivable_area(self, location: str) -> DrivableArea | None:
-        """The drivable area (with spatial index) of ``location``, or None without a map expansion file."""
+    def _map_row(self, location: str, log_token: str | None) -> dict:
+        """The ``map`` row of ``log_token`` (None: of the logs of ``location``), checked (see raster_map)."""
+        table_path = f"{self.version}/map.json"
+        if log_token is not None:
+            return semantic_prior_row(self.table("map"), log_token, table_path)
+        logs = [r["token"] for r in self.table("log") if r.get("location") == location and "token" in r]
+        if not logs:
+            raise DatasetError(f"{self.table_dir / 'log.json'}: no log at location {location!r}; cannot find "
+                               "its semantic-prior raster in map.json")
+        rows = {id(row): row for row in (semantic_prior_row(self.table("map"), t, table_path) for t in logs)}
+        files = sorted({str(r["filename"]) for r in rows.values()})
+        if len(files) > 1:
+            raise DatasetError(f"{table_path}: the logs of location {location!r} name different rasters "
+                               f"{files}; one semantic-prior raster per location expected")
+        return next(iter(rows.values()))
+
+    def _read_raster(self, location: str, log_token: str | None) -> DrivableArea | None:
+        """The vectorised semantic-prior raster of the log (cached per file), or None if its row names no file."""
+        row = self._map_row(location, log_token)
+        if row["filename"] == "":
+            return None
+        path = self.path_field("map", row)
+        if not path.is_file():
+            raise DatasetError(f"{path}: semantic-prior raster not found ({self.where('map', row, 'filename')}); "
+                               f"install maps/expansion/{location}.json or restore the PNG from the nuScenes "
+                               "metadata archive")
+        key = str(path)
+        if key not in self._rasters:
+            self._rasters[key] = read_semantic_prior(path)
+        return self._rasters[key].area
+
+    def _ensure_map(self, location: str, log_token: str | None) -> None:
         if location not in self._drivable:
-            self._read_map(location)
+            self._read_map(location, log_token)
+
+    def map_source(self, location: str, log_token: str | None = None) -> str | None:
+        """Which map gave ``location``'s drivable area: ``"expansion"``, ``"semantic-prior raster"`` or None.
+
+        ``log_token`` picks the raster's map row (default: the logs of ``location`` in ``log.json``).
+        """
+        self._ensure_map(location, log_token)
+        return self._map_source[location]
+
+    @property
+    def map_sources(self) -> dict[str, str | None]:
+        """Location -> map source of every location read so far (see :meth:`map_source`)."""
+        return dict(self._map_source)
+
+    def raster_map(self, location: str, log_token: str | None = None) -> RasterDrivable | None:
+        """The vectorised raster (with its size, timings) behind ``location``'s drivable area, if that is the source."""
+        if self.map_source(location, log_token) != MAP_SOURCE_RASTER:
+            return None
+        path = self.path_field("map", self._map_row(location, log_token))
+        return self._rasters.get(str(path))
+
+    def drivable_area(self, location: str, log_token: str | None = None) -> DrivableArea | None:
+        """The drivable area (with spatial index) of ``location``, or None without any map (see :meth:`_read_map`)."""
+        self._ensure_map(location, log_token)
         return self._drivable[location]
 
-    def lanes(self, location: str) -> LaneCenterlines | None:
-        """Lane centre lines of ``location``, or None without a map or without lanes."""
-        if location not in self._lanes:
-            self._read_map(location)
+    def lanes(self, location: str, log_token: str | None = None) -> LaneCenterlines | None:
+        """Lane centre lines of ``location``, or None without a map expansion or without lanes."""
+        self._ensure_map(location, log_token)
         return self._lanes[location]
 
-    def drivable_area_global(self, location: str) -> list | None:
+    def drivable_area_global(self, location: str, log_token: str | None = None) -> list | None:
         """Drivable-area (Multi)Polygons of ``location`` in global x/y (metres); None without a map."""
-        area = self.drivable_area(location)
+        area = self.drivable_area(location, log_token)
         return None if area is None else area.geometries
 
-    def drivable_area_near(self, location: str, xy_global: np.ndarray, radius_m: float):
+    def drivable_area_near(self, location: str, xy_global: np.ndarray, radius_m: float,
+                           log_token: str | None = None):
         """Drivable area clipped to the square of half-side ``radius_m`` around global ``xy_global`` (2,).
 
         Returns a shapely geometry in global x/y (possibly empty), or None without a map.
         """
-        area = self.drivable_area(location)
+        area = self.drivable_area(location, log_token)
         return None if area is None else area.near(xy_global, radius_m)
 
     # ------------------------------------------------------------------ the Sample
@@ -465,6 +533,7 @@ class NuScenesReader:
         row = self._sample_row(token)
         scene = self.scene_of(token)
         location = self.location_of(token)
+        log_token = self._field(scene, "scene", "log_token")
         cameras = {
             channel: self.camera_view(sd["token"])
             for channel, sd in sorted(self.keyframe_sample_data(token, "camera").items())
@@ -479,7 +548,8 @@ class NuScenesReader:
             timestamp_us=self._timestamp(row, "sample"),
             cameras=cameras,
             boxes=boxes,
-            drivable_area_global=self.drivable_area_global(location) if self.with_map else None,
+            drivable_area_global=self.drivable_area_global(location, log_token) if self.with_map else None,
             _load_lidar=load_lidar,
-            lanes=self.lanes(location) if self.with_map else None,
+            lanes=self.lanes(location, log_token) if self.with_map else None,
+            map_source=self.map_source(location, log_token) if self.with_map else None,
         )

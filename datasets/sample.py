@@ -180,6 +180,8 @@ class Sample:
         drivable_area_global: list of shapely (Multi)Polygons in global x/y, or None when no map.
         load_lidar: callable returning the LiDAR sweep (or None when the sample has none).
         lanes: lane centre lines of the map, or None when the map has no lanes.
+        map_source: which map gave ``drivable_area_global``: ``"expansion"`` (the map expansion JSON),
+            ``"semantic-prior raster"`` (the base release's ``map.json`` PNG, vectorised; no lanes), or None.
     """
 
     token: str
@@ -191,6 +193,7 @@ class Sample:
     drivable_area_global: list[shapely.Geometry] | None = None
     _load_lidar: Callable[[], LidarSweep | None] = field(repr=False, compare=False, default=None)
     lanes: LaneCenterlines | None = field(repr=False, compare=False, default=None)
+    map_source: str | None = None
 
     @functools.cached_property
     def lidar(self) -> LidarSweep | None:

@@ -27,7 +27,7 @@ from streetaug.datasets.nuscenes_format import LIDARSEG_NON_DRIVABLE
 from streetaug.datasets.sample import Box, CameraView, Sample
 
 from .config import PlacementConfig
-from .drivable import DrivableArea
+from .drivable import MAP_SOURCES, DrivableArea
 from .place import Placement
 
 AUDITED_RULES = ("drivable", "distance", "annotated_boxes", "lidar_obstacles", "lidarseg", "in_view",
@@ -131,7 +131,7 @@ def audit_placements(sample: Sample, view: CameraView, placements: Sequence[Plac
     free = points[~_points_in_any_box(points, boxes, 0.1)]
     non_drivable = points[np.isin(labels, LIDARSEG_NON_DRIVABLE)] if labels is not None else np.zeros((0, 3))
     road = None
-    if drivable is not None and drivable.source == "map":
+    if drivable is not None and drivable.source in MAP_SOURCES:
         road = shapely.union_all(shapely.make_valid(np.asarray(sample.drivable_area_global, dtype=object)))
     free_pts = shapely.points(free[:, :2])
     non_drivable_pts = shapely.points(non_drivable[:, :2])

@@ -4,6 +4,8 @@ Sources, best first:
 
 * ``"map"``: the map expansion's ``drivable_area`` polygons (``Sample.drivable_area_global``), clipped to a
   disc around the camera. Confidence ``"high"``.
+* ``"map-raster"``: the same from the base release's semantic-prior raster (``Sample.map_source`` ==
+  ``"semantic-prior raster"``: 0.1 m pixels vectorised, edges within about a pixel). Confidence ``"high"``.
 * ``"lidarseg"``: LiDAR points labelled ``flat.driveable_surface`` (24), rasterised to a bird's-eye grid.
   Far LiDAR rings are metres apart, so along each azimuth bin the cells between two consecutive
   drivable points (no other labelled point between them, gap below ``ray_fill_max_gap_m``) are filled,
@@ -30,6 +32,9 @@ from streetaug.datasets.sample import CameraView, Sample
 
 from .config import PlacementConfig
 
+# placement source of each Sample.map_source; all map sources are polygons (DrivableArea.region)
+MAP_SOURCE_NAMES = {"expansion": "map", "semantic-prior raster": "map-raster"}
+MAP_SOURCES = tuple(MAP_SOURCE_NAMES.values())
 _MAX_BLOCKER_HEIGHT_M = 3.0  # points higher above the ego ground (canopies, signs) do not block the road
 
 
@@ -38,7 +43,7 @@ class DrivableArea:
     """A drivable region in the global x/y plane (metres).
 
     Attributes:
-        source: ``"map"``, ``"lidarseg"`` or ``"lidar-ground"``.
+        source: ``"map"``, ``"map-raster"``, ``"lidarseg"`` or ``"lidar-ground"``.
         confidence: ``"high"``, ``"medium"`` or ``"low"``.
         region: shapely (Multi)Polygon in global x/y (polygon sources), else None.
         grid: (H, W) bool bird's-eye grid (grid sources), else None.
@@ -171,8 +176,14 @@ def _footprint_lattice(corners_xy: np.ndarray, spacing_m: float) -> np.ndarray:
 # ---------------------------------------------------------------------- builders
 
 
-def drivable_from_map(polygons: list, center_xy: np.ndarray, roi_m: float) -> DrivableArea | None:
-    """Union of the map's drivable polygons (global x/y) within ``roi_m`` of ``center_xy``; None if empty."""
+def drivable_from_map(polygons: list, center_xy: np.ndarray, roi_m: float,
+                      source: str = "map") -> DrivableArea | None:
+    """Union of the map's drivable polygons (global x/y) within ``roi_m`` of ``center_xy``; None if empty.
+
+    ``source``: ``"map"`` (map expansion) or ``"map-raster"`` (semantic-prior raster), see ``MAP_SOURCES``.
+    """
+    if source not in MAP_SOURCES:
+        raise ValueError(f"drivable_from_map: source must be one of {MAP_SOURCES}, got {source!r}")
     if not polygons:
         return None
     roi = shapely.Point(float(center_xy[0]), float(center_xy[1])).buffer(roi_m, quad_segs=16)
@@ -184,7 +195,7 @@ def drivable_from_map(polygons: list, center_xy: np.ndarray, roi_m: float) -> Dr
     if region.is_empty or region.area <= 0:
         return None
     shapely.prepare(region)
-    return DrivableArea(source="map", confidence="high", region=region)
+    return DrivableArea(source=source, confidence="high", region=region)
 
 
 def _ray_fill_grid(
@@ -286,10 +297,15 @@ def drivable_area_for_sample(sample: Sample, view: CameraView,
     tried = []
     polygons = sample.drivable_area_global
     if polygons:
-        area = drivable_from_map(polygons, cam_xy, config.map_roi_m)
+        kind = sample.map_source or "expansion"  # samples built without a reader: polygons of a map expansion
+        if kind not in MAP_SOURCE_NAMES:
+            raise ValueError(f"Sample.map_source must be one of {sorted(MAP_SOURCE_NAMES)} or None, got {kind!r}")
+        source = MAP_SOURCE_NAMES[kind]
+        area = drivable_from_map(polygons, cam_xy, config.map_roi_m, source)
         if area is not None:
             return area, None
-        tried.append(f"map has no drivable polygon within {config.map_roi_m:g} m of the camera")
+        what = "map" if source == "map" else "semantic-prior raster map"
+        tried.append(f"{what} has no drivable polygon within {config.map_roi_m:g} m of the camera")
     else:
         tried.append("no map")
     lidar = sample.lidar
