@@ -61,6 +61,7 @@ ATTRIBUTES = {
 }
 VEHICLE_MOVING = "vehicle.moving"
 VEHICLE_PARKED = "vehicle.parked"
+VEHICLE_STOPPED = "vehicle.stopped"
 
 # visibility token -> (level, the devkit's description); bins of the visible fraction split at VISIBILITY_EDGES
 VISIBILITY_LEVELS = {
@@ -91,6 +92,6 @@ def new_token(*keys: Any) -> str:
 __all__ = [
     "ATTRIBUTES", "CATEGORY_NAMES", "LIDARSEG_CAR", "LIDARSEG_DRIVEABLE", "LIDARSEG_EGO", "LIDARSEG_GROUND",
     "LIDARSEG_MANMADE", "LIDARSEG_NOISE", "LIDARSEG_NON_DRIVABLE", "LIDARSEG_SIDEWALK", "LIDARSEG_TERRAIN",
-    "LIDARSEG_TRAFFICCONE", "LIDARSEG_VEGETATION", "VEHICLE_MOVING", "VEHICLE_PARKED", "VISIBILITY_EDGES",
+    "LIDARSEG_TRAFFICCONE", "LIDARSEG_VEGETATION", "VEHICLE_MOVING", "VEHICLE_PARKED", "VEHICLE_STOPPED", "VISIBILITY_EDGES",
     "VISIBILITY_LEVELS", "content_token", "lidarseg_index", "new_token", "visibility_token",
 ]

@@ -34,13 +34,13 @@ import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
 
 from streetaug.augment.core import InputError, rotation_to_quat
-from streetaug.datasets.nuscenes_format import VEHICLE_MOVING, VEHICLE_PARKED
+from streetaug.datasets.nuscenes_format import VEHICLE_MOVING, VEHICLE_PARKED, VEHICLE_STOPPED
 from streetaug.datasets.sample import Box, CameraView, Sample
 
 from .candidates import object_transforms, sample_candidates
 from .config import PlacementConfig
 from .drivable import DrivableArea, drivable_area_for_sample
-from .ego_path import EgoPath, traffic_side
+from .ego_path import EgoPath, PathCoords, traffic_side
 from .place import Placeable, Placement, check_objects
 from .rules import (box_corners_object, box_footprint_rect, footprint_corners, rule_box_clearance, rule_drivable,
                     rule_in_view, rule_lidarseg, rule_mutual, rule_obstacles, visible_fraction_estimate)
@@ -63,10 +63,14 @@ SPEED_RANGE_MPS = {
     "human.pedestrian": (0.8, 1.8),
 }
 
-TRACK_RULES = ("span", "drivable", "annotated_boxes", "ego_path", "mutual_collision", "kerb", "lidar_obstacles",
+TRACK_RULES = ("lane_offset", "span", "drivable", "annotated_boxes", "ego_path", "mutual_collision", "kerb", "lidar_obstacles",
                "lidarseg", "in_view")
 SWEPT_PATH_STEPS = 4  # ego footprints per keyframe interval in the swept path
 MAX_LATERAL_ACCEL_MPS2 = 2.0  # comfortable cornering: a moving track slows down to this in curves
+LANE_WIDTH_M = 3.3  # moving candidates: lane centres at multiples of this from the ego's path ...
+LANE_JITTER_M = 0.3  # ... give or take this (std)
+STOPPED_BELOW_MPS = 0.5  # a moving track slower than this at a keyframe is labelled vehicle.stopped there
+CHUNK = 48  # candidates past the flat rules that are stood on the ground per attempt (the first passing wins)
 
 
 def speed_range(category: str) -> tuple[float, float]:
@@ -179,7 +183,15 @@ class Track:
 
     @property
     def attribute(self) -> str:
+        """The track's attribute while it moves (``vehicle.parked`` / ``vehicle.moving``)."""
         return VEHICLE_PARKED if self.motion == "parked" else VEHICLE_MOVING
+
+    def attribute_at(self, i: int) -> str:
+        """The attribute of its annotation at span position ``i``: a moving track that stands still there (in
+        the ego's lane, stopping with the ego) is ``vehicle.stopped``, as nuScenes labels waiting traffic."""
+        if self.motion == "moving" and np.linalg.norm(self.velocity_global[i, :2]) < STOPPED_BELOW_MPS:
+            return VEHICLE_STOPPED
+        return self.attribute
 
     def index_of(self, sample_token: str) -> int | None:
         """Position of ``sample_token`` in the span (None when the track is not annotated there)."""
@@ -209,7 +221,7 @@ class Track:
         return Placement(asset_index=asset_index, T_global_from_object=T.copy(), box=box, wlh=self.wlh.copy(),
                          ground_normal_global=T[:3, 2].copy(), ground_source=self.ground_source[i],
                          drivable_source=self.drivable_source, drivable_confidence=self.drivable_confidence,
-                         attribute=self.attribute, distance_m=distance,
+                         attribute=self.attribute_at(i), distance_m=distance,
                          yaw_source="lane" if self.lane_source == "map lanes" else "ego",
                          footprint_xy=box_footprint_rect(T[None], self.wlh)[0])
 
@@ -439,6 +451,42 @@ def plan_tracks(
     return TrackPlan(tracks, report, reason, f"traffic keeps {side} ({side_source})")
 
 
+@dataclass(frozen=True)
+class LaneMotion:
+    """Where moving candidates are along their lane over time: ``s(t)`` on the ego path (offset ``d`` fixed).
+
+    Candidates in the ego's own lane follow the ego's own speed profile ``tau`` seconds ahead (+) or behind
+    (-): s(t) = s_ego(t + tau), as traffic in one lane does (time headway); the others drive at a constant
+    signed speed: s(t) = s0 + v (t - t_anchor). ``s_ego`` is the ego's path position at each keyframe,
+    continued beyond the scene at its end speeds.
+    """
+
+    s0: np.ndarray
+    signed_speed: np.ndarray
+    follows_ego: np.ndarray
+    tau_s: np.ndarray
+    t_anchor_s: float
+    ego_t_s: np.ndarray
+    ego_s: np.ndarray
+
+    def _ego_s_at(self, t: np.ndarray) -> np.ndarray:
+        t0, t1 = self.ego_t_s[0], self.ego_t_s[-1]
+        v0 = (self.ego_s[1] - self.ego_s[0]) / max(self.ego_t_s[1] - t0, 1e-6) if len(self.ego_t_s) > 1 else 0.0
+        v1 = (self.ego_s[-1] - self.ego_s[-2]) / max(t1 - self.ego_t_s[-2], 1e-6) if len(self.ego_t_s) > 1 else 0.0
+        return np.interp(t, self.ego_t_s, self.ego_s) + np.minimum(t - t0, 0.0) * v0 + np.maximum(t - t1, 0.0) * v1
+
+    def s_at(self, t: np.ndarray | float, idx: np.ndarray | slice = slice(None)) -> np.ndarray:
+        """s of candidates ``idx`` at times ``t`` (seconds; broadcast against the candidates)."""
+        t = np.asarray(t, dtype=np.float64)
+        linear = self.s0[idx] + self.signed_speed[idx] * (t - self.t_anchor_s)
+        follow = self._ego_s_at(t + self.tau_s[idx])
+        return np.where(self.follows_ego[idx], follow, linear)
+
+    def heading_sign(self, idx: np.ndarray | slice = slice(None)) -> np.ndarray:
+        """+1 driving along the path, -1 against it."""
+        return np.where(self.follows_ego[idx] | (self.signed_speed[idx] >= 0), 1.0, -1.0)
+
+
 def _plan_one(frames, usable, index, obj, moving, rng, config: TrackConfig, path: EgoPath, votes: DirectionVotes,
               side: str, swept: np.ndarray, placed: list[Track], report: dict[str, int]) -> Track | None:
     pc = config.placement
@@ -447,17 +495,36 @@ def _plan_one(frames, usable, index, obj, moving, rng, config: TrackConfig, path
     K = len(frames)
     t_s = np.array([f.timestamp_us for f in frames], dtype=np.float64) * 1e-6
     ego_xy = np.array([f.T_global_from_ego[:2, 3] for f in frames])
+    ego_speed_mps = float(np.linalg.norm(np.diff(ego_xy, axis=0), axis=1).sum() / max(t_s[-1] - t_s[0], 1e-6))
+    s_ego_path = path.locate(ego_xy).s  # (K,) the ego's position along its path at each keyframe
+    ego_v = np.diff(s_ego_path) / np.maximum(np.diff(t_s), 1e-6)  # its speed between keyframes ...
+    t_mid = 0.5 * (t_s[1:] + t_s[:-1])  # ... at these times
     tally = _Tally(report)
     for _ in range(config.attempts):
         k = int(usable[rng.integers(len(usable))])
         frame = frames[k]
-        channel = frame.channels[int(rng.integers(len(frame.channels)))]
-        scene = frame.scene(channel)
-        cands = sample_candidates(scene, wlh, rng)
-        C = len(cands.xy)
-        coords = path.locate(cands.xy)
+        if moving:  # in lane coordinates: 10-40 m ahead of or behind the ego, in its lane or 1-2 lanes aside
+            channel = None
+            scene = frame.scene()
+            C = pc.n_candidates
+            s_ego = path.locate(ego_xy[k][None]).s[0]
+            along_m = rng.uniform(pc.min_distance_m, pc.max_distance_m, C) * np.where(rng.random(C) < 0.5, -1.0, 1.0)
+            d = rng.integers(-2, 3, C) * LANE_WIDTH_M + rng.normal(0.0, LANE_JITTER_M, C)
+            xy0, heading0 = path.point_at(s_ego + along_m, d)
+            coords = PathCoords(s_ego + along_m, d, heading0)
+            lane_heading, on_lane = (scene.lanes.heading_at(xy0, pc.lane_max_distance_m) if scene.lanes is not None
+                                     else (np.full(C, np.nan), np.zeros(C, dtype=bool)))
+        else:
+            channel = frame.channels[int(rng.integers(len(frame.channels)))]
+            scene = frame.scene(channel)
+            cands = sample_candidates(scene, wlh, rng)
+            C = len(cands.xy)
+            coords = path.locate(cands.xy)
         lo, hi = speed_range(obj.category)
         speed = rng.uniform(lo, hi, C) if moving else np.zeros(C)
+        if moving:  # in the ego's own lane traffic moves with the ego: its mean speed, +-15 %
+            own_lane = np.abs(coords.d) < 0.5 * LANE_WIDTH_M
+            speed[own_lane] = ego_speed_mps * rng.uniform(0.85, 1.15, int(own_lane.sum()))
         noise = np.radians(rng.normal(0.0, pc.yaw_sigma_deg, C))
         if moving:  # no faster than comfortable cornering allows on the curves within reach of the anchor
             reach = coords.s[:, None] + np.linspace(-config.annotate_range_m, config.annotate_range_m, 41)[None]
@@ -467,9 +534,9 @@ def _plan_one(frames, usable, index, obj, moving, rng, config: TrackConfig, path
             direction = np.zeros(C)
             lane_source = np.full(C, "ego path", dtype=object)
             dir_source = np.full(C, f"traffic keeps {side}", dtype=object)
-            if scene.lanes is not None and cands.on_lane.any():
-                along = np.cos(cands.yaw_rad - coords.heading_rad)
-                lane = cands.on_lane & (np.abs(along) > 0.7)
+            if on_lane.any():
+                along = np.cos(np.where(on_lane, lane_heading, 0.0) - coords.heading_rad)
+                lane = on_lane & (np.abs(along) > 0.7)
                 direction[lane] = np.sign(along[lane])
                 dir_source[lane] = "map lanes"
             voted, n_votes = votes.direction_at(coords.d, config.direction_band_m)
@@ -478,15 +545,21 @@ def _plan_one(frames, usable, index, obj, moving, rng, config: TrackConfig, path
             dir_source[use] = [f"annotated moving vehicles ({n})" for n in n_votes[use]]
             rest = direction == 0
             direction[rest] = _side_direction(coords.d[rest], side)
-            s_j = coords.s[:, None] + (direction * speed)[:, None] * (t_s[None] - t_s[k])
+            follows = own_lane & (ego_speed_mps > 1.0)
+            direction[follows] = 1.0
+            dir_source[follows] = "the ego's lane and speed profile"
+            v_anchor = max(float(np.interp(t_s[k], t_mid, ego_v)) if len(ego_v) else 0.0, 1.0)
+            motion = LaneMotion(coords.s, direction * speed, follows, (coords.s - s_ego_path[k]) / v_anchor,
+                                float(t_s[k]), t_s, s_ego_path)
+            s_j = motion.s_at(t_s[None, :], np.arange(C)[:, None])
             xy_j, heading_j = path.point_at(s_j, coords.d[:, None])
-            yaw_j = heading_j + np.where(direction > 0, 0.0, np.pi)[:, None]
+            yaw_j = heading_j + np.where(motion.heading_sign() > 0, 0.0, np.pi)[:, None]
             # oncoming lanes lie beside the ego's; a lane in the ego's direction may be the ego's own (kept
             # clear of the ego in time below)
             lateral_ok = (np.abs(coords.d) <= config.max_lane_offset_m) & (
                 (direction > 0) | (np.abs(coords.d) >= config.min_lane_offset_m))
             alive = np.flatnonzero(lateral_ok)
-            report["ego_path"] += C - len(alive)
+            report["lane_offset"] += C - len(alive)
         else:
             along = np.where(cands.on_lane, 0.0, _side_direction(coords.d, side))
             yaw = np.where(cands.on_lane, cands.yaw_rad,
@@ -502,19 +575,20 @@ def _plan_one(frames, usable, index, obj, moving, rng, config: TrackConfig, path
         alive = tally.keep("span", alive, span[alive, k])
         flat = footprint_corners(xy_j.reshape(-1, 2), yaw_j.reshape(-1), l, w).reshape(C, K, 4, 2)
         if moving:  # clear of the ego at the same time, also between keyframes
-            alive = _clear_of_ego_in_time(frames, path, coords.s, coords.d, direction * speed, t_s, k, span, alive,
-                                          wlh, config, tally)
+            alive = _clear_of_ego_in_time(frames, path, motion, coords.d, t_s, span, alive, wlh, config, tally)
         alive = _check_flat(frames, flat, span, alive, None if moving else swept, placed, config, tally)
         if not moving:
             edge = scene.drivable.edge_distance(flat[alive, k])
             alive = tally.keep("kerb", alive, edge <= pc.kerb_distance_m + 0.5)
-        for c in alive:
+        for c in alive[:CHUNK]:  # the first survivors only: a bounded cost per attempt
             track = _stand_and_check(frames, k, channel, c, xy_j[c], yaw_j[c], span[c], wlh, moving, swept, placed,
                                      config, tally)
             if track is None:
                 continue
-            velocity = _trajectory_velocity(path, coords.s[c], coords.d[c], direction[c] * speed[c], t_s, k, span[c],
-                                            moving) if moving else np.zeros((int(span[c].sum()), 3))
+            velocity = (_trajectory_velocity(path, motion, c, coords.d[c], t_s[span[c]]) if moving
+                        else np.zeros((int(span[c].sum()), 3)))
+            if moving and motion.follows_ego[c]:
+                speed[c] = float(np.mean(np.linalg.norm(velocity[:, :2], axis=1)))
             keep = np.flatnonzero(span[c])
             return Track(track_index=index, category=obj.category, wlh=wlh.copy(),
                          motion="moving" if moving else "parked", speed_mps=float(speed[c]),
@@ -523,7 +597,7 @@ def _plan_one(frames, usable, index, obj, moving, rng, config: TrackConfig, path
                          timestamps_us=np.array([frames[j].timestamp_us for j in keep], dtype=np.int64),
                          T_global_from_object=track[0], velocity_global=velocity, ground_source=track[1],
                          drivable_source=scene.drivable.source, drivable_confidence=scene.drivable.confidence,
-                         anchor_sample_token=frame.token, anchor_camera=channel)
+                         anchor_sample_token=frame.token, anchor_camera=track[2])
     return None
 
 
@@ -563,9 +637,9 @@ def _check_flat(frames, flat: np.ndarray, span: np.ndarray, alive: np.ndarray, s
     return alive
 
 
-def _clear_of_ego_in_time(frames, path: EgoPath, s0: np.ndarray, d: np.ndarray, signed_speed: np.ndarray,
-                          t_s: np.ndarray, k: int, span: np.ndarray, alive: np.ndarray, wlh: np.ndarray,
-                          config: TrackConfig, tally: _Tally) -> np.ndarray:
+def _clear_of_ego_in_time(frames, path: EgoPath, motion: LaneMotion, d: np.ndarray, t_s: np.ndarray,
+                          span: np.ndarray, alive: np.ndarray, wlh: np.ndarray, config: TrackConfig,
+                          tally: _Tally) -> np.ndarray:
     """Moving candidates ``alive`` whose footprint keeps ``dynamic_clearance_m`` from the ego's footprint at
     every keyframe of their span and ``SWEPT_PATH_STEPS - 1`` times between consecutive ones."""
     if len(frames) > 1:
@@ -586,8 +660,8 @@ def _clear_of_ego_in_time(frames, path: EgoPath, s0: np.ndarray, d: np.ndarray, 
             continue
         idx = np.flatnonzero(here)
         c = alive[idx]
-        xy, heading = path.point_at(s0[c] + signed_speed[c] * (t - t_s[k]), d[c])
-        yaw = heading + np.where(signed_speed[c] >= 0, 0.0, np.pi)
+        xy, heading = path.point_at(motion.s_at(t, c), d[c])
+        yaw = heading + np.where(motion.heading_sign(c) > 0, 0.0, np.pi)
         fp = footprint_corners(xy, yaw, l, w)
         clear = rule_mutual(fp, ego_fp[q][None], config.placement.dynamic_clearance_m)
         ok[idx[~clear]] = False
@@ -595,11 +669,12 @@ def _clear_of_ego_in_time(frames, path: EgoPath, s0: np.ndarray, d: np.ndarray, 
     return alive[ok]
 
 
-def _stand_and_check(frames, k: int, channel: str, c: int, xy_j: np.ndarray, yaw_j: np.ndarray, span: np.ndarray,
+def _stand_and_check(frames, k: int, channel: str | None, c: int, xy_j: np.ndarray, yaw_j: np.ndarray, span: np.ndarray,
                      wlh: np.ndarray, moving: bool, swept: np.ndarray, placed: Sequence[Track], config: TrackConfig,
-                     tally: _Tally) -> tuple[np.ndarray, tuple[str, ...]] | None:
+                     tally: _Tally) -> tuple[np.ndarray, tuple[str, ...], str] | None:
     """Stand candidate ``c`` on the ground (once at the anchor if parked, per frame if moving) and apply every
-    rule to its tilted boxes at every frame of its span; (T (K', 4, 4), ground sources) or None."""
+    rule to its tilted boxes at every frame of its span; (T (K', 4, 4), ground sources, anchor camera) or None.
+    ``channel``: the camera that must see it at the anchor; None: any of the anchor's cameras."""
     pc = config.placement
     keep = np.flatnonzero(span)
     anchor_plane = frames[k].scene().ground.fit(xy_j[k])
@@ -637,28 +712,27 @@ def _stand_and_check(frames, k: int, channel: str, c: int, xy_j: np.ndarray, yaw
                 return None
         T_all.append(T[0])
         sources.append(str(plane.source))
-    # the anchor camera sees it (the single-image visibility rule)
+    # the anchor camera sees it (the single-image visibility rule); without one given: the first that does
     i_k = int(np.searchsorted(keep, k))
-    view_scene = frames[k].scene(channel)
-    T_co = view_scene.view.T_cam_from_global @ T_all[i_k]
-    corners = (T_co[:3, :3] @ box_corners_object(wlh).T).T + T_co[:3, 3]
-    visible = visible_fraction_estimate(T_co[None], wlh, view_scene.camera, view_scene.depth_m,
-                                        pc.occlusion_tolerance_m)
-    if not rule_in_view(corners[None], view_scene.camera, pc.min_visible_fraction, pc.near_plane_m, visible)[0]:
-        tally.report["in_view"] += 1
-        return None
-    return np.array(T_all), tuple(sources)
+    for name in [channel] if channel is not None else frames[k].channels:
+        view_scene = frames[k].scene(name)
+        T_co = view_scene.view.T_cam_from_global @ T_all[i_k]
+        corners = (T_co[:3, :3] @ box_corners_object(wlh).T).T + T_co[:3, 3]
+        if not np.all(corners[:, 2] >= pc.near_plane_m):
+            continue
+        visible = visible_fraction_estimate(T_co[None], wlh, view_scene.camera, view_scene.depth_m,
+                                            pc.occlusion_tolerance_m)
+        if rule_in_view(corners[None], view_scene.camera, pc.min_visible_fraction, pc.near_plane_m, visible)[0]:
+            return np.array(T_all), tuple(sources), name
+    tally.report["in_view"] += 1
+    return None
 
 
-def _trajectory_velocity(path: EgoPath, s0: float, d: float, signed_speed: float, t_s: np.ndarray, k: int,
-                         span: np.ndarray, moving: bool) -> np.ndarray:
-    """(K', 3) velocity (m/s, global) of the trajectory s(t) = s0 + v (t - t_k) at offset d, at the span's keyframes."""
-    t = t_s[span]
+def _trajectory_velocity(path: EgoPath, motion: LaneMotion, c: int, d: float, t: np.ndarray) -> np.ndarray:
+    """(T, 3) velocity (m/s, global) of moving candidate ``c`` (offset ``d``) at times ``t`` (T,) seconds."""
     dt = 1e-3
-    s_a = s0 + signed_speed * (t - dt - t_s[k])
-    s_b = s0 + signed_speed * (t + dt - t_s[k])
-    a, _ = path.point_at(s_a, np.full(len(t), d))
-    b, _ = path.point_at(s_b, np.full(len(t), d))
+    a, _ = path.point_at(motion.s_at(t - dt, c), np.full(len(t), d))
+    b, _ = path.point_at(motion.s_at(t + dt, c), np.full(len(t), d))
     v = np.zeros((len(t), 3))
     v[:, :2] = (b - a) / (2 * dt)
     return v

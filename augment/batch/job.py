@@ -146,7 +146,7 @@ def _with_tracks(rows: list[LogRow], here: list, scene: SceneTracks, token: str)
             for o in row.objects:
                 track = here[o.object_index]
                 i = track.index_of(token)
-                objects.append(replace(o, object_index=track.track_index, attribute=track.attribute,
+                objects.append(replace(o, object_index=track.track_index, attribute=track.attribute_at(i),
                                        track=f"{scene.scene_token}/{track.track_index}",
                                        velocity=[round(float(v), 6) for v in track.velocity_global[i]]))
             row = replace(row, objects=tuple(objects))

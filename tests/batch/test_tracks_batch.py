@@ -84,8 +84,8 @@ def test_devkit_chains_instances_and_velocity_matches_the_trajectory(run):
             chain.append(ann)
             token = ann["next"]
         assert [a["sample_token"] for a in chain] == here and chain[-1]["token"] == inst["last_annotation_token"]
-        attributes = {nusc.get("attribute", t)["name"] for a in chain for t in a["attribute_tokens"]}
-        assert attributes == {track.attribute}
+        attributes = [nusc.get("attribute", t)["name"] for a in chain for t in a["attribute_tokens"]]
+        assert attributes == [track.attribute_at(track.index_of(a["sample_token"])) for a in chain]
         for ann in chain:
             i = track.index_of(ann["sample_token"])
             assert np.allclose(ann["translation"], track.box_at(i).center, atol=1e-6)
@@ -105,7 +105,8 @@ def test_log_names_each_annotation_by_track_with_velocity_and_attribute(run):
     assert logged
     for sample_token, o in logged:
         track = by_key[o.track]
-        assert o.object_index == track.track_index and o.attribute == track.attribute
+        assert o.object_index == track.track_index
+        assert o.attribute == track.attribute_at(track.index_of(sample_token))
         assert np.allclose(o.velocity, track.velocity_global[track.index_of(sample_token)], atol=1e-5)
 
 
