@@ -41,6 +41,10 @@ def _dataroot(dataroot: Path | None, version: str | None) -> tuple[str, str]:
               help="Insert N tracks per scene: instances through the scene's keyframes (parked by the kerb or moving "
                    "along a lane), rendered into every camera of every keyframe that sees them, with velocities and "
                    "prev/next-linked annotations. 0: objects per sample (--n-objects).")
+@click.option("--sweeps", is_flag=True,
+              help="With --tracks: also render the tracks into the camera (12 Hz) and LiDAR (20 Hz) sweeps between "
+                   "keyframes, at poses interpolated at each sweep's time (skipped, with the reason, where the "
+                   "dataset has no sweep files).")
 @click.option("--yaw-sigma", type=YAW_SIGMA_RANGE, default=15.0, show_default=True,
               help="Yaw noise (deg, 0-180) around the ego heading: 15 augmentation (paper), 3 realistic.")
 @asset_options
@@ -62,7 +66,7 @@ def _dataroot(dataroot: Path | None, version: str | None) -> tuple[str, str]:
 @click.option("--debug", is_flag=True, help="Show tracebacks.")
 @limit_options
 @runtime_errors
-def batch(dataroot, version, out, cameras, limit, n_objects, tracks, yaw_sigma, asset, assets_dir, asset_front, asset_length,
+def batch(dataroot, version, out, cameras, limit, n_objects, tracks, sweeps, yaw_sigma, asset, assets_dir, asset_front, asset_length,
           quality, seed, ev, match_camera, level, workers, scheduler, dask_local, shard, dry_run, contact_sheet, fail_fast,
           no_progress, debug):
     """Augment every sample of a dataset into a new nuScenes-format dataset; rerunning resumes.
@@ -91,7 +95,7 @@ def batch(dataroot, version, out, cameras, limit, n_objects, tracks, yaw_sigma, 
         dataroot=root, version=version, cameras=() if names in ((), ("all",)) else names, limit=limit, seed=seed,
         quality=quality, level=level, ev=ev, match_camera=match_camera, n_objects=n_objects, yaw_sigma_deg=yaw_sigma,
         asset=str(asset.resolve()) if asset else None, assets_dir=str(assets_dir.resolve()) if assets_dir else None,
-        asset_front=asset_front, asset_length=asset_length, tracks=tracks,
+        asset_front=asset_front, asset_length=asset_length, tracks=tracks, sweeps=sweeps,
     )
     run = RunOptions(workers=workers or default_workers(), scheduler=scheduler, dask_local=dask_local,
                      shard=parse_shard(shard) if shard else None, fail_fast=fail_fast, dry_run=dry_run,

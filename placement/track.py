@@ -225,6 +225,18 @@ class Track:
                          yaw_source="lane" if self.lane_source == "map lanes" else "ego",
                          footprint_xy=box_footprint_rect(T[None], self.wlh)[0])
 
+    def placement_at_time(self, timestamp_us: int, asset_index: int) -> Placement:
+        """The :class:`Placement` at any time of the span (a sweep's): the pose interpolated between keyframes,
+        the attribute and ground of the keyframe nearest in time."""
+        T = self.pose_at(timestamp_us)
+        i = int(np.argmin(np.abs(self.timestamps_us - timestamp_us)))
+        center = T[:3, 3] + 0.5 * self.wlh[2] * T[:3, 2]
+        box = Box(center, self.wlh.copy(), rotation_to_quat(T[:3, :3]), self.category)
+        return Placement(asset_index=asset_index, T_global_from_object=T, box=box, wlh=self.wlh.copy(),
+                         ground_normal_global=T[:3, 2].copy(), ground_source=self.ground_source[i],
+                         drivable_source=self.drivable_source, drivable_confidence=self.drivable_confidence,
+                         attribute=self.attribute_at(i), footprint_xy=box_footprint_rect(T[None], self.wlh)[0])
+
     def to_json(self) -> dict:
         return {"track_index": self.track_index, "category": self.category, "wlh": self.wlh.tolist(),
                 "motion": self.motion, "attribute": self.attribute, "speed_mps": round(self.speed_mps, 6),

@@ -12,7 +12,7 @@ from ..core import InputError, write_json_atomic
 CONFIG_FILE = "batch_config.json"
 CONFIG_SCHEMA = "streetaug.batch/1"
 # Fields added after the schema's first release: a batch_config.json without them means their default.
-OPTIONAL_FIELDS = {"limit", "match_camera", "tracks"}
+OPTIONAL_FIELDS = {"limit", "match_camera", "tracks", "sweeps"}
 # Fields that may change between runs into the same output folder (everything else must match to resume).
 _MAY_CHANGE = ("limit",)
 
@@ -37,6 +37,8 @@ class BatchConfig:
         tracks: 0 = objects per sample (independent in each keyframe); N > 0 = N tracks per scene, each an
             instance through the scene's keyframes (parked or moving; :mod:`streetaug.placement.track`),
             rendered into every camera of every keyframe that sees it (``n_objects`` is then not used).
+        sweeps: with ``tracks``, also render them into the camera and LiDAR sweeps between keyframes (poses
+            interpolated at each sweep's time); a dataset without sweep files skips them with one reason.
     """
 
     dataroot: str
@@ -55,10 +57,13 @@ class BatchConfig:
     asset_front: str = "+z"
     asset_length: float | None = None
     tracks: int = 0
+    sweeps: bool = False
 
     def __post_init__(self) -> None:
         if self.tracks < 0:
             raise InputError(f"--tracks must be >= 0 (tracks per scene; 0 = objects per sample), got {self.tracks}")
+        if self.sweeps and not self.tracks:
+            raise InputError("--sweeps renders tracks into the sweeps between keyframes: give --tracks N too")
 
     def to_json(self) -> dict:
         return {"schema": CONFIG_SCHEMA, **asdict(self), "cameras": list(self.cameras)}

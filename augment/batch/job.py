@@ -134,6 +134,17 @@ def augment_track_sample(reader: NuScenesReader, config: BatchConfig, out_dir: P
                                     v.sample_data_token) for v in views}
     rows = [write_camera(out_dir, sample, c, result, per_camera, lidar, names.get(c))
             for c in cameras if c not in failed]
+    if config.sweeps:
+        from .sweep_render import render_sweeps  # deferred: only with --sweeps
+
+        sweeps = render_sweeps(out_dir, reader, sample, views, here, assets, label_fields, result.shared_lighting,
+                               insert_options(config))
+        lidar_files = sweeps.by_channel.get("LIDAR_TOP", [])
+        rows = [replace(r, files=tuple(dict.fromkeys((*r.files, *sweeps.by_channel.get(r.camera, []), *lidar_files))),
+                        sweep_files={t: f for t, f in sweeps.files.items()
+                                     if f in sweeps.by_channel.get(r.camera, []) or f in lidar_files},
+                        sweeps_note=sweeps.note, timing_s={**r.timing_s, "sweeps": sweeps.seconds / len(rows)})
+                for r in rows]
     return ordered(cameras, with_file_checks(out_dir, _with_tracks(rows, here, scene, token)), failed)
 
 

@@ -17,6 +17,7 @@ PLAN_FILE = "plan.jsonl"
 # Output folder of lidarseg labels that inserted objects changed (``lidarseg/`` links to the source's).
 LIDARSEG_FOLDER = "lidarseg_augmented"
 SAMPLES = "samples"
+SWEEPS = "sweeps"  # nuScenes keeps non-keyframe files under sweeps/<CHANNEL>/
 LABELS = "labels"
 
 
@@ -33,7 +34,8 @@ def output_file(filename: str, channel: str, token: str = "") -> str:
         channel: its sensor channel (e.g. ``CAM_FRONT``, ``LIDAR_TOP``).
         token: its ``sample_data`` token (for the message).
 
-    Convention: ``samples/...`` keeps its path; any other path ``p`` becomes ``samples/<channel>/p``.
+    Convention: ``samples/...`` and ``sweeps/...`` keep their path; any other path ``p`` becomes
+    ``samples/<channel>/p``.
 
     Raises:
         InputError: the filename is absolute or climbs out with ``..``.
@@ -42,7 +44,7 @@ def output_file(filename: str, channel: str, token: str = "") -> str:
     if not parts or PurePosixPath(filename).is_absolute() or any(p in ("..", "") for p in parts):
         raise InputError(f"sample_data {token}: filename {filename!r} must be a relative path inside the dataroot")
     parts = tuple(p for p in parts if p != ".")
-    if parts[0] != SAMPLES or len(parts) < 3:
+    if parts[0] not in (SAMPLES, SWEEPS) or len(parts) < 3:
         parts = (SAMPLES, channel, *parts)
     return str(PurePosixPath(*parts))
 

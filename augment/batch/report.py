@@ -90,6 +90,16 @@ def format_summary(summary: dict) -> str:
         lines.append("  seconds per ok image:  " + "  ".join(f"{s:>9}" for s in shown))
         for p in PERCENTILES:
             lines.append(f"                   p{p:<2}  " + "  ".join(f"{stages[s][f'p{p}']:9.3f}" for s in shown))
+    tracks = summary.get("tracks")
+    if tracks:
+        lines.append(f"  tracks:   {tracks['tracks']} in {tracks['scenes']} scene(s) ({tracks['parked']} parked, "
+                     f"{tracks['moving']} moving), median {tracks['keyframes_per_track_median']} keyframes each"
+                     + (f"; {tracks['scenes_failed']} scene(s) failed" if tracks["scenes_failed"] else ""))
+    sweeps = summary.get("sweeps")
+    if sweeps:
+        lines.append(f"  sweeps:   {sweeps['files']} sweep files rendered"
+                     + (f"; not rendered for {sweeps['samples_not_rendered']} sample(s): {sweeps['reason']}"
+                        if sweeps["samples_not_rendered"] else ""))
     workers = summary.get("workers", {})
     if workers:
         rss = [w["peak_rss_mb"] for w in workers.values()]

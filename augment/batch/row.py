@@ -136,6 +136,9 @@ class LogRow:
         placement_report: rule name -> candidates rejected (``plan.jsonl``).
         seconds, cpu_s: the sample's wall and CPU seconds divided among its cameras.
         worker, peak_rss_mb: the worker (``host:pid``) and its peak resident memory.
+        sweep_files: ``--sweeps``: sweep ``sample_data`` token -> its new file, for the sweeps before this
+            sample of this camera (the LiDAR sweeps on every camera row of the sample); also in ``files``.
+        sweeps_note: ``--sweeps``: why this sample's sweeps were not rendered (e.g. their files are absent).
         extra: keys this version does not know (kept on rewriting).
     """
 
@@ -157,6 +160,8 @@ class LogRow:
     worker: str | None = None
     peak_rss_mb: float | None = None
     file_checks: dict[str, dict[str, Any]] | None = None
+    sweep_files: dict[str, str] | None = None
+    sweeps_note: str | None = None
     extra: dict[str, Any] = field(default_factory=dict)
 
     @property
@@ -182,6 +187,7 @@ class LogRow:
             "n_objects_visible": self.n_objects_visible, "seconds": self.seconds, "cpu_s": self.cpu_s,
             "worker": self.worker, "peak_rss_mb": self.peak_rss_mb,
             "file_checks": None if self.file_checks is None else {k: dict(v) for k, v in self.file_checks.items()},
+            "sweep_files": None if self.sweep_files is None else dict(self.sweep_files), "sweeps_note": self.sweeps_note,
         }
         doc = _drop_none(doc)
         if self.status in ("planned", "no_placement"):
@@ -203,5 +209,6 @@ class LogRow:
             n_objects_visible=doc.get("n_objects_visible"), placement_report=doc.get("placement_report"),
             seconds=doc.get("seconds"), cpu_s=doc.get("cpu_s"), worker=doc.get("worker"),
             peak_rss_mb=doc.get("peak_rss_mb"), file_checks=doc.get("file_checks"),
+            sweep_files=doc.get("sweep_files"), sweeps_note=doc.get("sweeps_note"),
             extra={k: v for k, v in doc.items() if k not in known},
         )

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import shutil
 import time
+from itertools import chain
 from collections import Counter
 from dataclasses import replace
 from pathlib import Path
@@ -164,8 +165,21 @@ def _run_locked(config: BatchConfig, out_dir: Path, run: RunOptions, echo: Calla
     if config.tracks:
         scenes = plan_scenes(config, out_dir, reader, slicer, pending, run, echo)
     scene_of = {t: reader.scene_of(t)["token"] for t in pending} if config.tracks else {}
-    tasks = ((config, str(out_dir), t, cameras[t], slicer.tables(t), run.dry_run, run.fail_fast,
-              scenes.get(scene_of.get(t))) for t in pending)
+    unsliceable: list[list[LogRow]] = []  # samples whose rows are inconsistent: failed here, never dispatched
+
+    def tasks_of():
+        for t in pending:
+            try:
+                tables = slicer.tables(t, config.sweeps)
+            except InputError as e:  # e.g. a missing ego pose or calibration row
+                if run.fail_fast:
+                    raise
+                unsliceable.append([LogRow(t, c, "failed", str(e).splitlines()[0][:300]) for c in cameras[t]])
+                continue
+            yield (config, str(out_dir), t, cameras[t], tables, run.dry_run, run.fail_fast,
+                   scenes.get(scene_of.get(t)))
+
+    tasks = tasks_of()
     workers = max(1, min(run.workers, len(pending)))
     if run.scheduler or run.dask_local:
         executor = f"Dask {run.scheduler or f'LocalCluster({run.dask_local})'}"
@@ -176,6 +190,7 @@ def _run_locked(config: BatchConfig, out_dir: Path, run: RunOptions, echo: Calla
     else:
         executor = "1 process (inline)"
         results = run_inline(process_sample, tasks)
+    results = chain(results, unsliceable)  # filled while the tasks are drawn: read after them
     return _collect(config, out_dir, run, reader, log_path, results, cameras, tokens, executor)
 
 
@@ -196,9 +211,17 @@ def plan_scenes(config: BatchConfig, out_dir: Path, reader: NuScenesReader, slic
         saved = read_scene_tracks(out_dir, scene_token, config, tokens)
         if saved is not None:
             scenes[scene_token] = saved
-        else:
-            todo.append((config, scene_token, reader.get("scene", scene_token).get("name", ""), tokens,
-                         scene_tables(slicer, tokens)))
+            continue
+        name = reader.get("scene", scene_token).get("name", "")
+        try:
+            todo.append((config, scene_token, name, tokens, scene_tables(slicer, tokens)))
+        except InputError as e:  # inconsistent tables (a missing ego pose, calibration, ...): the scene fails
+            if run.fail_fast:
+                raise
+            scenes[scene_token] = SceneTracks(scene_token, name, tuple(tokens), (),
+                                              reason=f"scene {name or scene_token}: {e}".splitlines()[0][:300],
+                                              failed=True)
+            write_scene_tracks(out_dir, scenes[scene_token], config)  # for the summary; a rerun plans it again
     if todo:
         echo(f"planning tracks in {len(todo)} scene(s)" + (f" ({len(scenes)} already planned)" if scenes else ""))
         workers = max(1, min(run.workers, len(todo)))
@@ -206,8 +229,7 @@ def plan_scenes(config: BatchConfig, out_dir: Path, reader: NuScenesReader, slic
         for planned in results:
             if run.fail_fast and planned.failed:
                 raise InputError(planned.reason or f"scene {planned.scene_token}: planning failed")
-            if not planned.failed:
-                write_scene_tracks(out_dir, planned, config)
+            write_scene_tracks(out_dir, planned, config)  # a failed scene's file is for the summary only
             scenes[planned.scene_token] = planned
     return scenes
 
@@ -264,6 +286,7 @@ def finalize(out_dir: Path, config: BatchConfig, reader: NuScenesReader, rows: l
     for r in rows:
         if not r.done:
             continue
+        augmented.update(r.sweep_files or {})  # --sweeps: the sweeps before the sample, with its tracks
         lidar = r.lidar
         if lidar is not None:  # the sample's sweep with its objects (the same entry on each camera row)
             augmented[lidar.sample_data_token] = lidar.file
@@ -288,6 +311,11 @@ def finalize(out_dir: Path, config: BatchConfig, reader: NuScenesReader, rows: l
     if config.tracks:
         scenes = saved_scene_tracks(out_dir)
         summary["tracks"] = summarize_tracks(scenes)
+        if config.sweeps:
+            notes = {r.sample_token: r.sweeps_note for r in rows if r.sweeps_note}
+            summary["sweeps"] = {"files": len({t for r in rows for t in (r.sweep_files or {})}),
+                                 "samples_not_rendered": len(notes),
+                                 "reason": next(iter(notes.values()), None)}  # e.g. the files are absent
         tracks_sheet = track_sheet(out_dir, rows, scenes) if contact_sheet_n > 0 else None
         summary["outputs"]["tracks_sheet"] = tracks_sheet.name if tracks_sheet else None
     write_json_atomic(out_dir / SUMMARY_FILE, summary)

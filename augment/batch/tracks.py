@@ -99,12 +99,13 @@ def plan_key(config: BatchConfig) -> dict:
 
 def read_scene_tracks(out_dir: Path, scene_token: str, config: BatchConfig,
                       sample_tokens: list[str]) -> SceneTracks | None:
-    """The saved plan of a scene, or None when there is none or it was made for other options or samples."""
+    """The saved plan of a scene, or None when there is none, it failed (planned again) or it was made for other
+    options or samples."""
     path = tracks_file(out_dir, scene_token)
     if not path.is_file():
         return None
     doc = read_json(path)
-    if doc.get("plan_key") != plan_key(config) or list(doc.get("sample_tokens") or []) != list(sample_tokens):
+    if doc.get("failed") or doc.get("plan_key") != plan_key(config) or list(doc.get("sample_tokens") or []) != list(sample_tokens):
         return None
     return SceneTracks.from_json(doc, path)
 

@@ -40,15 +40,16 @@ class TableSlicer:
         """Channels of the sample's keyframe camera images, sorted."""
         return sorted(self.reader.keyframe_sample_data(token, "camera"))
 
-    def tables(self, token: str) -> dict[str, list[dict]]:
+    def tables(self, token: str, sweeps: bool = False) -> dict[str, list[dict]]:
+        """The rows of sample ``token`` (with ``sweeps``: its non-keyframe ``sample_data`` rows too)."""
         r = self.reader
         sample = r.get("sample", token)
         scene = r.get("scene", sample["scene_token"])
-        sds = [sd for sd in r.sample_data_rows(token) if sd.get("is_key_frame")]
+        sds = [sd for sd in r.sample_data_rows(token) if sweeps or sd.get("is_key_frame")]
         anns = r.annotation_rows(token)
         return {
             **self._whole,
-            "sample": [sample],
+            "sample": [sample] + ([r.get("sample", sample["prev"])] if sweeps and sample.get("prev") else []),
             "scene": [scene],
             "log": [r.get("log", scene["log_token"])],
             "sample_data": sds,

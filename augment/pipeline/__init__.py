@@ -18,12 +18,13 @@ from .options import InsertOptions, item_seed, render_settings
 from .outputs import LABELS_SCHEMA, labels_document, write_insert_outputs
 from .place import SamplePlacement, place_in_sample, place_in_view
 from .results import InsertResult, SampleInsertResult
-from .sample import insert_into_sample, insert_into_view, insert_placed_into_sample, sample_lighting
+from .sample import insert_into_sample, insert_into_view, insert_placed_into_sample, sample_lighting, \
+    shared_sample_lighting
 
 __all__ = [
     "InsertOptions", "InsertResult", "LABELS_SCHEMA", "SampleContext", "SampleInsertResult", "SamplePlacement",
     "SampleSweep", "SweepInsertion", "ViewContext", "check_image_input", "insert_image_to_files",
     "insert_into_image", "insert_into_sample", "insert_placed_into_sample", "insert_into_sweep", "insert_into_view", "insert_placements_into_sweep",
     "insert_view_to_files", "item_seed", "labels_document", "place_in_sample", "place_in_view", "read_depth_map",
-    "render_settings", "sample_lighting", "scene_depth", "scene_depth_for_view", "write_insert_outputs",
+    "render_settings", "sample_lighting", "shared_sample_lighting", "scene_depth", "scene_depth_for_view", "write_insert_outputs",
 ]

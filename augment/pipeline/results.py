@@ -61,6 +61,7 @@ class SampleInsertResult:
         lighting: channel -> lighting estimate of that camera.
         skipped_reason: set when no object could be placed in any view.
         timing_s: seconds of the sample-level stages (``lighting``, ``placement``) and ``total``.
+        shared_lighting: the sample's lighting in the world (``SampleLighting``; ``.for_view`` gives any camera's).
     """
 
     views: dict[str, InsertResult]
@@ -73,3 +74,4 @@ class SampleInsertResult:
     lighting: dict[str, LightingEstimate]
     skipped_reason: str | None
     timing_s: dict[str, float]
+    shared_lighting: object = None

@@ -23,6 +23,15 @@ from .results import InsertResult, SampleInsertResult
 from .view import render_into_view
 
 
+def shared_sample_lighting(sample: Sample, views: Sequence[CameraView], level: str,
+                           points_cam: dict[str, np.ndarray] | None = None):
+    """The lighting of a sample built once from all ``views`` (a ``SampleLighting``: ``.for_view(view)`` gives it
+    in any camera's frame, e.g. a sweep's); see :func:`sample_lighting`."""
+    points_cam = points_cam or {}
+    return estimate_views_lighting(list(views), sample.location, level, lidar=sample.lidar, boxes=sample.boxes,
+                                   query_point_cam=points_cam.get(views[0].channel))
+
+
 def sample_lighting(sample: Sample, views: Sequence[CameraView], level: str,
                     points_cam: dict[str, np.ndarray] | None = None) -> dict[str, LightingEstimate]:
     """The lighting of a sample, built once from all ``views`` and expressed in each camera's frame
@@ -32,9 +41,7 @@ def sample_lighting(sample: Sample, views: Sequence[CameraView], level: str,
     ``points_cam``: channel -> (3,) placement in that camera's frame; the first view's point is where
     L2 centres its volume and where ``auto`` judges the level.
     """
-    points_cam = points_cam or {}
-    shared = estimate_views_lighting(list(views), sample.location, level, lidar=sample.lidar, boxes=sample.boxes,
-                                     query_point_cam=points_cam.get(views[0].channel))
+    shared = shared_sample_lighting(sample, views, level, points_cam)
     return {view.channel: shared.for_view(view) for view in views}
 
 
@@ -67,7 +74,7 @@ def insert_into_sample(
 
 def insert_placed_into_sample(sample: Sample, views: Sequence[CameraView], placements: Sequence[Placement],
                               assets: Sequence[Asset], options: InsertOptions,
-                              label_fields: Sequence[dict] = ()) -> SampleInsertResult:
+                              label_fields: Sequence[dict] = (), lighting=None) -> SampleInsertResult:
     """Render objects whose places are already decided (e.g. the tracks of a scene at this keyframe) into
     ``views`` of ``sample``: lighting per sample, then every object or shadow each camera sees.
 
@@ -75,15 +82,17 @@ def insert_placed_into_sample(sample: Sample, views: Sequence[CameraView], place
         placements: the objects' placements (global frame), one per asset; ``asset_index`` = position.
         assets: their assets.
         label_fields: per object, extra fields for its image labels (e.g. ``{"track": ...}``), or empty.
+        lighting: a sample's shared lighting (:func:`shared_sample_lighting`, ``result.shared_lighting``) to
+            render with instead of estimating it here (e.g. a keyframe's, for the sweeps around it).
     Each object is logged under the first of ``views`` (``placed_for``): one annotation per sample.
     """
     placed = SamplePlacement(list(placements), [views[0].channel] * len(placements), list(assets), {},
                              {v.channel: 0.0 for v in views}, tuple(label_fields))
-    return _insert(sample, views, options, lambda context: placed)
+    return _insert(sample, views, options, lambda context: placed, lighting)
 
 
 def _insert(sample: Sample, views: Sequence[CameraView], options: InsertOptions,
-            place: Callable[[SampleContext], SamplePlacement]) -> SampleInsertResult:
+            place: Callable[[SampleContext], SamplePlacement], shared=None) -> SampleInsertResult:
     render_settings(options)  # a bad preset fails before any work
     check_insert_memory([(v.width, v.height) for v in views], options.quality, f"sample {sample.token}")
     t_start = time.perf_counter()
@@ -94,7 +103,9 @@ def _insert(sample: Sample, views: Sequence[CameraView], options: InsertOptions,
     context = SampleContext.of(sample, views)
     placed = place(context)
     t = time.perf_counter()
-    lighting = sample_lighting(sample, views, options.level, placement_points_cam(views, placed))
+    if shared is None:
+        shared = shared_sample_lighting(sample, views, options.level, placement_points_cam(views, placed))
+    lighting = {view.channel: shared.for_view(view) for view in views}
     lighting_s = (time.perf_counter() - t) / max(len(views), 1)
     context = context.with_lighting(lighting)
 
@@ -111,7 +122,7 @@ def _insert(sample: Sample, views: Sequence[CameraView], options: InsertOptions,
     timing_s = {"lighting": lighting_s * len(views), "placement": sum(placed.seconds.values()),
                 "total": time.perf_counter() - t0, "with_decode": time.perf_counter() - t_start}
     return SampleInsertResult(out, placed.placements, placed.placed_for, placed.assets, placed.results, visible_px,
-                              coverage_px, lighting, placed.reason, timing_s)
+                              coverage_px, lighting, placed.reason, timing_s, shared)
 
 
 def insert_into_view(sample: Sample, view: CameraView, assets: Sequence[Asset], options: InsertOptions) -> InsertResult:

@@ -1,0 +1,109 @@
+"""``streetaug batch --tracks`` on the bundled sequence scene (examples/nuscenes-sequence: 5 keyframes, 3 cameras,
+800 x 450, the ego driving at 8 m/s, annotated parked and moving cars, map lanes): the same output whatever the
+number of workers or a kill, rules that hold at every keyframe, labels and the track sheet.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from streetaug.augment.batch import BatchConfig, RunOptions, read_log, run_batch
+from streetaug.augment.batch.tracks import saved_scene_tracks
+from streetaug.augment.evaluation.track_audit import audit_tracks
+from streetaug.datasets.bundled import bundled_sequence_dataroot
+from test_batch import assert_same_output
+
+VERSION = "v1.0-sequence"
+QUIET = dict(progress=False, contact_sheet=4)
+
+
+def config(**kw) -> BatchConfig:
+    values = dict(dataroot=str(bundled_sequence_dataroot().resolve()), version=VERSION, quality="draft", level="L1",
+                  seed=0, tracks=3)
+    values.update(kw)
+    return BatchConfig(**values)
+
+
+@pytest.fixture(scope="module")
+def reference(tmp_path_factory):
+    out = tmp_path_factory.mktemp("seq") / "inline"
+    summary = run_batch(config(), out, RunOptions(workers=1, **QUIET))
+    return out, summary
+
+
+def test_tracks_are_planned_and_shown_through_the_scene(reference):
+    out, summary = reference
+    tracks = summary["tracks"]
+    assert tracks["tracks"] == 3 and tracks["keyframes_per_track_median"] >= 3
+    assert summary["outputs"]["tracks_sheet"] == "tracks_sheet.png" and (out / "tracks_sheet.png").is_file()
+    labelled = [o for p in sorted((out / "labels").rglob("*.json")) for o in json.loads(p.read_text())["objects"]]
+    assert labelled and all(o["track"] and len(o["velocity"]) == 3 and o["motion"] in ("parked", "moving")
+                            for o in labelled)
+    # the labels' LiDAR count is the annotation's (the augmented sweep's points on the object)
+    rows = read_log(out / "augment_log.jsonl")
+    logged = {(r.sample_token, o.object_index): o.num_lidar_pts for r in rows for o in r.objects or ()}
+    for p in sorted((out / "labels").rglob("*.json")):
+        doc = json.loads(p.read_text())
+        for o in doc["objects"]:
+            assert o["num_lidar_pts"] == logged[(doc["sample_token"], o["track_index"])]
+
+
+def test_audit_finds_no_violation_no_pop_and_renders_what_is_visible(reference):
+    out, _ = reference
+    audit = audit_tracks(out, bundled_sequence_dataroot(), VERSION)
+    assert audit["frames_checked"] >= 9
+    assert audit["violations"] == 0, audit["per_scene"]
+    assert audit["pops"] == 0, audit["per_scene"]
+    assert audit["recall"] is not None and audit["recall"] >= 0.9, audit
+    assert audit["lidar_pts_nonzero_fraction"] > 0.5
+
+
+def test_two_workers_give_the_same_output(reference, tmp_path):
+    run_batch(config(), tmp_path / "out", RunOptions(workers=2, **QUIET))
+    assert_same_output(tmp_path / "out", reference[0])
+    a = [t.to_json() for t in saved_scene_tracks(tmp_path / "out")[0].tracks]
+    assert a == [t.to_json() for t in saved_scene_tracks(reference[0])[0].tracks]
+
+
+def test_sigkill_mid_scene_then_rerun_gives_the_same_output(reference, tmp_path):
+    out = tmp_path / "out"
+    cmd = [str(Path(sys.executable).with_name("streetaug")), "batch", "--dataroot", str(bundled_sequence_dataroot()),
+           "--version", VERSION, "--tracks", "3", "--quality", "draft", "--level", "L1", "--workers", "1",
+           "--no-progress", "--contact-sheet", "4", "--out", str(out)]
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    log = out / "augment_log.jsonl"
+    deadline = time.monotonic() + 240
+    while not (log.is_file() and log.stat().st_size > 0) and proc.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.01)
+    proc.send_signal(signal.SIGKILL)  # after the first sample of the scene, while the next is being rendered
+    proc.wait()
+    assert proc.returncode == -signal.SIGKILL
+    done_before = {r.sample_token for r in read_log(log)}
+    assert 0 < len(done_before) < 5
+    rerun = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
+    assert rerun.returncode == 0, rerun.stderr
+    assert "resuming" in rerun.stderr
+    assert_same_output(out, reference[0])
+
+
+def test_a_scene_with_a_sample_missing_its_ego_pose_fails_alone(tmp_path):
+    src = tmp_path / "src"
+    shutil.copytree(bundled_sequence_dataroot(), src)
+    table = src / VERSION / "ego_pose.json"
+    poses = json.loads(table.read_text())
+    sample_data = json.loads((src / VERSION / "sample_data.json").read_text())
+    key = next(sd for sd in sample_data if sd["is_key_frame"] and "CAM_FRONT/" in sd["filename"])
+    table.write_text(json.dumps([p for p in poses if p["token"] != key["ego_pose_token"]]))
+    summary = run_batch(config(dataroot=str(src)), tmp_path / "out", RunOptions(workers=1, **QUIET))
+    assert summary["tracks"]["scenes_failed"] == 1
+    rows = read_log(tmp_path / "out" / "augment_log.jsonl")
+    assert rows and all(r.status == "failed" for r in rows)
+    assert all("ego_pose" in r.reason for r in rows), rows[0].reason
