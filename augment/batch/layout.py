@@ -50,9 +50,11 @@ def output_file(filename: str, channel: str, token: str = "") -> str:
 
 
 def labels_file(image_file: str) -> str:
-    """The labels of an augmented image: ``samples/CAM/x/y.jpg`` -> ``labels/CAM/x/y.json``."""
+    """The labels of an augmented image: ``samples/CAM/x/y.jpg`` -> ``labels/CAM/x/y.json``; a sweep's
+    ``sweeps/CAM/y.jpg`` -> ``labels/sweeps/CAM/y.json``."""
     path = PurePosixPath(image_file)
-    return str(PurePosixPath(LABELS, *path.parts[1:]).with_suffix(".json"))
+    parts = path.parts[1:] if path.parts[0] != SWEEPS else path.parts
+    return str(PurePosixPath(LABELS, *parts).with_suffix(".json"))
 
 
 def check_unique_outputs(outputs: dict[str, list[str]]) -> None:

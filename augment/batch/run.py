@@ -43,10 +43,10 @@ from .layout import (LIDARSEG_FOLDER, LOG_FILE, PLAN_FILE, SUMMARY_FILE, check_u
 from .log import append_rows, compact_log, done_samples, latest_rows, read_log, write_log
 from .report import contact_sheet, summarize
 from .row import LogRow
-from .tracks import SceneTracks, plan_scene, read_scene_tracks, saved_scene_tracks, scene_groups, scene_tables, \
+from .tracks import SceneTracks, read_scene_tracks, saved_scene_tracks, scene_groups, scene_tables, \
     summarize_tracks, write_scene_tracks
 from .track_sheet import track_sheet
-from .worker import TableSlicer, process_sample
+from .worker import TableSlicer, plan_scene, process_sample
 
 
 

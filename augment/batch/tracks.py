@@ -1,6 +1,6 @@
 """Tracks in a batch (``--tracks N``): N inserted instances per scene, planned once per scene, rendered per sample.
 
-Planning runs as one task per scene (in a worker, like samples); its result is saved as
+Planning runs as one task per scene (in a worker, like samples: :func:`~.worker.plan_scene`); its result is saved as
 ``OUTDIR/tracks/<scene token>.json`` (atomically) before any sample of the scene is rendered, so a rerun
 renders exactly the same tracks (it reads the file instead of planning again) and a killed run never
 duplicates or truncates a track: each sample's annotation of each track is logged with the sample.
@@ -11,14 +11,13 @@ same in the planning task (its size) and in every sample's task (its mesh and pa
 
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from streetaug.datasets.nuscenes import NuScenesReader
-from streetaug.placement.track import Track, TrackConfig, plan_tracks, track_frames
+from streetaug.placement.track import Track
 
 from ..core import InputError, read_json, write_json_atomic
 from .config import BatchConfig
@@ -119,32 +118,6 @@ def write_scene_tracks(out_dir: Path, planned: SceneTracks, config: BatchConfig)
     write_json_atomic(tracks_file(out_dir, planned.scene_token), {**planned.to_json(), "plan_key": plan_key(config)})
 
 
-def plan_scene(config: BatchConfig, scene_token: str, scene_name: str, sample_tokens: list[str],
-               tables: dict[str, list[dict]]) -> SceneTracks:
-    """Plan ``config.tracks`` tracks through the keyframes ``sample_tokens`` of one scene (a worker task).
-
-    ``tables``: the rows of those samples (:func:`scene_tables`). A scene whose tables are inconsistent (a
-    missing ego pose, a sample without cameras, an unreadable LiDAR file) comes back ``failed`` with the
-    reason; the batch skips its samples and goes on.
-    """
-    from .worker import dataset_reader  # deferred: the driver sends this function to workers
-
-    t0 = time.perf_counter()
-    try:
-        reader = dataset_reader(config).with_tables(tables)
-        samples = [reader.sample(t) for t in sample_tokens]
-        frames = track_frames(samples)
-        assets = track_assets(config, scene_token, config.tracks)
-        plan = plan_tracks(frames, assets, track_rng(config.seed, "tracks", scene_token),
-                           TrackConfig(), samples[0].location)
-    except Exception as e:  # noqa: BLE001 - one inconsistent scene is skipped, the batch goes on
-        reason = f"scene {scene_name or scene_token}: {type(e).__name__}: {e}".splitlines()[0][:300]
-        return SceneTracks(scene_token, scene_name, tuple(sample_tokens), (), {}, reason, failed=True,
-                           seconds=time.perf_counter() - t0)
-    return SceneTracks(scene_token, scene_name, tuple(sample_tokens), tuple(plan.tracks), plan.report, plan.reason,
-                       plan.traffic_side, seconds=time.perf_counter() - t0)
-
-
 def scene_groups(reader: NuScenesReader, tokens: list[str]) -> dict[str, list[str]]:
     """scene token -> its samples among ``tokens`` (time order), scenes in the order of ``tokens``."""
     groups: dict[str, list[str]] = {}
@@ -181,5 +154,5 @@ def summarize_tracks(planned: list[SceneTracks]) -> dict:
     }
 
 
-__all__ = ["SceneTracks", "TRACKS_FOLDER", "plan_key", "plan_scene", "read_scene_tracks", "saved_scene_tracks", "scene_groups", "scene_tables",
+__all__ = ["SceneTracks", "TRACKS_FOLDER", "plan_key", "read_scene_tracks", "saved_scene_tracks", "scene_groups", "scene_tables",
            "summarize_tracks", "track_assets", "tracks_file", "write_scene_tracks"]

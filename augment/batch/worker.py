@@ -128,3 +128,32 @@ def process_sample(config: BatchConfig, out_dir: str, token: str, cameras: list[
     worker, rss = worker_id(), round(peak_rss_mb(), 1)
     return [replace(row, timing_s=row.timing_s or {"total": seconds}, seconds=seconds, cpu_s=cpu_s, worker=worker,
                     peak_rss_mb=rss) for row in rows]
+
+
+def plan_scene(config: BatchConfig, scene_token: str, scene_name: str, sample_tokens: list[str],
+               tables: dict[str, list[dict]]) -> SceneTracks:
+    """Plan ``config.tracks`` tracks through the keyframes ``sample_tokens`` of one scene (a worker task).
+
+    ``tables``: the rows of those samples (:func:`scene_tables`). A scene whose tables are inconsistent (a
+    missing ego pose, a sample without cameras, an unreadable LiDAR file) comes back ``failed`` with the
+    reason; the batch skips its samples and goes on.
+    """
+    # deferred: the driver sends this function to workers and must not pay for the planner's imports
+    from streetaug.placement.track import TrackConfig, plan_tracks, track_frames
+
+    from .tracks import SceneTracks, track_assets, track_rng
+
+    t0 = time.perf_counter()
+    try:
+        reader = dataset_reader(config).with_tables(tables)
+        samples = [reader.sample(t) for t in sample_tokens]
+        frames = track_frames(samples)
+        assets = track_assets(config, scene_token, config.tracks)
+        plan = plan_tracks(frames, assets, track_rng(config.seed, "tracks", scene_token),
+                           TrackConfig(), samples[0].location)
+    except Exception as e:  # noqa: BLE001 - one inconsistent scene is skipped, the batch goes on
+        reason = f"scene {scene_name or scene_token}: {type(e).__name__}: {e}".splitlines()[0][:300]
+        return SceneTracks(scene_token, scene_name, tuple(sample_tokens), (), {}, reason, failed=True,
+                           seconds=time.perf_counter() - t0)
+    return SceneTracks(scene_token, scene_name, tuple(sample_tokens), tuple(plan.tracks), plan.report, plan.reason,
+                       plan.traffic_side, seconds=time.perf_counter() - t0)

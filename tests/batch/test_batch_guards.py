@@ -37,13 +37,18 @@ class TestOutputNames:
         assert labels_file(name) == "labels/CAM_FRONT/n015-2018__CAM_FRONT__1.json"
         assert output_file("samples/LIDAR_TOP/x.pcd.bin", "LIDAR_TOP") == "samples/LIDAR_TOP/x.pcd.bin"
 
+    def test_sweeps_keep_their_folder_and_label_apart(self):
+        name = "sweeps/CAM_FRONT/n015-2018__CAM_FRONT__2.jpg"
+        assert output_file(name, "CAM_FRONT") == name
+        assert labels_file(name) == "labels/sweeps/CAM_FRONT/n015-2018__CAM_FRONT__2.json"
+
     def test_sub_folders_are_kept(self):
         a, b = output_file("samples/CAM_FRONT/sub0/same.jpg", "CAM_FRONT"), output_file(
             "samples/CAM_FRONT/sub1/same.jpg", "CAM_FRONT")
         assert a != b and labels_file(a) == "labels/CAM_FRONT/sub0/same.json"
 
     def test_a_file_outside_samples_goes_under_its_channel(self):
-        assert output_file("sweeps/CAM_FRONT/x.jpg", "CAM_FRONT") == "samples/CAM_FRONT/sweeps/CAM_FRONT/x.jpg"
+        assert output_file("other/CAM_FRONT/x.jpg", "CAM_FRONT") == "samples/CAM_FRONT/other/CAM_FRONT/x.jpg"
         assert output_file("./samples/CAM_FRONT/x.jpg", "CAM_FRONT") == "samples/CAM_FRONT/x.jpg"
 
     @pytest.mark.parametrize("bad", ["../private/x.jpg", "/etc/passwd", "samples/../../x.jpg"])
