@@ -13,6 +13,7 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from streetaug.augment.batch import BatchConfig, RunOptions, read_log, run_batch
@@ -27,7 +28,7 @@ QUIET = dict(progress=False, contact_sheet=4)
 
 def config(**kw) -> BatchConfig:
     values = dict(dataroot=str(bundled_sequence_dataroot().resolve()), version=VERSION, quality="draft", level="L1",
-                  seed=0, tracks=3)
+                  seed=0, tracks=3, sweeps=True)
     values.update(kw)
     return BatchConfig(**values)
 
@@ -43,6 +44,10 @@ def test_tracks_are_planned_and_shown_through_the_scene(reference):
     out, summary = reference
     tracks = summary["tracks"]
     assert tracks["tracks"] == 3 and tracks["keyframes_per_track_median"] >= 3
+    # the committed copy holds keyframes only: the sweeps are skipped, with the reason said once
+    sweeps = summary["sweeps"]
+    assert sweeps["files"] == 0 and sweeps["samples_not_rendered"] == 4
+    assert "sweep files are absent" in sweeps["reason"] and "make-samples --sequence --sweeps" in sweeps["reason"]
     assert summary["outputs"]["tracks_sheet"] == "tracks_sheet.png" and (out / "tracks_sheet.png").is_file()
     labelled = [o for p in sorted((out / "labels").rglob("*.json")) for o in json.loads(p.read_text())["objects"]]
     assert labelled and all(o["track"] and len(o["velocity"]) == 3 and o["motion"] in ("parked", "moving")
@@ -76,7 +81,7 @@ def test_two_workers_give_the_same_output(reference, tmp_path):
 def test_sigkill_mid_scene_then_rerun_gives_the_same_output(reference, tmp_path):
     out = tmp_path / "out"
     cmd = [str(Path(sys.executable).with_name("streetaug")), "batch", "--dataroot", str(bundled_sequence_dataroot()),
-           "--version", VERSION, "--tracks", "3", "--quality", "draft", "--level", "L1", "--workers", "1",
+           "--version", VERSION, "--tracks", "3", "--sweeps", "--quality", "draft", "--level", "L1", "--workers", "1",
            "--no-progress", "--contact-sheet", "4", "--out", str(out)]
     proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     log = out / "augment_log.jsonl"
@@ -107,3 +112,73 @@ def test_a_scene_with_a_sample_missing_its_ego_pose_fails_alone(tmp_path):
     rows = read_log(tmp_path / "out" / "augment_log.jsonl")
     assert rows and all(r.status == "failed" for r in rows)
     assert all("ego_pose" in r.reason for r in rows), rows[0].reason
+
+
+@pytest.fixture(scope="module")
+def with_sweeps(tmp_path_factory):
+    """A small generated sequence WITH its sweep files (3 keyframes, CAM_FRONT + CAM_BACK, 192 x 108), batched."""
+    from streetaug.augment.scenegen.sequence import make_sequence_scene
+
+    src = tmp_path_factory.mktemp("seq_sweeps") / "src"
+    make_sequence_scene(src, sweeps=True, width=192, height=108, spp=1, sky_rays=1, n_keyframes=3,
+                        cameras=("CAM_FRONT", "CAM_BACK"))
+    out = src.parent / "out"
+    summary = run_batch(config(dataroot=str(src)), out, RunOptions(workers=1, **QUIET))
+    return src, out, summary
+
+
+def test_sweeps_show_the_tracks_at_their_interpolated_poses(with_sweeps):
+    from streetaug.datasets.nuscenes import NuScenesReader
+
+    src, out, summary = with_sweeps
+    assert summary["sweeps"]["reason"] is None and summary["sweeps"]["files"] > 0
+    (planned,) = saved_scene_tracks(out)
+    by_key = {f"{planned.scene_token}/{t.track_index}": t for t in planned.tracks}
+    reader = NuScenesReader(src, VERSION)
+    labelled = 0
+    for path in sorted((out / "labels" / "sweeps").rglob("*.json")):
+        doc = json.loads(path.read_text())
+        assert doc["is_key_frame"] is False
+        t_us = int(reader.get("sample_data", doc["sample_data_token"])["timestamp"])
+        for obj in doc["objects"]:
+            track = by_key[obj["track"]]
+            expected = track.pose_at(t_us)
+            center = expected[:3, 3] + 0.5 * track.wlh[2] * expected[:3, 2]
+            assert np.allclose(obj["box_global"]["translation"], center, atol=1e-6)
+            # between its keyframes' poses: a moving track has moved since the previous keyframe
+            labelled += 1
+    assert labelled > 0
+
+
+def test_sweep_files_are_linked_in_the_tables_and_hold_the_objects(with_sweeps):
+    from conftest import devkit
+
+    from streetaug.datasets.lidarseg import read_lidar_points
+    from streetaug.datasets.nuscenes import NuScenesReader
+
+    src, out, summary = with_sweeps
+    nusc = devkit().NuScenes(version=VERSION, dataroot=str(out), verbose=False)
+    rows = read_log(out / "augment_log.jsonl")
+    files = {t: f for r in rows for t, f in (r.sweep_files or {}).items()}
+    assert len(files) == summary["sweeps"]["files"]
+    for token, file in files.items():
+        sd = nusc.get("sample_data", token)
+        assert not sd["is_key_frame"] and sd["filename"] == file and (out / file).is_file()
+    # the LiDAR sweeps have points on the moving tracks at their own time
+    (planned,) = saved_scene_tracks(out)
+    reader = NuScenesReader(src, VERSION)
+    lidar = [t for t, f in files.items() if f.startswith("sweeps/LIDAR_TOP/")]
+    assert lidar
+    hits = 0
+    for token in lidar:
+        sd = reader.get("sample_data", token)
+        points = read_lidar_points(out / files[token])[:, :3].astype(np.float64)
+        T = reader.T_global_from_ego(sd) @ reader.T_ego_from_sensor(sd)
+        xyz = points @ T[:3, :3].T + T[:3, 3]
+        for track in planned.tracks:
+            T_obj = track.pose_at(int(sd["timestamp"]))
+            local = (xyz - T_obj[:3, 3]) @ T_obj[:3, :3]
+            w, l, h = track.wlh
+            inside = (np.abs(local[:, 0]) <= l / 2) & (np.abs(local[:, 1]) <= w / 2) & (local[:, 2] >= 0) & (local[:, 2] <= h)
+            hits += int(inside.sum() > 0)
+    assert hits > 0
