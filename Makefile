@@ -21,7 +21,7 @@ $(BIN)/.installed: pyproject.toml
 $(BIN)/.devkit: $(BIN)/.installed
 	$(BIN)/python -m pip install --quiet --no-deps "nuscenes-devkit==1.2.0"
 	$(BIN)/python -m pip install --quiet cachetools descartes fire matplotlib scikit-learn "shapely~=2.0.3" \
-		parameterized pycocotools pillow
+		parameterized pycocotools pillow pandas "motmetrics<1.5"
 	touch $@
 
 setup: $(BIN)/.installed

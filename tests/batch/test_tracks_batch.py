@@ -116,3 +116,35 @@ def test_dry_run_writes_the_planned_tracks(tmp_path):
     (planned,) = saved_scene_tracks(tmp_path / "plan")
     assert tracks_file(tmp_path / "plan", planned.scene_token).is_file()
     assert summary["objects_planned"] == len(planned.at(planned.sample_tokens[0]))
+
+
+def test_devkit_detection_and_tracking_loaders_read_the_new_boxes(run):
+    """The evaluation code's own ground-truth loaders (mini_val holds scene-0916): velocities and attributes."""
+    devkit()
+    from nuscenes.eval.common.config import config_factory
+    from nuscenes.eval.common.loaders import load_gt
+    from nuscenes.eval.detection.data_classes import DetectionBox
+    from nuscenes.eval.tracking.data_classes import TrackingBox
+    from nuscenes.nuscenes import NuScenes
+
+    out, _ = run
+    nusc = NuScenes(version="v1.0-mini", dataroot=str(out), verbose=False)
+    (planned,) = saved_scene_tracks(out)
+    ours = {new_token("instance", 3, "track", f"{planned.scene_token}/{t.track_index}"): t for t in planned.tracks}
+    config_factory("tracking_nips_2019")  # the tracking benchmark's config (sets its class names), as its eval does
+    tracking = load_gt(nusc, "mini_val", TrackingBox)
+    detection = load_gt(nusc, "mini_val", DetectionBox)
+    found = 0
+    for sample_token in tracking.sample_tokens:
+        det = {tuple(np.round(b.translation, 4)): b for b in detection[sample_token]}
+        for box in tracking[sample_token]:
+            track = ours.get(box.tracking_id)
+            if track is None:
+                continue
+            i = track.index_of(sample_token)
+            assert box.tracking_name == "car"
+            d = det[tuple(np.round(box.translation, 4))]
+            assert d.detection_name == "car" and d.attribute_name == track.attribute_at(i)
+            assert np.all(np.isfinite(box.velocity))  # from the neighbouring annotations (3 rendered keyframes)
+            found += 1
+    assert found >= 2
