@@ -30,6 +30,7 @@ demo: setup
 	$(BIN)/streetaug batch --cameras CAM_FRONT,CAM_FRONT_LEFT --out $(OUT)
 	$(BIN)/streetaug insert --scene sample-sunny --debug --out $(OUT)/insert-sunny
 	$(BIN)/streetaug predict-light --scene sample-lowsun --out $(OUT)/light-lowsun
+	$(BIN)/streetaug batch --dataroot examples/nuscenes-sequence --version v1.0-sequence --tracks 3 --out $(OUT)/tracks
 	@echo
 	@echo "Outputs:"
 	@echo "  $(OUT)/                            a nuScenes dataset: NuScenes(version='v1.0-samples', dataroot='$(OUT)')"
@@ -38,6 +39,8 @@ demo: setup
 	@echo "  $(OUT)/samples/LIDAR_TOP/*.pcd.bin the LiDAR sweeps with the inserted cars in them"
 	@echo "  $(OUT)/insert-sunny/               one insertion with mask.png and shadow.exr"
 	@echo "  $(OUT)/light-lowsun/               lighting.json, envmap_camera.exr, preview.png"
+	@echo "  $(OUT)/tracks/                     3 tracks through the bundled sequence scene (5 keyframes): a nuScenes"
+	@echo "                                     dataset with linked instances and velocities; tracks_sheet.png"
 
 test: setup $(BIN)/.devkit
 	STREETAUG_REQUIRE_DEVKIT=1 $(BIN)/pytest -q
