@@ -8,11 +8,11 @@ the first whose every rule holds at EVERY keyframe of its span:
 * ``parked``: static in the global frame, by the kerb (footprint within ``kerb_distance_m`` of the edge of the
   drivable area), heading along the lane: the map lane's direction where the map has lanes, else the direction
   of traffic for that side of the road (the ego's path; Singapore keeps left, Boston right; elsewhere the side
-  the annotated moving vehicles show). Stood once on the ground fitted from the anchor keyframe's LiDAR.
+  the annotated moving vehicles show). Stood on the median of the ground planes its keyframes' LiDAR fit.
 * ``moving``: along the ego's path shifted sideways by the candidate's offset (a lane beside the ego's, never
   the ego's own: the ego's swept path is kept clear), at a speed drawn per category, in the direction of
   traffic of that lane (map lanes; else the annotated moving vehicles near that offset; else the traffic side),
-  heading = the path's smooth tangent; stood at each keyframe on that keyframe's ground.
+  heading = the path's smooth tangent; stood at each keyframe on that keyframe's ground (heights median-filtered).
 
 A track's span is the run of keyframes around the anchor in which it lies within ``annotate_range_m`` of the
 ego (nuScenes annotates what is near). In every frame of the span the rules are: drivable footprint, clearance
@@ -31,6 +31,7 @@ from dataclasses import dataclass, field
 from typing import Sequence
 
 import numpy as np
+from scipy.ndimage import median_filter
 from scipy.spatial.transform import Rotation, Slerp
 
 from streetaug.augment.core import InputError, rotation_to_quat
@@ -681,22 +682,39 @@ def _clear_of_ego_in_time(frames, path: EgoPath, motion: LaneMotion, d: np.ndarr
     return alive[ok]
 
 
+def stand_heights(frames, keep: np.ndarray, xy_j: np.ndarray, moving: bool) -> tuple[list, np.ndarray]:
+    """The ground planes a track stands on at its span's keyframes ``keep`` and their heights (K',).
+
+    Each keyframe's LiDAR fits the plane below the track's position there (:class:`LocalGroundFitter`). One
+    sweep can mistake a canopy, a wall or car roofs for the ground (within its tolerance: 10 % grade), more so
+    far from the ego where the rings are sparse, so: a parked track stands on the plane fitted at the keyframe
+    where the ego is closest to it (the densest LiDAR there; the same plane throughout: it is static); a moving
+    track's heights are median-filtered over 5 keyframes.
+    """
+    planes = [frames[j].scene().ground.fit(xy_j[j]) for j in keep]
+    z = np.array([p.point_global[2] for p in planes])
+    if not moving:
+        fitted = [q for q, p in enumerate(planes) if p.source != "ego-plane"] or list(range(len(planes)))
+        dist = [np.linalg.norm(frames[keep[q]].T_global_from_ego[:2, 3] - xy_j[keep[q]]) for q in fitted]
+        best = fitted[int(np.argmin(dist))]
+        return [planes[best]] * len(keep), np.full(len(keep), z[best])
+    return planes, median_filter(z, size=5, mode="nearest") if len(z) >= 3 else z
+
+
 def _stand_and_check(frames, k: int, channel: str | None, c: int, xy_j: np.ndarray, yaw_j: np.ndarray, span: np.ndarray,
                      wlh: np.ndarray, moving: bool, swept: np.ndarray, placed: Sequence[Track], config: TrackConfig,
                      tally: _Tally) -> tuple[np.ndarray, tuple[str, ...], str] | None:
-    """Stand candidate ``c`` on the ground (once at the anchor if parked, per frame if moving) and apply every
+    """Stand candidate ``c`` on the ground (:func:`stand_heights`) and apply every
     rule to its tilted boxes at every frame of its span; (T (K', 4, 4), ground sources, anchor camera) or None.
     ``channel``: the camera that must see it at the anchor; None: any of the anchor's cameras."""
     pc = config.placement
     keep = np.flatnonzero(span)
-    anchor_plane = frames[k].scene().ground.fit(xy_j[k])
+    planes, heights = stand_heights(frames, keep, xy_j, moving)
     T_all, sources = [], []
-    for j in keep:
-        plane = anchor_plane if not moving or j == k else frames[j].scene().ground.fit(xy_j[j])
-        T = object_transforms(xy_j[j][None], np.array([yaw_j[j]]), np.array([plane.point_global[2]]),
-                              plane.normal_global[None])
-        if not moving and T_all:
-            T = T_all[0][None]
+    for q, j in enumerate(keep):
+        plane = planes[q]
+        ground_point = np.array([*plane.point_global[:2], heights[q]])
+        T = object_transforms(xy_j[j][None], np.array([yaw_j[j]]), np.array([heights[q]]), plane.normal_global[None])
         frame = frames[j]
         scene = frame.scene()
         rect = box_footprint_rect(T, wlh)
@@ -706,7 +724,7 @@ def _stand_and_check(frames, k: int, channel: str | None, c: int, xy_j: np.ndarr
                                                            pc.dynamic_clearance_m, pc.static_clearance_m)[0]),
             ("ego_path", lambda: moving or rule_mutual(rect, swept, config.ego_clearance_m)[0]),
             ("mutual_collision", lambda: rule_mutual(rect, _tracks_at(placed, frame.token), pc.mutual_clearance_m)[0]),
-            ("lidar_obstacles", lambda: rule_obstacles(rect, plane.point_global[None], plane.normal_global[None],
+            ("lidar_obstacles", lambda: rule_obstacles(rect, ground_point[None], plane.normal_global[None],
                                                        scene.obstacle_points, pc.static_clearance_m,
                                                        pc.obstacle_min_height_m, pc.obstacle_max_height_m,
                                                        pc.obstacle_max_points)[0]),

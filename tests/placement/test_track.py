@@ -170,3 +170,24 @@ def test_plan_is_deterministic_per_seed(seq_frames, seq_plan):
     samples, frames = seq_frames
     again = plan_tracks(frames, [CAR] * 4, np.random.default_rng(7), TrackConfig(), samples[0].location)
     assert [t.to_json() for t in again.tracks] == [t.to_json() for t in seq_plan.tracks]
+
+
+@needs_seq
+def test_tracks_stand_on_the_lidar_ground_not_on_roofs_or_canopies(seq_frames, seq_plan):
+    """At the keyframe where the ego is closest, the track's bottom is within 0.3 m of the lowest LiDAR returns
+    (10th percentile) within 2 m of its centre: the road, not a canopy, a wall or car roofs."""
+    samples, _ = seq_frames
+    by_token = {s.token: s for s in samples}
+    checked = 0
+    for t in seq_plan.tracks:
+        dist = [np.linalg.norm(by_token[s].cameras["CAM_FRONT"].T_global_from_ego[:2, 3] - t.T_global_from_object[i, :2, 3])
+                for i, s in enumerate(t.sample_tokens)]
+        i = int(np.argmin(dist))
+        points = by_token[t.sample_tokens[i]].lidar.points_global
+        xy = t.T_global_from_object[i, :2, 3]
+        near = points[np.linalg.norm(points[:, :2] - xy, axis=1) < 2.0]
+        if len(near) < 10:
+            continue
+        assert abs(t.T_global_from_object[i, 2, 3] - np.percentile(near[:, 2], 10)) < 0.3, (t.track_index, t.motion)
+        checked += 1
+    assert checked >= 2
