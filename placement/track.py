@@ -36,7 +36,7 @@ from scipy.spatial.transform import Rotation, Slerp
 
 from streetaug.augment.core import InputError, rotation_to_quat
 from streetaug.datasets.nuscenes_format import VEHICLE_MOVING, VEHICLE_PARKED, VEHICLE_STOPPED
-from streetaug.datasets.sample import Box, CameraView, Sample
+from streetaug.datasets.sample import Box, Sample
 
 from .candidates import object_transforms, sample_candidates
 from .config import PlacementConfig
@@ -768,14 +768,6 @@ def _trajectory_velocity(path: EgoPath, motion: LaneMotion, c: int, d: float, t:
     return v
 
 
-def sample_placements(tracks: Sequence[Track], sample_token: str, view: CameraView | None = None
-                      ) -> tuple[list[Placement], list[Track]]:
-    """The placements (for rendering) of the tracks annotated at ``sample_token`` and those tracks, in track order."""
-    cam_xy = None if view is None else view.T_global_from_cam[:2, 3]
-    here = [t for t in tracks if t.index_of(sample_token) is not None]
-    return [t.placement_at(sample_token, i, cam_xy) for i, t in enumerate(here)], here
-
-
 __all__ = ["DirectionVotes", "EGO_HALF_WIDTH_M", "EGO_X_RANGE_M", "SPEED_RANGE_MPS", "TRACK_RULES", "Track",
            "TrackConfig", "TrackFrame", "TrackPlan", "direction_votes", "ego_footprint", "interpolate_poses",
-           "plan_tracks", "sample_placements", "speed_range", "swept_ego_footprints", "track_frames"]
+           "plan_tracks", "speed_range", "swept_ego_footprints", "track_frames"]

@@ -6,7 +6,10 @@ Densification is classical morphological depth completion in the spirit of IP-Ba
 CRV 2018): project the points with a z-buffer, then grow them with dilations of the *inverse*
 depth (so the nearer surface wins at occlusion boundaries), a closing, and larger fills for the
 remaining holes, never above the highest LiDAR return of a column (that is sky or unknown).
-Where there is no LiDAR below the horizon the ground plane fills in.
+With a ground plane, the returns near it are the ground: between its scan lines (far rings are tens of
+pixels apart) its inverse depth is interpolated down each column instead of grown from the nearer line,
+which would hide the lower part of anything standing on the road farther away. Where there is no LiDAR
+below the horizon the ground plane fills in.
 """
 
 from __future__ import annotations
@@ -65,6 +68,35 @@ def ground_plane_depth(K: np.ndarray, width: int, height: int, ground_normal_cam
     return np.where(np.isfinite(z) & (z > 0), z, np.inf).astype(np.float32)
 
 
+GROUND_BAND_M = 0.25  # with a ground plane: points this close to it (plus GROUND_BAND_PER_M x depth) are ground
+GROUND_BAND_PER_M = 0.015  # ... the band grows with depth (slopes, pitch)
+GROUND_MAX_GAP_PX = 80  # ground samples of one column farther apart than this are not joined (an object between)
+
+
+def _ground_inverse_depth(ground: np.ndarray) -> np.ndarray:
+    """(H, W) float32 inverse depth of the ground: the sparse ground depth ``ground`` (0 = empty) joined down
+    each column by linear interpolation of 1/z between consecutive samples at most ``GROUND_MAX_GAP_PX`` apart
+    (1/z of a plane is affine in the pixel row), after a 1 x 5 dilation that fills the columns between points."""
+    inv = np.where(ground > 0, 1.0 / np.maximum(ground, 1e-6), 0.0).astype(np.float32)
+    inv = cv2.dilate(inv, np.ones((1, 5), np.uint8))
+    out = inv.copy()
+    H, W = inv.shape
+    rows = np.arange(H, dtype=np.float64)
+    for col in np.flatnonzero((inv > 0).sum(axis=0) >= 2):
+        r = np.flatnonzero(inv[:, col] > 0)
+        gap = np.diff(r)
+        join = (gap > 1) & (gap <= GROUND_MAX_GAP_PX)
+        if not join.any():
+            continue
+        lo, hi = r[:-1][join], r[1:][join]
+        starts = np.zeros(H + 1, dtype=np.int64)
+        np.add.at(starts, lo + 1, 1)
+        np.add.at(starts, hi, -1)
+        span = np.cumsum(starts[:H]) > 0
+        out[span, col] = np.interp(rows[span], r, inv[r, col]).astype(np.float32)
+    return out
+
+
 def densify_lidar_depth(points_cam: np.ndarray, K: np.ndarray, width: int, height: int,
                         ground_fill: tuple[np.ndarray, float] | None = None, max_depth_m: float = 200.0) -> np.ndarray:
     """Dense depth (H, W) float32 metres from LiDAR points in the camera frame, inf where unknown (sky).
@@ -80,12 +112,22 @@ def densify_lidar_depth(points_cam: np.ndarray, K: np.ndarray, width: int, heigh
     check_shape(pts, ("N", 3), "points_cam")
     pts = pts[pts[:, 2] < max_depth_m]
     sparse = sparse_depth(pts, K, width, height)
-    inv = np.where(sparse > 0, 1.0 / np.maximum(sparse, 1e-6), 0.0).astype(np.float32)
-    valid_rows = np.flatnonzero(inv.any(axis=1))
+    is_ground = np.zeros(len(pts), dtype=bool)
+    if ground_fill is not None and len(pts):
+        normal, offset = ground_fill
+        height_m = pts @ np.asarray(normal, dtype=np.float64) + float(offset)
+        is_ground = np.abs(height_m) < GROUND_BAND_M + GROUND_BAND_PER_M * pts[:, 2]
+    obstacles = sparse_depth(pts[~is_ground], K, width, height) if is_ground.any() else sparse
+    inv = np.where(obstacles > 0, 1.0 / np.maximum(obstacles, 1e-6), 0.0).astype(np.float32)
+    valid_rows = np.flatnonzero(sparse.any(axis=1))
     # 1. Small diamond dilation: nearest point wins (max of inverse depth).
     inv = cv2.dilate(inv, _diamond(5))
     # 2. Closing to join neighbouring scan lines.
     inv = cv2.morphologyEx(inv, cv2.MORPH_CLOSE, np.ones((5, 5), np.uint8))
+    # 2b. The ground between scan lines: its inverse depth interpolated down each column (exact for a plane),
+    #     not the nearer line grown upwards (which would hide the bottom of anything standing farther away).
+    if is_ground.any():
+        inv = np.maximum(inv, _ground_inverse_depth(sparse_depth(pts[is_ground], K, width, height)))
     # 3. Fill remaining small holes with a wider dilation, then large holes with a wider one.
     for size in (7, 15, 31):
         empty = inv <= 0

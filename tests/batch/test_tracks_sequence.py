@@ -184,3 +184,29 @@ def test_sweep_files_are_linked_in_the_tables_and_hold_the_objects(with_sweeps):
             inside = (np.abs(local[:, 0]) <= l / 2) & (np.abs(local[:, 1]) <= w / 2) & (local[:, 2] >= 0) & (local[:, 2] <= h)
             hits += int(inside.sum() > 0)
     assert hits > 0
+
+
+def test_devkit_returns_and_renders_the_tracks_in_each_camera(reference, tmp_path):
+    from conftest import devkit
+
+    from streetaug.datasets.nuscenes_format import new_token
+
+    out, _ = reference
+    nusc = devkit().NuScenes(version=VERSION, dataroot=str(out), verbose=False)
+    ok = [r for r in read_log(out / "augment_log.jsonl") if r.status == "ok"]
+    assert ok
+    for r in ok:
+        path, boxes, K = nusc.get_sample_data(r.sample_data_token)
+        assert Path(path) == out / r.image
+        by_token = {b.token: b for b in boxes}
+        for label in json.loads((out / r.files[1]).read_text())["objects"]:
+            box = by_token[new_token("sample_annotation", 0, r.sample_token, label["track_index"])]
+            u, v, z = np.asarray(K) @ box.center
+            x0, y0, x1, y1 = label["bbox_2d"]
+            assert z > 0 and x0 <= u / z <= x1 and y0 <= v / z <= y1
+    (planned,) = saved_scene_tracks(out)
+    instance = new_token("instance", 0, "track", f"{planned.scene_token}/{planned.tracks[0].track_index}")
+    first = nusc.get("instance", instance)["first_annotation_token"]
+    nusc.render_annotation(first, out_path=str(tmp_path / "ann.png"))
+    nusc.render_sample_data(ok[0].sample_data_token, out_path=str(tmp_path / "cam.png"), verbose=False)
+    assert (tmp_path / "ann.png").stat().st_size > 10_000 and (tmp_path / "cam.png").stat().st_size > 10_000

@@ -82,3 +82,30 @@ def test_sparse_depth_keeps_nearest():
     d = sparse_depth(pts, K, W, H)
     assert d[int(round(K[1, 2])), int(round(K[0, 2]))] == pytest.approx(5.0)
     assert (d > 0).sum() == 1
+
+
+def test_far_ground_between_scan_lines_does_not_hide_what_stands_on_it():
+    """32-beam rings ~1.33 deg apart meet a flat road 1.7 m below the camera 30-50 m ahead tens of pixels apart.
+    A virtual object standing at 45 m must see the road in front of it as farther than itself along every ray
+    through its image (that road lies behind its foot): growing the nearer ring upwards made it 30 m away and
+    hid the object's lower half."""
+    K_ = np.array([[1266.0, 0, 800], [0, 1266.0, 450], [0, 0, 1]])
+    W_, H_ = 1600, 900
+    elev = np.radians(np.arange(-30.0, 10.0, 1.33))
+    az = np.radians(np.linspace(-40, 40, 2400))
+    e, a = np.meshgrid(elev, az, indexing="ij")
+    dirs = np.stack([np.cos(e) * np.sin(a), -np.sin(e), np.cos(e) * np.cos(a)], -1).reshape(-1, 3)  # camera frame
+    down = dirs[:, 1] > 1e-6
+    t = 1.7 / dirs[down, 1]
+    pts = (dirs[down] * t[:, None])[t < 120]
+    dense = densify_lidar_depth(pts, K_, W_, H_, ground_fill=(np.array([0.0, -1.0, 0.0]), 1.7))
+    # the object's image: 45 m ahead, bottom on the road (y = 1.7), 1.5 m tall
+    v_foot, v_top = 450 + 1266 * 1.7 / 45, 450 + 1266 * 0.2 / 45
+    rows = np.arange(int(np.ceil(v_top)), int(np.floor(v_foot)))
+    assert len(rows) >= 30
+    assert np.all(dense[rows, 790:811] >= 45.0 * 0.98), dense[rows, 800].min()
+    # and the road itself stays right where LiDAR saw it (1/z of a plane is affine in the row)
+    truth = ground_plane_depth(K_, W_, H_, np.array([0.0, -1.0, 0.0]), 1.7)
+    band = slice(int(v_foot) + 2, H_ - 5)
+    err = np.abs(dense[band, 700:900] - truth[band, 700:900]) / truth[band, 700:900]
+    assert np.median(err) < 0.01
