@@ -68,7 +68,8 @@ def ground_plane_depth(K: np.ndarray, width: int, height: int, ground_normal_cam
     return np.where(np.isfinite(z) & (z > 0), z, np.inf).astype(np.float32)
 
 
-GROUND_BAND_M = 0.25  # with a ground plane: points this close to it (plus GROUND_BAND_PER_M x depth) are ground
+GROUND_BAND_M = 0.25  # with a ground plane: points below it or at most this above (+ GROUND_BAND_PER_M x depth)
+#                        are ground
 GROUND_BAND_PER_M = 0.015  # ... the band grows with depth (slopes, pitch)
 GROUND_MAX_GAP_PX = 80  # ground samples of one column farther apart than this are not joined (an object between)
 
@@ -116,7 +117,8 @@ def densify_lidar_depth(points_cam: np.ndarray, K: np.ndarray, width: int, heigh
     if ground_fill is not None and len(pts):
         normal, offset = ground_fill
         height_m = pts @ np.asarray(normal, dtype=np.float64) + float(offset)
-        is_ground = np.abs(height_m) < GROUND_BAND_M + GROUND_BAND_PER_M * pts[:, 2]
+        # below the ego's plane is the road too (it falls away downhill); above it, a band that grows with depth
+        is_ground = height_m < GROUND_BAND_M + GROUND_BAND_PER_M * pts[:, 2]
     obstacles = sparse_depth(pts[~is_ground], K, width, height) if is_ground.any() else sparse
     inv = np.where(obstacles > 0, 1.0 / np.maximum(obstacles, 1e-6), 0.0).astype(np.float32)
     valid_rows = np.flatnonzero(sparse.any(axis=1))
@@ -126,15 +128,17 @@ def densify_lidar_depth(points_cam: np.ndarray, K: np.ndarray, width: int, heigh
     inv = cv2.morphologyEx(inv, cv2.MORPH_CLOSE, np.ones((5, 5), np.uint8))
     # 2b. The ground between scan lines: its inverse depth interpolated down each column (exact for a plane),
     #     not the nearer line grown upwards (which would hide the bottom of anything standing farther away).
-    if is_ground.any():
-        inv = np.maximum(inv, _ground_inverse_depth(sparse_depth(pts[is_ground], K, width, height)))
-    # 3. Fill remaining small holes with a wider dilation, then large holes with a wider one.
+    ground = _ground_inverse_depth(sparse_depth(pts[is_ground], K, width, height)) if is_ground.any() else None
+    # 3. Fill remaining small holes with a wider dilation, then large holes with a wider one (the obstacles
+    #    only, into what the ground does not cover: the ground is never grown, the plane fills its holes).
     for size in (7, 15, 31):
-        empty = inv <= 0
+        empty = inv <= 0 if ground is None else (inv <= 0) & (ground <= 0)
         if not empty.any():
             break
         grown = cv2.dilate(inv, np.ones((size, size), np.uint8))
         inv = np.where(empty, grown, inv)
+    if ground is not None:
+        inv = np.maximum(inv, ground)  # the nearer surface wins
     # 4. Light median to remove dilation blockiness, keeping empties empty.
     med = cv2.medianBlur(inv, 5)
     inv = np.where((inv > 0) & (med > 0), med, inv)
