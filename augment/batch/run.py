@@ -50,6 +50,11 @@ from .worker import TableSlicer, plan_scene, process_sample
 
 
 
+# The tables a sample's rows are cut from (TableSlicer): read (and their tokens checked) before dispatching.
+SLICED_TABLES = ("sample", "scene", "log", "sample_data", "calibrated_sensor", "ego_pose", "sample_annotation",
+                 "instance", "sensor", "category", "attribute", "visibility", "map")
+
+
 def _echo_none(_: str) -> None:
     pass
 
@@ -165,7 +170,9 @@ def _run_locked(config: BatchConfig, out_dir: Path, run: RunOptions, echo: Calla
     if config.tracks:
         scenes = plan_scenes(config, out_dir, reader, slicer, pending, run, echo)
     scene_of = {t: reader.scene_of(t)["token"] for t in pending} if config.tracks else {}
-    unsliceable: list[list[LogRow]] = []  # samples whose rows are inconsistent: failed here, never dispatched
+    for name in SLICED_TABLES:  # a table-wide fault (e.g. a duplicated token) stops the batch before any work
+        reader.table(name)
+    unsliceable: list[list[LogRow]] = []  # samples whose rows are missing: failed here, never dispatched
 
     def tasks_of():
         for t in pending:

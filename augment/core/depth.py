@@ -72,21 +72,28 @@ GROUND_BAND_M = 0.25  # with a ground plane: points below it or at most this abo
 #                        are ground
 GROUND_BAND_PER_M = 0.015  # ... the band grows with depth (slopes, pitch)
 GROUND_MAX_GAP_PX = 80  # ground samples of one column farther apart than this are not joined (an object between)
+GROUND_PAST_OBSTACLE_PX = 31  # window in which a nearer obstacle hides a ground sample
 
 
-def _ground_inverse_depth(ground: np.ndarray) -> np.ndarray:
+def _ground_inverse_depth(ground: np.ndarray, obstacle: np.ndarray) -> np.ndarray:
     """(H, W) float32 inverse depth of the ground: the sparse ground depth ``ground`` (0 = empty) joined down
     each column by linear interpolation of 1/z between consecutive samples at most ``GROUND_MAX_GAP_PX`` apart
-    (1/z of a plane is affine in the pixel row), after a 1 x 5 dilation that fills the columns between points."""
+    (1/z of a plane is affine in the pixel row) with no obstacle between them, after a 1 x 5 dilation that
+    fills the columns between points. ``obstacle``: (H, W) float32 inverse depth of everything else (0 = none);
+    a ground sample farther than an obstacle within ``GROUND_PAST_OBSTACLE_PX`` / 2 pixels is dropped (the
+    LiDAR, above the camera, sees road over a car that projects inside the car's image)."""
     inv = np.where(ground > 0, 1.0 / np.maximum(ground, 1e-6), 0.0).astype(np.float32)
     inv = cv2.dilate(inv, np.ones((1, 5), np.uint8))
+    # ground the LiDAR (above the camera) saw past a nearer obstacle that is beside it in the image: hidden
+    inv[inv < cv2.dilate(obstacle, np.ones((GROUND_PAST_OBSTACLE_PX, GROUND_PAST_OBSTACLE_PX), np.uint8))] = 0.0
     out = inv.copy()
     H, W = inv.shape
     rows = np.arange(H, dtype=np.float64)
+    blocked = np.cumsum(obstacle > 0, axis=0)  # obstacle pixels at or above each row, per column
     for col in np.flatnonzero((inv > 0).sum(axis=0) >= 2):
         r = np.flatnonzero(inv[:, col] > 0)
         gap = np.diff(r)
-        join = (gap > 1) & (gap <= GROUND_MAX_GAP_PX)
+        join = (gap > 1) & (gap <= GROUND_MAX_GAP_PX) & (blocked[r[1:] - 1, col] == blocked[r[:-1], col])
         if not join.any():
             continue
         lo, hi = r[:-1][join], r[1:][join]
@@ -128,7 +135,8 @@ def densify_lidar_depth(points_cam: np.ndarray, K: np.ndarray, width: int, heigh
     inv = cv2.morphologyEx(inv, cv2.MORPH_CLOSE, np.ones((5, 5), np.uint8))
     # 2b. The ground between scan lines: its inverse depth interpolated down each column (exact for a plane),
     #     not the nearer line grown upwards (which would hide the bottom of anything standing farther away).
-    ground = _ground_inverse_depth(sparse_depth(pts[is_ground], K, width, height)) if is_ground.any() else None
+    ground = (_ground_inverse_depth(sparse_depth(pts[is_ground], K, width, height), inv) if is_ground.any()
+              else None)
     # 3. Fill remaining small holes with a wider dilation, then large holes with a wider one (the obstacles
     #    only, into what the ground does not cover: the ground is never grown, the plane fills its holes).
     for size in (7, 15, 31):

@@ -109,3 +109,21 @@ def test_far_ground_between_scan_lines_does_not_hide_what_stands_on_it():
     band = slice(int(v_foot) + 2, H_ - 5)
     err = np.abs(dense[band, 700:900] - truth[band, 700:900]) / truth[band, 700:900]
     assert np.median(err) < 0.01
+
+
+def test_ground_seen_past_an_obstacle_does_not_punch_through_it():
+    """The LiDAR sits above the camera: it sees road behind a car that projects between the car's own scan lines
+    in the image. The ground is only joined between scan lines with no obstacle between them."""
+    K_ = np.array([[1266.0, 0, 800], [0, 1266.0, 450], [0, 0, 1]])
+    W_, H_ = 1600, 900
+    u = np.linspace(-1.0, 1.0, 200)
+    car = np.stack(np.meshgrid(u, np.arange(0.2, 1.7, 0.2)), -1).reshape(-1, 2)  # a car's back, rows 20 cm apart
+    car = np.c_[car[:, 0], 1.7 - car[:, 1], np.full(len(car), 10.0)]  # camera frame: y down, 10 m ahead
+    t = np.linspace(15.0, 30.0, 12)  # road behind it, projecting between the car's scan lines
+    road = np.stack(np.meshgrid(u * 1.5, t), -1).reshape(-1, 2)
+    road = np.c_[road[:, 0] * road[:, 1] / 10, np.full(len(road), 1.7), road[:, 1]]
+    dense = densify_lidar_depth(np.concatenate([car, road]), K_, W_, H_,
+                                ground_fill=(np.array([0.0, -1.0, 0.0]), 1.7))
+    rows = slice(int(450 + 1266 * 0.2 / 10) + 3, int(450 + 1266 * 1.5 / 10) - 3)
+    cols = slice(800 - 80, 800 + 80)
+    assert np.all(dense[rows, cols] < 10.5), np.max(dense[rows, cols])
