@@ -15,7 +15,8 @@ the first whose every rule holds at EVERY keyframe of its span:
   heading = the path's smooth tangent; stood at each keyframe on that keyframe's ground (heights median-filtered).
 
 A track's span is the run of keyframes around the anchor in which it lies within ``annotate_range_m`` of the
-ego (nuScenes annotates what is near). In every frame of the span the rules are: drivable footprint, clearance
+ego (nuScenes annotates what is near), pushed on at both ends while a camera still has it in view (up to
+``max_visible_range_m``): it never pops in or out of view inside the scene. In every frame of the span the rules are: drivable footprint, clearance
 to every annotated box of that keyframe, to the ego's swept path (its footprint at every keyframe and between
 them) and to the other tracks at that keyframe, no unannotated LiDAR obstacle nor non-drivable lidarseg point
 in the footprint; at the anchor, the object is in the camera's view and visible (the single-image rules).
@@ -90,7 +91,9 @@ class TrackConfig:
             tracks the clearance to annotated moving things (and the ego) is 2 m: traffic passes that close.
         moving_probability: probability that an object is a moving track (else parked).
         annotate_range_m: a track is annotated at the keyframes where it is this close to the ego (the nuScenes
-            detection range of cars).
+            detection range of cars) ...
+        max_visible_range_m: ... and beyond, up to this distance, for as long as a camera still has it in view
+            (so it never appears or vanishes in view).
         min_lane_offset_m, max_lane_offset_m: a moving track's lateral offset from the ego's path.
         ego_clearance_m: footprint clearance to the ego's swept path.
         direction_band_m: annotated moving vehicles within this lateral distance of a track's offset vote for
@@ -101,6 +104,7 @@ class TrackConfig:
     placement: PlacementConfig = PlacementConfig(dynamic_clearance_m=2.0)
     moving_probability: float = 0.5
     annotate_range_m: float = 50.0
+    max_visible_range_m: float = 100.0
     min_lane_offset_m: float = 2.5
     max_lane_offset_m: float = 12.0
     ego_clearance_m: float = 0.5
@@ -583,8 +587,11 @@ def _plan_one(frames, usable, index, obj, moving, rng, config: TrackConfig, path
             yaw_j = np.repeat(yaw[:, None], K, axis=1)
             alive = np.arange(C)
         yaw_j = np.mod(yaw_j + np.pi, 2 * np.pi) - np.pi
-        in_range = np.linalg.norm(xy_j - ego_xy[None], axis=2) <= config.annotate_range_m
-        span = _contiguous_span(in_range, np.full(C, k))
+        dist = np.linalg.norm(xy_j - ego_xy[None], axis=2)
+        span = _contiguous_span(dist <= config.annotate_range_m, np.full(C, k))
+        # no pop in or out of view: a span end is pushed on while a camera still sees the box
+        span = _contiguous_span(span | (in_some_view(frames, xy_j, yaw_j, wlh) & (dist <= config.max_visible_range_m)),
+                                np.full(C, k))
         alive = tally.keep("span", alive, span[alive, k])
         flat = footprint_corners(xy_j.reshape(-1, 2), yaw_j.reshape(-1), l, w).reshape(C, K, 4, 2)
         if moving:  # clear of the ego at the same time, also between keyframes
@@ -612,6 +619,29 @@ def _plan_one(frames, usable, index, obj, moving, rng, config: TrackConfig, path
                          drivable_source=scene.drivable.source, drivable_confidence=scene.drivable.confidence,
                          anchor_sample_token=frame.token, anchor_camera=track[2])
     return None
+
+
+def in_some_view(frames, xy_j: np.ndarray, yaw_j: np.ndarray, wlh: np.ndarray) -> np.ndarray:
+    """(C, K) bool: whether candidate c's box (on the ego's ground plane) at keyframe j has a corner in front of
+    and inside the image of some camera of that keyframe (occlusion ignored: a conservative "could be seen")."""
+    C, K = xy_j.shape[:2]
+    w, l, h = wlh
+    out = np.zeros((C, K), dtype=bool)
+    for j, frame in enumerate(frames):
+        fp = footprint_corners(xy_j[:, j], yaw_j[:, j], l, w)  # (C, 4, 2)
+        z0 = frame.T_global_from_ego[2, 3]
+        corners = np.concatenate([np.concatenate([fp, np.full((C, 4, 1), z0)], 2),
+                                  np.concatenate([fp, np.full((C, 4, 1), z0 + h)], 2)], 1)  # (C, 8, 3)
+        for view in frame.sample.cameras.values():
+            T = view.T_cam_from_global
+            cam = corners @ T[:3, :3].T + T[:3, 3]
+            z = cam[..., 2]
+            with np.errstate(divide="ignore", invalid="ignore"):
+                u = view.K[0, 0] * cam[..., 0] / z + view.K[0, 2]
+                v = view.K[1, 1] * cam[..., 1] / z + view.K[1, 2]
+            inside = (z > 0.5) & (u >= 0) & (u < view.width) & (v >= 0) & (v < view.height)
+            out[:, j] |= inside.any(axis=1)
+    return out
 
 
 def _tracks_at(placed: Sequence[Track], token: str) -> np.ndarray:

@@ -9,8 +9,8 @@ map) and the output (``tracks/*.json``, ``augment_log.jsonl``, ``labels/``), and
   :func:`~streetaug.placement.rules.visible_fraction_estimate`) is >= ``VISIBLE_MIN``; **rendered**: the
   camera's labels name the track with a 2D box. ``recall`` = rendered / should be visible (the frames where
   the renderer agrees the track shows); ``rendered_unexpected`` the converse.
-* **pop-in/out**: a track whose span starts or ends at a keyframe that is not the scene's first/last while it
-  should be visible in some camera there (it would appear from nothing / vanish in view).
+* **pop-in/out**: a track that should be visible in some camera at the keyframe just before its span starts or
+  just after it ends (at its first / last pose: it would appear from nothing / vanish in view).
 * **rule violations** per annotated keyframe: footprint off the drivable area, closer than ``MIN_GAP_M`` to an
   annotated box of that keyframe, overlapping the ego's footprint at that time, or another track.
 * **velocity**: the devkit's ``box_velocity`` (difference of the neighbouring annotations over their time
@@ -66,6 +66,23 @@ def _logged(out_dir: Path) -> tuple[set[str], dict[tuple[str, str], dict]]:
     return done, objects
 
 
+def visible_fractions(sample, T_global_from_object: np.ndarray, wlh: np.ndarray,
+                      cameras: tuple[str, ...] = ()) -> dict[str, float]:
+    """camera -> the occlusion-aware visible fraction of a box (object frame ``T_global_from_object``) there."""
+    out = {}
+    for channel, view in sorted(sample.cameras.items()):
+        if cameras and channel not in cameras:
+            continue
+        T_co = view.T_cam_from_global @ T_global_from_object
+        corners = (T_co[:3, :3] @ box_corners_object(wlh).T).T + T_co[:3, 3]
+        out[channel] = 0.0
+        if np.all(corners[:, 2] > 0.1):
+            out[channel] = float(visible_fraction_estimate(T_co[None], wlh, PinholeCamera(view.K, view.width,
+                                                                                          view.height),
+                                                           scene_depth(sample, view), 1.0)[0])
+    return out
+
+
 def audit_scene(reader: NuScenesReader, scene: SceneTracks, rendered: dict, done: set[str], logged: dict,
                 cameras: tuple[str, ...] = ()) -> dict:
     """The audit figures of one scene's tracks over its rendered keyframes (see the module docstring)."""
@@ -76,30 +93,17 @@ def audit_scene(reader: NuScenesReader, scene: SceneTracks, rendered: dict, done
     samples = {t: reader.sample(t) for t in order if t in done}
     for track in scene.tracks:
         key = f"{scene.scene_token}/{track.track_index}"
-        visible_at = {}
         for i, token in enumerate(track.sample_tokens):
             if token not in samples:
                 continue
             sample = samples[token]
             T = track.T_global_from_object[i]
-            any_visible = False
-            for channel, view in sorted(sample.cameras.items()):
-                if cameras and channel not in cameras:
-                    continue
-                cam = PinholeCamera(view.K, view.width, view.height)
-                T_co = view.T_cam_from_global @ T
-                corners = (T_co[:3, :3] @ box_corners_object(track.wlh).T).T + T_co[:3, 3]
-                vis = 0.0
-                if np.all(corners[:, 2] > 0.1):
-                    vis = float(visible_fraction_estimate(T_co[None], track.wlh, cam, scene_depth(sample, view),
-                                                          1.0)[0])
+            for channel, vis in visible_fractions(sample, T, track.wlh, cameras).items():
                 expected = vis >= VISIBLE_MIN
                 shown = (key, token, channel) in rendered
                 should += expected
                 got += expected and shown
                 unexpected += shown and not expected
-                any_visible |= expected
-            visible_at[i] = any_visible
             # rules, re-checked on the output
             frames_checked += 1
             fp = shapely.Polygon(box_footprint_rect(T[None], track.wlh)[0])
@@ -121,10 +125,11 @@ def audit_scene(reader: NuScenesReader, scene: SceneTracks, rendered: dict, done
             if o is not None:
                 lidar_pts.append(int(o.get("num_lidar_pts") or 0))
         first, last = order.index(track.sample_tokens[0]), order.index(track.sample_tokens[-1])
-        if first > 0 and visible_at.get(0):
-            pops.append({"track": track.track_index, "at": first, "kind": "pop-in"})
-        if last < len(order) - 1 and visible_at.get(len(track.sample_tokens) - 1):
-            pops.append({"track": track.track_index, "at": last, "kind": "pop-out"})
+        for at, pose, kind in ((first - 1, 0, "pop-in"), (last + 1, -1, "pop-out")):
+            neighbour = order[at] if 0 <= at < len(order) else None
+            if neighbour in samples and any(v >= VISIBLE_MIN for v in visible_fractions(
+                    samples[neighbour], track.T_global_from_object[pose], track.wlh, cameras).values()):
+                pops.append({"track": track.track_index, "at": at, "kind": kind})
     return {"should_be_visible": should, "rendered_when_visible": got,
             "recall": round(got / should, 4) if should else None, "rendered_unexpected": unexpected,
             "pops": pops, "frames_checked": frames_checked, "violations": dict(violations),
