@@ -73,6 +73,7 @@ GROUND_BAND_M = 0.25  # with a ground plane: points below it or at most this abo
 GROUND_BAND_PER_M = 0.015  # ... the band grows with depth (slopes, pitch)
 GROUND_MAX_GAP_PX = 80  # ground samples of one column farther apart than this are not joined (an object between)
 GROUND_PAST_OBSTACLE_PX = 31  # window in which a nearer obstacle hides a ground sample
+GROUND_ROW_CLOSE_PX = 15  # horizontal closing of the ground (points along a scan line are ~4 px apart at 1600 px)
 
 
 def _ground_inverse_depth(ground: np.ndarray, obstacle: np.ndarray) -> np.ndarray:
@@ -83,7 +84,8 @@ def _ground_inverse_depth(ground: np.ndarray, obstacle: np.ndarray) -> np.ndarra
     a ground sample farther than an obstacle within ``GROUND_PAST_OBSTACLE_PX`` / 2 pixels is dropped (the
     LiDAR, above the camera, sees road over a car that projects inside the car's image)."""
     inv = np.where(ground > 0, 1.0 / np.maximum(ground, 1e-6), 0.0).astype(np.float32)
-    inv = cv2.dilate(inv, np.ones((1, 5), np.uint8))
+    inv = cv2.morphologyEx(cv2.dilate(inv, np.ones((1, 5), np.uint8)), cv2.MORPH_CLOSE,
+                           np.ones((1, GROUND_ROW_CLOSE_PX), np.uint8))  # each scan line continuous along its row
     # ground the LiDAR (above the camera) saw past a nearer obstacle that is beside it in the image: hidden
     inv[inv < cv2.dilate(obstacle, np.ones((GROUND_PAST_OBSTACLE_PX, GROUND_PAST_OBSTACLE_PX), np.uint8))] = 0.0
     out = inv.copy()
@@ -102,7 +104,8 @@ def _ground_inverse_depth(ground: np.ndarray, obstacle: np.ndarray) -> np.ndarra
         np.add.at(starts, hi, -1)
         span = np.cumsum(starts[:H]) > 0
         out[span, col] = np.interp(rows[span], r, inv[r, col]).astype(np.float32)
-    return out
+    # a column whose join was refused between joined neighbours would stand out (streaks in a shadow): close it
+    return cv2.morphologyEx(out, cv2.MORPH_CLOSE, np.ones((1, GROUND_ROW_CLOSE_PX), np.uint8))
 
 
 def densify_lidar_depth(points_cam: np.ndarray, K: np.ndarray, width: int, height: int,
