@@ -12,7 +12,7 @@ import pytest
 
 from conftest import SHARED_DATA, devkit
 from streetaug.augment.batch import BatchConfig, RunOptions, read_log, run_batch
-from streetaug.augment.batch.tracks import read_scene_tracks, saved_scene_tracks, tracks_file
+from streetaug.augment.batch.tracks import read_scene_tracks, saved_scene_tracks
 from streetaug.datasets.nuscenes import NuScenesReader
 from streetaug.datasets.nuscenes_format import new_token
 
@@ -27,6 +27,12 @@ def config(**kw) -> BatchConfig:
                   limit=N_SAMPLES, quality="draft", level="L1", seed=3, tracks=3)
     values.update(kw)
     return BatchConfig(**values)
+
+
+@pytest.fixture(scope="module")
+def nusc(run):
+    """The devkit's view of the output (loaded once: the real scene's tables take seconds)."""
+    return devkit().NuScenes(version="v1.0-mini", dataroot=str(run[0]), verbose=False)
 
 
 @pytest.fixture(scope="module")
@@ -65,10 +71,8 @@ def test_every_track_annotation_is_logged_once_per_sample(run):
     assert set(seen) == expected
 
 
-def test_devkit_chains_instances_and_velocity_matches_the_trajectory(run):
+def test_devkit_chains_instances_and_velocity_matches_the_trajectory(run, nusc):
     out, _ = run
-    NuScenes = devkit().NuScenes
-    nusc = NuScenes(version="v1.0-mini", dataroot=str(out), verbose=False)
     (planned,) = saved_scene_tracks(out)
     rendered = list(planned.sample_tokens)[:N_SAMPLES]
     checked = 0
@@ -110,25 +114,14 @@ def test_log_names_each_annotation_by_track_with_velocity_and_attribute(run):
         assert np.allclose(o.velocity, track.velocity_global[track.index_of(sample_token)], atol=1e-5)
 
 
-def test_dry_run_writes_the_planned_tracks(tmp_path):
-    summary = run_batch(config(limit=1), tmp_path / "plan", RunOptions(workers=1, progress=False, dry_run=True,
-                                                                       contact_sheet=0))
-    (planned,) = saved_scene_tracks(tmp_path / "plan")
-    assert tracks_file(tmp_path / "plan", planned.scene_token).is_file()
-    assert summary["objects_planned"] == len(planned.at(planned.sample_tokens[0]))
-
-
-def test_devkit_detection_and_tracking_loaders_read_the_new_boxes(run):
+def test_devkit_detection_and_tracking_loaders_read_the_new_boxes(run, nusc):
     """The evaluation code's own ground-truth loaders (mini_val holds scene-0916): velocities and attributes."""
-    devkit()
     from nuscenes.eval.common.config import config_factory
     from nuscenes.eval.common.loaders import load_gt
     from nuscenes.eval.detection.data_classes import DetectionBox
     from nuscenes.eval.tracking.data_classes import TrackingBox
-    from nuscenes.nuscenes import NuScenes
 
     out, _ = run
-    nusc = NuScenes(version="v1.0-mini", dataroot=str(out), verbose=False)
     (planned,) = saved_scene_tracks(out)
     ours = {new_token("instance", 3, "track", f"{planned.scene_token}/{t.track_index}"): t for t in planned.tracks}
     config_factory("tracking_nips_2019")  # the tracking benchmark's config (sets its class names), as its eval does

@@ -120,11 +120,11 @@ def test_a_scene_with_a_sample_missing_its_ego_pose_fails_alone(tmp_path):
 
 @pytest.fixture(scope="module")
 def with_sweeps(tmp_path_factory):
-    """A small generated sequence WITH its sweep files (2 keyframes, CAM_FRONT + CAM_BACK, 192 x 108), batched."""
+    """A small generated sequence WITH its sweep files (2 keyframes, CAM_FRONT + CAM_BACK, 160 x 90), batched."""
     from streetaug.augment.scenegen.sequence import make_sequence_scene
 
     src = tmp_path_factory.mktemp("seq_sweeps") / "src"
-    make_sequence_scene(src, sweeps=True, width=192, height=108, spp=1, sky_rays=1, n_keyframes=2,
+    make_sequence_scene(src, sweeps=True, width=160, height=90, spp=1, sky_rays=1, n_keyframes=2,
                         cameras=("CAM_FRONT", "CAM_BACK"))
     out = src.parent / "out"
     summary = run_batch(config(dataroot=str(src)), out, RunOptions(workers=1, **QUIET))
@@ -212,3 +212,14 @@ def test_devkit_returns_and_renders_the_tracks_in_each_camera(reference, tmp_pat
     nusc.render_annotation(first, out_path=str(tmp_path / "ann.png"))
     nusc.render_sample_data(ok[0].sample_data_token, out_path=str(tmp_path / "cam.png"), verbose=False)
     assert (tmp_path / "ann.png").stat().st_size > 10_000 and (tmp_path / "cam.png").stat().st_size > 10_000
+
+
+def test_dry_run_writes_the_planned_tracks(tmp_path):
+    from streetaug.augment.batch.tracks import tracks_file
+
+    summary = run_batch(config(limit=1), tmp_path / "plan", RunOptions(workers=1, progress=False, dry_run=True,
+                                                                       contact_sheet=0))
+    (planned,) = saved_scene_tracks(tmp_path / "plan")
+    assert tracks_file(tmp_path / "plan", planned.scene_token).is_file() and planned.tracks
+    assert summary["objects_planned"] == len(planned.at(planned.sample_tokens[0]))
+    assert not list((tmp_path / "plan").glob("samples/*/*"))  # nothing rendered
