@@ -39,7 +39,7 @@ demo: setup
 	@echo "  $(OUT)/samples/LIDAR_TOP/*.pcd.bin the LiDAR sweeps with the inserted cars in them"
 	@echo "  $(OUT)/insert-sunny/               one insertion with mask.png and shadow.exr"
 	@echo "  $(OUT)/light-lowsun/               lighting.json, envmap_camera.exr, preview.png"
-	@echo "  $(OUT)/tracks/                     3 tracks through the bundled sequence scene (5 keyframes): a nuScenes"
+	@echo "  $(OUT)/tracks/                     up to 3 tracks through the bundled sequence scene (5 keyframes): a nuScenes"
 	@echo "                                     dataset with linked instances and velocities; tracks_sheet.png"
 
 test: setup $(BIN)/.devkit
