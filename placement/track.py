@@ -207,9 +207,7 @@ class Track:
 
     def box_at(self, i: int) -> Box:
         """The nuScenes box at span position ``i`` (centre = bottom centre + h/2 along the object's up)."""
-        T = self.T_global_from_object[i]
-        center = T[:3, 3] + 0.5 * self.wlh[2] * T[:3, 2]
-        return Box(center, self.wlh.copy(), rotation_to_quat(T[:3, :3]), self.category)
+        return self._box(self.T_global_from_object[i])
 
     def pose_at(self, timestamp_us: int | float) -> np.ndarray:
         """(4, 4) T_global_from_object at any time within the span (interpolated; clamped at its ends)."""
@@ -220,27 +218,28 @@ class Track:
         i = self.index_of(sample_token)
         if i is None:
             raise InputError(f"track {self.track_index}: not annotated at sample {sample_token}")
-        T = self.T_global_from_object[i]
-        box = self.box_at(i)
+        return self._placement(self.T_global_from_object[i].copy(), i, asset_index, camera_xy)
+
+    def placement_at_time(self, timestamp_us: int, asset_index: int) -> Placement:
+        """The :class:`Placement` at any time of the span (a sweep's): the pose interpolated between keyframes,
+        the attribute and ground of the keyframe nearest in time."""
+        i = int(np.argmin(np.abs(self.timestamps_us - timestamp_us)))
+        return self._placement(self.pose_at(timestamp_us), i, asset_index)
+
+    def _placement(self, T: np.ndarray, i: int, asset_index: int, camera_xy: np.ndarray | None = None) -> Placement:
+        """The :class:`Placement` of pose ``T`` (4, 4) with the attribute and ground of span position ``i``."""
+        box = self._box(T)
         distance = float("nan") if camera_xy is None else float(np.linalg.norm(box.center[:2] - camera_xy))
-        return Placement(asset_index=asset_index, T_global_from_object=T.copy(), box=box, wlh=self.wlh.copy(),
+        return Placement(asset_index=asset_index, T_global_from_object=T, box=box, wlh=self.wlh.copy(),
                          ground_normal_global=T[:3, 2].copy(), ground_source=self.ground_source[i],
                          drivable_source=self.drivable_source, drivable_confidence=self.drivable_confidence,
                          attribute=self.attribute_at(i), distance_m=distance,
                          yaw_source="lane" if self.lane_source == "map lanes" else "ego",
                          footprint_xy=box_footprint_rect(T[None], self.wlh)[0])
 
-    def placement_at_time(self, timestamp_us: int, asset_index: int) -> Placement:
-        """The :class:`Placement` at any time of the span (a sweep's): the pose interpolated between keyframes,
-        the attribute and ground of the keyframe nearest in time."""
-        T = self.pose_at(timestamp_us)
-        i = int(np.argmin(np.abs(self.timestamps_us - timestamp_us)))
+    def _box(self, T: np.ndarray) -> Box:
         center = T[:3, 3] + 0.5 * self.wlh[2] * T[:3, 2]
-        box = Box(center, self.wlh.copy(), rotation_to_quat(T[:3, :3]), self.category)
-        return Placement(asset_index=asset_index, T_global_from_object=T, box=box, wlh=self.wlh.copy(),
-                         ground_normal_global=T[:3, 2].copy(), ground_source=self.ground_source[i],
-                         drivable_source=self.drivable_source, drivable_confidence=self.drivable_confidence,
-                         attribute=self.attribute_at(i), footprint_xy=box_footprint_rect(T[None], self.wlh)[0])
+        return Box(center, self.wlh.copy(), rotation_to_quat(T[:3, :3]), self.category)
 
     def to_json(self) -> dict:
         return {"track_index": self.track_index, "category": self.category, "wlh": self.wlh.tolist(),

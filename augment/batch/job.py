@@ -49,6 +49,14 @@ def readable_views(sample: Sample, cameras: list[str], fail_fast: bool = False
     return views, failed
 
 
+def readable_views_and_failures(sample: Sample, token: str, cameras: list[str], fail_fast: bool = False
+                                ) -> tuple[list[CameraView], dict[str, LogRow]]:
+    """:func:`readable_views` with a failed log row for each camera whose image cannot be read."""
+    views, unreadable = readable_views(sample, cameras, fail_fast)
+    return views, {c: LogRow(token, c, "failed", reason, sample_data_token=sample.cameras[c].sample_data_token)
+                   for c, reason in unreadable.items()}
+
+
 def augment_sample(reader: NuScenesReader, config: BatchConfig, out_dir: Path, token: str, cameras: list[str],
                    dry_run: bool = False, fail_fast: bool = False) -> list[LogRow]:
     """Augment ``cameras`` of sample ``token`` (``reader`` holds its table rows) into ``out_dir``.
@@ -59,14 +67,12 @@ def augment_sample(reader: NuScenesReader, config: BatchConfig, out_dir: Path, t
     """
     t0 = time.perf_counter()
     sample = reader.sample(token)
-    views, unreadable = readable_views(sample, cameras, fail_fast)
+    views, failed = readable_views_and_failures(sample, token, cameras, fail_fast)
     assets = {v.channel: select_assets(item_seed(config.seed, "asset", token, v.channel), config.n_objects,
                                        config.asset, config.assets_dir, config.asset_front, config.asset_length)
               for v in views}
     options = insert_options(config)
     load_s = time.perf_counter() - t0
-    failed = {c: LogRow(token, c, "failed", reason, sample_data_token=sample.cameras[c].sample_data_token)
-              for c, reason in unreadable.items()}
     if not views:
         return [failed.get(c) or LogRow(token, c, "skipped", f"camera {c} not in this sample") for c in cameras]
     if dry_run:
@@ -74,15 +80,22 @@ def augment_sample(reader: NuScenesReader, config: BatchConfig, out_dir: Path, t
                                                                                               options))
         return ordered(cameras, planned, failed)
     result = insert_into_sample(sample, views, assets, options)
+    rows = write_sample(out_dir, reader, sample, views, [c for c in cameras if c not in failed], result, load_s,
+                        config.version)
+    return ordered(cameras, with_file_checks(out_dir, rows), failed)
+
+
+def write_sample(out_dir: Path, reader: NuScenesReader, sample: Sample, views: list[CameraView], cameras: list[str],
+                 result, load_s: float, version: str) -> list[LogRow]:
+    """Write a sample's LiDAR sweep with its objects and each of ``cameras``' image and labels; their log rows
+    (the sample's shared ``load`` and ``lidar`` seconds divided among its cameras)."""
     t_lidar = time.perf_counter()
-    lidar = write_lidar(out_dir, reader, sample, result, config.version)
+    lidar = write_lidar(out_dir, reader, sample, result, version)
     shared_s = {"load": load_s, "lidar": time.perf_counter() - t_lidar}  # per sample: shared by its cameras
     per_camera = {k: v / max(len(views), 1) for k, v in shared_s.items()}
     names = {v.channel: output_file(reader.get("sample_data", v.sample_data_token)["filename"], v.channel,
                                     v.sample_data_token) for v in views}
-    rows = [write_camera(out_dir, sample, c, result, per_camera, lidar, names.get(c))
-            for c in cameras if c not in failed]
-    return ordered(cameras, with_file_checks(out_dir, rows), failed)
+    return [write_camera(out_dir, sample, c, result, per_camera, lidar, names.get(c)) for c in cameras]
 
 
 def ordered(cameras: list[str], rows: list[LogRow], failed: dict[str, LogRow]) -> list[LogRow]:
@@ -102,9 +115,7 @@ def augment_track_sample(reader: NuScenesReader, config: BatchConfig, out_dir: P
         return [LogRow(token, c, "failed", scene.reason or "the scene's tracks could not be planned") for c in cameras]
     t0 = time.perf_counter()
     sample = reader.sample(token)
-    views, unreadable = readable_views(sample, cameras, fail_fast)
-    failed = {c: LogRow(token, c, "failed", reason, sample_data_token=sample.cameras[c].sample_data_token)
-              for c, reason in unreadable.items()}
+    views, failed = readable_views_and_failures(sample, token, cameras, fail_fast)
     here = scene.at(token)
     if not views:
         return [failed.get(c) or LogRow(token, c, "skipped", f"camera {c} not in this sample") for c in cameras]
@@ -127,13 +138,8 @@ def augment_track_sample(reader: NuScenesReader, config: BatchConfig, out_dir: P
                      "motion": t.motion, "velocity": [round(float(v), 6) for v in t.velocity_global[t.index_of(token)]]}
                     for t in here]
     result = insert_placed_into_sample(sample, views, placements, assets, insert_options(config), label_fields)
-    t_lidar = time.perf_counter()
-    lidar = write_lidar(out_dir, reader, sample, result, config.version)
-    per_camera = {k: v / len(views) for k, v in {"load": load_s, "lidar": time.perf_counter() - t_lidar}.items()}
-    names = {v.channel: output_file(reader.get("sample_data", v.sample_data_token)["filename"], v.channel,
-                                    v.sample_data_token) for v in views}
-    rows = [write_camera(out_dir, sample, c, result, per_camera, lidar, names.get(c))
-            for c in cameras if c not in failed]
+    rows = write_sample(out_dir, reader, sample, views, [c for c in cameras if c not in failed], result, load_s,
+                        config.version)
     if config.sweeps:
         from .sweep_render import render_sweeps  # deferred: only with --sweeps
 
