@@ -35,7 +35,8 @@ from streetaug.augment.core.paths import resolve_inside
 
 from .errors import DatasetError
 from .lidarseg import read_lidar_points, read_lidarseg_labels
-from .nuscenes_map import DrivableArea, LaneCenterlines, map_expansion_path, read_lanes, read_map_expansion
+from .nuscenes_map import (DrivableArea, LaneCenterlines, map_expansion_path, read_area_layer, read_lanes,
+                           read_map_expansion)
 from .raster_map import MAP_SOURCE_EXPANSION, MAP_SOURCE_RASTER, RasterDrivable, read_semantic_prior, semantic_prior_row
 from .sample import Box, CameraView, LidarSweep, Sample
 from .tables import integer_field, read_table_rows, rotation_field, row_where, size_field, token_index, vector_field
@@ -109,6 +110,7 @@ class NuScenesReader:
         self._drivable: dict[str, DrivableArea | None] = {}
         self._lanes: dict[str, LaneCenterlines | None] = {}
         self._map_errors: dict[str, InputError] = {}
+        self._pedestrian_areas: dict[str, dict[str, list]] = {}  # location -> walkway / ped_crossing polygons
         self._map_source: dict[str, str | None] = {}  # location -> "expansion" / "semantic-prior raster" / None
         self._rasters: dict[str, RasterDrivable] = {}  # raster file -> its vectorised drivable area
 
@@ -437,14 +439,17 @@ class NuScenesReader:
             if path.is_file():
                 data = read_map_expansion(path)
                 drivable, lanes = DrivableArea.from_file(path, data), read_lanes(path, data=data)
+                pedestrian_areas = {layer: read_area_layer(path, layer, data, required=False)
+                                    for layer in ("walkway", "ped_crossing")}
                 source = MAP_SOURCE_EXPANSION
             else:
-                drivable, lanes = self._read_raster(location, log_token), None
+                drivable, lanes, pedestrian_areas = self._read_raster(location, log_token), None, {}
                 source = None if drivable is None else MAP_SOURCE_RASTER
         except InputError as e:
             self._map_errors[location] = e
             raise
         self._drivable[location], self._lanes[location] = drivable, lanes
+        self._pedestrian_areas[location] = pedestrian_areas
         self._map_source[location] = source
 
     def _map_row(self, location: str, log_token: str | None) -> dict:
@@ -517,6 +522,14 @@ class NuScenesReader:
         area = self.drivable_area(location, log_token)
         return None if area is None else area.geometries
 
+    def map_areas(self, location: str, layer: str, log_token: str | None = None) -> list:
+        """The map expansion's ``walkway`` or ``ped_crossing`` (Multi)Polygons of ``location`` (global x/y);
+        empty without an expansion or without that layer."""
+        if layer not in ("walkway", "ped_crossing"):
+            raise ValueError(f"map_areas: layer must be 'walkway' or 'ped_crossing', got {layer!r}")
+        self._ensure_map(location, log_token)
+        return self._pedestrian_areas[location].get(layer, [])
+
     def drivable_area_near(self, location: str, xy_global: np.ndarray, radius_m: float,
                            log_token: str | None = None):
         """Drivable area clipped to the square of half-side ``radius_m`` around global ``xy_global`` (2,).
@@ -552,4 +565,6 @@ class NuScenesReader:
             _load_lidar=load_lidar,
             lanes=self.lanes(location, log_token) if self.with_map else None,
             map_source=self.map_source(location, log_token) if self.with_map else None,
+            walkways_global=tuple(self.map_areas(location, "walkway", log_token)) if self.with_map else (),
+            ped_crossings_global=tuple(self.map_areas(location, "ped_crossing", log_token)) if self.with_map else (),
         )

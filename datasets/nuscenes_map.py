@@ -5,6 +5,7 @@ File ``<dataroot>/maps/expansion/<location>.json`` (map expansion v1.x) holds, a
 * ``node``: ``{token, x, y}`` -- vertices in the global (map) frame, metres (x east, y north);
 * ``polygon``: ``{token, exterior_node_tokens, holes: [{node_tokens}]}``;
 * ``drivable_area``: ``{token, polygon_tokens}`` (v1.0 files: a single ``polygon_token``);
+* ``walkway``, ``ped_crossing``: ``{token, polygon_token}`` (sidewalks and zebra crossings, see :func:`read_area_layer`);
 * ``lane`` / ``lane_connector``: ``{token, polygon_token, from_edge_line_token, to_edge_line_token, ...}``
   with centre lines in ``arcline_path_3`` (``{lane_token: [arcline path, ...]}``), see :func:`read_lanes`.
 """
@@ -52,12 +53,32 @@ def read_drivable_area(path: str | Path, data: dict | None = None) -> list[Polyg
     Returns:
         One shapely (Multi)Polygon per ``drivable_area`` record, global x/y in metres (holes kept).
     """
+    return read_area_layer(path, "drivable_area", data)
+
+
+AREA_LAYERS = ("drivable_area", "walkway", "ped_crossing", "carpark_area")
+
+
+def read_area_layer(path: str | Path, layer: str, data: dict | None = None,
+                    required: bool = True) -> list[Polygon | MultiPolygon]:
+    """Read a polygon layer (``drivable_area``, ``walkway``, ``ped_crossing``, ...) of a map expansion file.
+
+    Records carry ``polygon_token`` or ``polygon_tokens``; a record of several polygons is their union.
+    Without ``required`` a missing layer reads as empty (older expansions lack some layers).
+
+    Returns:
+        One shapely (Multi)Polygon per record, global x/y in metres (holes kept).
+    """
     path = Path(path)
     if data is None:
         data = read_map_expansion(path)
-    for layer in ("node", "polygon", "drivable_area"):
-        if not isinstance(data, dict) or not isinstance(data.get(layer), list):
-            raise DatasetError(f"{path}: map expansion has no '{layer}' layer (a list of records expected)")
+    if not required and isinstance(data, dict) and data.get(layer) is None:
+        return []
+    for name in ("node", "polygon", layer):
+        if not isinstance(data, dict) or not isinstance(data.get(name), list):
+            raise DatasetError(f"{path}: map expansion has no '{name}' layer (a list of records expected)")
+    if not data[layer]:
+        return []
     try:
         xy_by_node = {n["token"]: (float(n["x"]), float(n["y"])) for n in data["node"]}
         rings_by_polygon = {p["token"]: p for p in data["polygon"]}
@@ -70,7 +91,7 @@ def read_drivable_area(path: str | Path, data: dict | None = None) -> list[Polyg
 
         def polygon(token: str) -> Polygon:
             if token not in rings_by_polygon:
-                raise DatasetError(f"{path}: drivable_area refers to unknown polygon token '{token}'")
+                raise DatasetError(f"{path}: {layer} refers to unknown polygon token '{token}'")
             rec = rings_by_polygon[token]
             exterior = ring(rec["exterior_node_tokens"], f"polygon '{token}'")
             holes = [ring(h["node_tokens"], f"hole of polygon '{token}'") for h in rec.get("holes", [])]
@@ -78,14 +99,14 @@ def read_drivable_area(path: str | Path, data: dict | None = None) -> list[Polyg
             return poly if poly.is_valid else _polygonal(shapely.make_valid(poly))
 
         areas = []
-        for rec in data["drivable_area"]:
+        for rec in data[layer]:
             tokens = rec["polygon_tokens"] if "polygon_tokens" in rec else [rec["polygon_token"]]
             polys = [polygon(t) for t in tokens]
             areas.append(polys[0] if len(polys) == 1 else shapely.union_all(polys))
     except (KeyError, TypeError, ValueError) as e:
         if isinstance(e, DatasetError):
             raise
-        raise DatasetError(f"{path}: malformed map expansion record ({type(e).__name__}: {e})") from None
+        raise DatasetError(f"{path}: malformed map expansion record in '{layer}' ({type(e).__name__}: {e})") from None
     return areas
 
 

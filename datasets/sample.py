@@ -182,6 +182,8 @@ class Sample:
         lanes: lane centre lines of the map, or None when the map has no lanes.
         map_source: which map gave ``drivable_area_global``: ``"expansion"`` (the map expansion JSON),
             ``"semantic-prior raster"`` (the base release's ``map.json`` PNG, vectorised; no lanes), or None.
+        walkways_global, ped_crossings_global: the map expansion's ``walkway`` / ``ped_crossing`` (Multi)Polygons
+            in global x/y (empty without such a map layer).
     """
 
     token: str
@@ -194,6 +196,8 @@ class Sample:
     _load_lidar: Callable[[], LidarSweep | None] = field(repr=False, compare=False, default=None)
     lanes: LaneCenterlines | None = field(repr=False, compare=False, default=None)
     map_source: str | None = None
+    walkways_global: tuple[shapely.Geometry, ...] = ()
+    ped_crossings_global: tuple[shapely.Geometry, ...] = ()
 
     @functools.cached_property
     def lidar(self) -> LidarSweep | None:

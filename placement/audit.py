@@ -23,14 +23,16 @@ import numpy as np
 import shapely
 
 from streetaug.augment.core import quat_to_rotation, transform_points
-from streetaug.datasets.nuscenes_format import LIDARSEG_NON_DRIVABLE
+from streetaug.datasets.nuscenes_format import LIDARSEG_GROUND, LIDARSEG_NON_DRIVABLE
 from streetaug.datasets.sample import Box, CameraView, Sample
 
+from .class_rules import ClassRule, ClassRules, read_class_rules
 from .config import PlacementConfig
 from .drivable import MAP_SOURCES, DrivableArea
-from .place import Placement
+from .place import OFF_ROAD_ZONES, Placement
+from .zones import ROAD_EDGE_BAND_M, SurfaceZones, surface_zones
 
-AUDITED_RULES = ("drivable", "distance", "annotated_boxes", "lidar_obstacles", "lidarseg", "in_view",
+AUDITED_RULES = ("surface", "distance", "annotated_boxes", "lidar_obstacles", "lidarseg", "in_view",
                  "corners_unoccluded", "mutual_collision")
 
 
@@ -81,6 +83,44 @@ def _grid_contains(area: DrivableArea, hull) -> bool:
     return bool(np.all(drivable[touched]))
 
 
+def _surface_ok(p: Placement, hull, rule: ClassRule, road, area: DrivableArea, zones: SurfaceZones,
+                config: PlacementConfig) -> bool:
+    """Whether the box's vertical projection ``hull`` lies in the placement's zone (shapely, own definitions)."""
+    tol = 1e-6
+    centre = shapely.Point(*p.box.center[:2])
+    if p.zone in ("lane", "kerb"):
+        grown = hull.buffer(rule.lane_margin_m) if p.zone == "lane" and rule.lane_margin_m > 0 else hull
+        on_road = bool(road.contains(grown)) if road is not None else _grid_contains(area, grown)
+        if p.zone == "lane":
+            return on_road
+        edge = hull.distance(road.boundary) if road is not None else float(area.edge_distance(p.footprint_xy[None])[0])
+        return on_road and edge <= config.kerb_distance_m + tol
+    if p.zone == "crossing":
+        return zones.crossings is not None and bool(zones.crossings.buffer(0.3 + tol).contains(hull))
+    if road is not None:
+        d_centre = centre.distance(road.boundary) * (1.0 if road.contains(centre) else -1.0)
+    else:
+        d_centre = float(zones.signed_distance(p.box.center[None, :2])[0])
+    if p.zone == "road_edge":
+        return ROAD_EDGE_BAND_M[0] - tol <= d_centre <= ROAD_EDGE_BAND_M[1] + tol
+    if p.zone == "sidewalk":
+        if road is not None:
+            if road.intersects(hull) or hull.distance(road) < rule.sidewalk_band_m[0] - 1e-3:
+                return False
+            far = max(shapely.Point(*xy).distance(road) for xy in np.asarray(hull.exterior.coords))
+        else:
+            s = zones.signed_distance(np.asarray(hull.exterior.coords)[:, :2])
+            if np.any(s > -rule.sidewalk_band_m[0] + 1e-3):
+                return False
+            far = float(-s.min())
+        if zones.walkway is not None:
+            return bool(zones.walkway.buffer(tol).contains(hull))
+        if zones.sidewalk_cells is not None:
+            return bool(zones.on_sidewalk_cells(np.asarray(hull.exterior.coords)[:, :2]).all())
+        return far <= rule.sidewalk_band_m[1] + 1e-3
+    return False
+
+
 def _inside_fraction_cv(corners_cam: np.ndarray, K: np.ndarray, width: int, height: int) -> float:
     uv = corners_cam @ K.T
     uv = (uv[:, :2] / uv[:, 2:]).astype(np.float32)
@@ -114,14 +154,20 @@ def _top_corners_occluded(corners_cam: np.ndarray, points_cam: np.ndarray, K: np
 
 
 def audit_placements(sample: Sample, view: CameraView, placements: Sequence[Placement], drivable: DrivableArea,
-                     config: PlacementConfig) -> list[Audit]:
+                     config: PlacementConfig, class_rules: ClassRules | None = None) -> list[Audit]:
     """Re-check each of ``placements`` (one image's :class:`Placement` list) against every rule.
+
+    Each placement is checked with its class's thresholds (``class_rules``, default the built-in table) and
+    its zone; cluster members may be as close to their mates as the cluster's gap allows.
 
     Args:
         sample, view: where they were placed.
         drivable: the drivable area the placement used (``PlacementResult.drivable``).
         config: the thresholds used.
     """
+    rules = class_rules or read_class_rules()
+    base_config = config
+    zones = surface_zones(sample, view, drivable, config) if drivable is not None else None
     cam_xy = view.T_global_from_cam[:2, 3]
     boxes = list(sample.boxes)
     box_hulls = [box_hull_xy(b) for b in boxes]
@@ -137,10 +183,18 @@ def audit_placements(sample: Sample, view: CameraView, placements: Sequence[Plac
     non_drivable_pts = shapely.points(non_drivable[:, :2])
     hulls = [box_hull_xy(p.box) for p in placements]
     out = []
+    non_ground = points[np.isin(labels, LIDARSEG_NON_DRIVABLE) & ~np.isin(labels, LIDARSEG_GROUND)] \
+        if labels is not None else np.zeros((0, 3))
+    non_ground_pts = shapely.points(non_ground[:, :2])
+    mutual = [rules.classes[p.detection_class].config(base_config).mutual_clearance_m for p in placements]
     for i, (p, hull) in enumerate(zip(placements, hulls)):
         passed, measured = {}, {}
-        # drivable: the whole vertical projection of the box on the road
-        passed["drivable"] = bool(road.contains(hull)) if road is not None else _grid_contains(drivable, hull)
+        rule = rules.classes[p.detection_class]
+        config = rule.config(base_config)
+        # surface: the whole vertical projection of the box in its class's zone
+        passed["surface"] = _surface_ok(p, hull, rule, road, drivable, zones, config)
+        if p.zone in OFF_ROAD_ZONES:
+            passed["surface"] &= p.ground_source != "ego-plane"
         # distance camera -> box centre
         d = float(np.hypot(*(p.box.center[:2] - cam_xy)))
         measured["distance_m"] = d
@@ -164,8 +218,10 @@ def audit_placements(sample: Sample, view: CameraView, placements: Sequence[Plac
         measured["obstacle_points"] = n_obst
         passed["lidar_obstacles"] = n_obst <= config.obstacle_max_points
         if labels is not None:
-            n_seg = int(np.sum(shapely.distance(hull, non_drivable_pts) <= config.static_clearance_m)) \
-                if len(non_drivable) else 0
+            blocking, blocking_pts = (non_ground, non_ground_pts) if p.zone in OFF_ROAD_ZONES else \
+                (non_drivable, non_drivable_pts)
+            n_seg = int(np.sum(shapely.distance(hull, blocking_pts) <= config.static_clearance_m)) \
+                if len(blocking) else 0
             measured["non_drivable_points"] = n_seg
             passed["lidarseg"] = n_seg <= config.lidarseg_max_points
         # in view
@@ -179,8 +235,12 @@ def audit_placements(sample: Sample, view: CameraView, placements: Sequence[Plac
                 corners_cam, transform_points(view.T_cam_from_global, points), view.K, view.width, view.height,
                 config.occlusion_tolerance_m)
         # other objects inserted into the same image
-        others = [hull.distance(h) for j, h in enumerate(hulls) if j != i]
-        measured["min_gap_inserted_m"] = min(others, default=np.inf)
-        passed["mutual_collision"] = measured["min_gap_inserted_m"] >= config.mutual_clearance_m
+        cluster = p.cluster_of if p.cluster_of >= 0 else i
+        mates = {j for j, q in enumerate(placements) if j == cluster or q.cluster_of == cluster}
+        others = [(hull.distance(h), max(mutual[i], mutual[j])) for j, h in enumerate(hulls)
+                  if j != i and j not in mates]
+        measured["min_gap_inserted_m"] = min((g for g, _ in others), default=np.inf)
+        passed["mutual_collision"] = all(g >= need for g, need in others) and all(
+            hull.distance(hulls[j]) > 0 for j in mates if j != i)
         out.append(Audit(passed, measured))
     return out

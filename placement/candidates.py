@@ -14,6 +14,8 @@ import numpy as np
 from streetaug.augment.core import InputError
 from streetaug.datasets.sample import CameraView
 
+from .class_rules import ClassRule
+from .config import PlacementConfig
 from .ground import GroundPlane
 from .rules import box_corners_object, box_footprint_rect, footprint_corners
 from .scene import PlacementScene
@@ -83,22 +85,52 @@ class Candidates:
     footprints_xy: np.ndarray
 
 
-def sample_candidates(scene: PlacementScene, wlh: np.ndarray, rng: np.random.Generator) -> Candidates:
-    """``config.n_candidates`` candidates in the camera's field of view (draws r, azimuth, flip, noise from ``rng``)."""
-    config, n = scene.config, scene.config.n_candidates
+LANE_REACH_OFF_CENTRE_M = 4.0  # extra lane search distance outside the lane zone (kerb, road edge, sidewalk)
+OVERSAMPLE = 8  # draws per candidate: candidates whose centre suits the zone are kept first
+
+
+def sample_candidates(scene: PlacementScene, wlh: np.ndarray, rng: np.random.Generator,
+                      rule: ClassRule | None = None, zone: str = "lane") -> Candidates:
+    """``config.n_candidates`` candidates of one object in the camera's field of view, in ``zone``.
+
+    Draws ``OVERSAMPLE`` x n of (r, azimuth, flip, noise, random heading) from ``rng`` (a fixed count, so the
+    stream does not depend on the scene) and keeps, in draw order, those whose centre suits the zone
+    (:meth:`SurfaceZones.plausible_centres`) first, then the others. The heading follows ``rule.heading``:
+    ``lane`` the nearest lane's direction (within ``lane_max_distance_m``) or the ego's (either way); ``path``
+    the same either way (across the road on a crossing); ``across`` that plus 90 deg; ``random`` uniform.
+    ``rule`` None: a car's rule (lane heading) with the scene's config.
+    """
+    config = scene.config if rule is None else rule.config(scene.config)
+    n = config.n_candidates
+    m = n if rule is None else OVERSAMPLE * n  # without a rule: the stream of earlier versions (tracks)
     fov = camera_azimuth_range(scene.view)
     R_ego = scene.view.T_global_from_ego[:3, :3]
     yaw_ego = float(np.arctan2(R_ego[1, 0], R_ego[0, 0]))
-    r = rng.uniform(config.min_distance_m, config.max_distance_m, n)
-    az = fov.heading_rad + rng.uniform(-fov.right_rad, fov.left_rad, n)
-    flip = rng.random(n) < config.opposite_heading_probability
-    noise = np.radians(rng.normal(0.0, config.yaw_sigma_deg, n))
+    r = rng.uniform(config.min_distance_m, config.max_distance_m, m)
+    az = fov.heading_rad + rng.uniform(-fov.right_rad, fov.left_rad, m)
+    flip = rng.random(m) < config.opposite_heading_probability
+    noise = np.radians(rng.normal(0.0, config.yaw_sigma_deg, m))
+    uniform_yaw = rng.uniform(-np.pi, np.pi, m) if rule is not None else np.zeros(m)
     xy = scene.camera_xy + r[:, None] * np.stack([np.cos(az), np.sin(az)], axis=1)
+    if rule is not None:
+        good = scene.zones.plausible_centres(zone, xy, wlh, rule)
+        order = np.concatenate([np.flatnonzero(good), np.flatnonzero(~good)])[:n]
+    else:
+        order = np.arange(n)
+    xy, flip, noise, uniform_yaw = xy[order], flip[order], noise[order], uniform_yaw[order]
+    heading_mode = "lane" if rule is None else rule.heading
     heading = yaw_ego + np.pi * flip
     on_lane = np.zeros(n, dtype=bool)
     if scene.lanes is not None:
-        lane_heading, on_lane = scene.lanes.heading_at(xy, config.lane_max_distance_m)
-        heading = np.where(on_lane, lane_heading, heading)
+        # by the kerb and off the road, the nearest lane is farther than half a lane away
+        reach = config.lane_max_distance_m + (LANE_REACH_OFF_CENTRE_M if zone != "lane" and rule is not None else 0.0)
+        lane_heading, on_lane = scene.lanes.heading_at(xy, reach)
+        along = lane_heading + (np.pi * flip if heading_mode != "lane" else 0.0)
+        heading = np.where(on_lane, along, heading)
+    if heading_mode == "across" or (heading_mode == "path" and zone == "crossing"):
+        heading = heading + np.pi / 2
+    if heading_mode == "random":
+        heading, noise, on_lane = uniform_yaw, np.zeros(n), np.zeros(n, dtype=bool)
     yaw = np.mod(heading + noise + np.pi, 2 * np.pi) - np.pi
     w, l, _ = wlh
     return Candidates(xy, yaw, on_lane, footprint_corners(xy, yaw, l, w))
@@ -133,9 +165,20 @@ class StoodCandidates:
         return np.array([p.normal_global for p in self.planes]).reshape(-1, 3)
 
 
-def stand_candidates(scene: PlacementScene, cands: Candidates, index: np.ndarray, wlh: np.ndarray) -> StoodCandidates:
-    """Stand candidates ``index`` on the ground fitted below them: roll/pitch from the plane, heading kept."""
-    planes = [scene.ground.fit(p) for p in cands.xy[index]]
+def stand_candidates(scene: PlacementScene, cands: Candidates, index: np.ndarray, wlh: np.ndarray,
+                     config: PlacementConfig | None = None) -> StoodCandidates:
+    """Stand candidates ``index`` on the ground fitted below them: roll/pitch from the plane, heading kept.
+
+    ``config`` (default the scene's) sets the fit radius. Small objects (footprint diagonal under
+    ``SUPPORT_MAX_SIZE_M``) then sit on the LiDAR returns right around their footprint: the plane moves along
+    its normal by their median height above it when enough of them lie within ``SUPPORT_BAND_M`` of it (a cone
+    on a kerb step, a pedestrian on a raised sidewalk, which a wider fit would average with the road).
+    """
+    config = config or scene.config
+    fitter = scene.ground_for(config)
+    planes = [fitter.fit(p) for p in cands.xy[index]]
+    if float(np.hypot(wlh[0], wlh[1])) < SUPPORT_MAX_SIZE_M:
+        planes = [support_plane(p, scene.obstacle_points, fp) for p, fp in zip(planes, cands.footprints_xy[index])]
     g_point = np.array([p.point_global for p in planes]).reshape(-1, 3)
     g_normal = np.array([p.normal_global for p in planes]).reshape(-1, 3)
     T_go = object_transforms(cands.xy[index], cands.yaw_rad[index], g_point[:, 2], g_normal)
@@ -145,5 +188,30 @@ def stand_candidates(scene: PlacementScene, cands: Candidates, index: np.ndarray
     return StoodCandidates(index, planes, T_go, centers, box_footprint_rect(T_go, wlh), T_co, corners_cam)
 
 
+SUPPORT_MAX_SIZE_M = 3.0  # footprint diagonal below which an object reads the ground right under it
+SUPPORT_MARGIN_M = 0.4  # around the footprint
+SUPPORT_BAND_M = 0.25  # returns this close to the fitted plane count as the ground under the object
+SUPPORT_MIN_POINTS = 4
+
+
+def support_plane(plane: GroundPlane, points_global: np.ndarray, footprint_xy: np.ndarray) -> GroundPlane:
+    """``plane`` moved along its normal onto the LiDAR returns (P, 3) under the footprint (4, 2) grown by
+    ``SUPPORT_MARGIN_M`` (their median height above it, when at least ``SUPPORT_MIN_POINTS`` lie within
+    ``SUPPORT_BAND_M``); unchanged otherwise."""
+    if len(points_global) == 0:
+        return plane
+    c = footprint_xy.mean(axis=0)
+    r = float(np.max(np.linalg.norm(footprint_xy - c, axis=1))) + SUPPORT_MARGIN_M
+    near = np.linalg.norm(points_global[:, :2] - c, axis=1) <= r
+    h = (points_global[near] - plane.point_global) @ plane.normal_global
+    h = h[np.abs(h) <= SUPPORT_BAND_M]
+    if len(h) < SUPPORT_MIN_POINTS:
+        return plane
+    dz = float(np.median(h))
+    # a plane moved by dz along its normal rises by dz / n_z at the same x/y
+    return GroundPlane(plane.point_global + np.array([0.0, 0.0, dz / plane.normal_global[2]]), plane.normal_global,
+                       plane.source, plane.n_points)
+
+
 __all__ = ["CameraAzimuthRange", "Candidates", "StoodCandidates", "camera_azimuth_range", "object_transforms",
-           "sample_candidates", "stand_candidates"]
+           "sample_candidates", "stand_candidates", "support_plane"]

@@ -5,7 +5,9 @@ area (grey) and its source, lane centre lines (brown, when the map has lanes), L
 annotated boxes (blue), the camera and its viewing direction (yellow), the sampled region (camera field
 of view between the minimum and maximum distance, olive outline), every candidate coloured by the
 rule that rejected it (see ``RULE_COLORS_RGB``; "unused" = passed the checks made, not needed), placed
-objects (green, with their heading).
+objects (green, with their heading and class). The legend counts the rejections per rule, then, per class
+and zone the candidates were drawn for, which rules rejected how many of them (``pedestrian/sidewalk:
+surface 310, lidar_obstacles 12``), and why a class could not be placed.
 """
 
 from __future__ import annotations
@@ -23,7 +25,7 @@ LANE_COLOR_RGB = (150, 120, 40)
 RULE_COLORS_RGB: dict[str, tuple[int, int, int]] = {
     "": (0, 255, 0),  # passed and chosen
     "unused": (0, 140, 0),  # passed, not needed
-    "drivable": (120, 0, 0),
+    "surface": (120, 0, 0),
     "annotated_boxes": (255, 0, 0),
     "distance": (255, 128, 0),
     "lidar_obstacles": (255, 255, 0),
@@ -32,6 +34,22 @@ RULE_COLORS_RGB: dict[str, tuple[int, int, int]] = {
     "corners_unoccluded": (255, 160, 160),
     "mutual_collision": (0, 255, 255),
 }
+
+
+def class_rule_lines(result: PlacementResult) -> list[str]:
+    """Legend lines: per ``class/zone`` the candidates were drawn for, the rules that rejected them (most
+    first), then each class that could not be placed with the reason."""
+    lines = []
+    classes = np.asarray(result.candidate_class, dtype=object)
+    rejected = np.asarray(result.rejected_by, dtype=object)
+    if len(classes) == len(rejected):
+        for name in dict.fromkeys(classes.tolist()):
+            rules, counts = np.unique(rejected[(classes == name) & (rejected != "") & (rejected != "unused")],
+                                      return_counts=True)
+            order = np.argsort(-counts, kind="stable")
+            lines.append(f"{name}: " + (", ".join(f"{rules[i]} {counts[i]}" for i in order) or "no rejection"))
+    lines += [f"not placed: {reason}" for reason in result.class_reasons.values()]
+    return lines
 
 
 def draw_placement_bev(
@@ -79,6 +97,9 @@ def draw_placement_bev(
         cv2.polylines(img, [to_px(p.box.corners()[[0, 1, 5, 4], :2])], True, (0, 255, 0), 2)
         a, b = to_px(np.stack([p.box.center[:2], p.box.center[:2] + 0.6 * p.wlh[1] * p.T_global_from_object[:2, 0]]))
         cv2.arrowedLine(img, (int(a[0]), int(a[1])), (int(b[0]), int(b[1])), (0, 255, 0), 1, tipLength=0.3)
+        if p.cluster_of < 0:
+            cv2.putText(img, p.detection_class, (int(a[0]) + 4, int(a[1]) - 4), cv2.FONT_HERSHEY_SIMPLEX, 0.35,
+                        (0, 255, 0), 1)
     if result.config is not None:  # the sampled region: camera field of view x [min, max] distance
         fov = camera_azimuth_range(view)
         az = np.linspace(fov.heading_rad - fov.right_rad, fov.heading_rad + fov.left_rad, 64)
@@ -97,6 +118,10 @@ def draw_placement_bev(
     if area is not None:
         cv2.putText(img, f"road: {area.source} ({area.confidence} confidence)", (6, y + 4),
                     cv2.FONT_HERSHEY_SIMPLEX, 0.4, (200, 200, 200), 1)
+        y += 18
+    for line in class_rule_lines(result):
+        cv2.putText(img, line[:110], (6, y + 4), cv2.FONT_HERSHEY_SIMPLEX, 0.35, (220, 220, 220), 1)
+        y += 13
     if result.reason:
         cv2.putText(img, result.reason[:110], (6, size_px - 8), cv2.FONT_HERSHEY_SIMPLEX, 0.35, (255, 255, 255), 1)
     return img

@@ -101,6 +101,13 @@ class LocalGroundFitter:
                 sets = [points_global[labels == LIDARSEG_DRIVEABLE], points_global[np.isin(labels, LIDARSEG_GROUND)]]
             self.point_sets = [(p, cKDTree(p[:, :2])) for p in sets if len(p)]
 
+    def with_config(self, config: PlacementConfig) -> "LocalGroundFitter":
+        """This fitter (same points and trees) with other thresholds, e.g. a smaller ``ground_radius_m``."""
+        other = object.__new__(LocalGroundFitter)
+        other.__dict__.update(self.__dict__)
+        other.config = config
+        return other
+
     def fit(self, xy: np.ndarray) -> GroundPlane:
         """Ground plane below global x/y ``xy`` (2,); falls back to the ego plane when LiDAR is insufficient.
 

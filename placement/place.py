@@ -30,16 +30,16 @@ from streetaug.datasets.nuscenes_format import VEHICLE_MOVING, VEHICLE_PARKED
 from streetaug.datasets.sample import Box, CameraView, Sample
 
 from .candidates import Candidates, StoodCandidates, sample_candidates, stand_candidates
+from .class_rules import ClassRule, ClassRules, read_class_rules
 from .config import PlacementConfig
 from .drivable import DrivableArea, drivable_area_for_sample
 from .rules import (
+    footprint_corners,
     rule_box_clearance,
     rule_corners_unoccluded,
     rule_distance,
-    rule_drivable,
     rule_in_view,
     rule_lidarseg,
-    rule_mutual,
     rule_obstacles,
     visible_fraction_estimate,
 )
@@ -48,7 +48,7 @@ from .scene import PlacementScene
 CHUNK = 48  # candidates stood on the ground and checked per round (the first survivor wins)
 
 RULE_ORDER = (
-    "drivable",
+    "surface",
     "annotated_boxes",
     "distance",
     "lidar_obstacles",
@@ -104,6 +104,10 @@ class Placement:
         footprint_xy: (4, 2) float64 the footprint the rules checked (:func:`box_footprint_rect`), global x/y.
         visible_fraction: the estimated fraction of the box's image inside the image and not hidden by
             the scene depth (:func:`visible_fraction_estimate`), as the ``in_view`` rule judged it.
+        detection_class: the class whose rule placed it (:mod:`~streetaug.placement.class_rules`).
+        zone: the surface it stands on (``lane``, ``kerb``, ``road_edge``, ``sidewalk``, ``crossing``).
+        cluster_of: for a member of a cluster (a line of cones), the index among the result's placements of
+            its first member; -1 for the first member and single objects.
     """
 
     asset_index: int
@@ -114,12 +118,15 @@ class Placement:
     ground_source: str
     drivable_source: str
     drivable_confidence: str = ""
-    attribute: str = VEHICLE_MOVING
+    attribute: str | None = VEHICLE_MOVING
     distance_m: float = float("nan")
     edge_distance_m: float = float("nan")
     yaw_source: str = "ego"
     footprint_xy: np.ndarray = field(default_factory=lambda: np.zeros((4, 2)))
     visible_fraction: float = float("nan")
+    detection_class: str = "car"
+    zone: str = "lane"
+    cluster_of: int = -1
 
     def T_cam_from_object(self, view: CameraView) -> np.ndarray:
         """(4, 4) object -> camera frame of ``view``."""
@@ -137,8 +144,10 @@ class PlacementResult:
         reason: why fewer objects than requested were placed (None when all were placed).
         candidates_xy: (C, 2) float64 every sampled candidate's bottom-centre x/y (global), for explanations.
         rejected_by: (C,) the rule that rejected each candidate ('' = passed, 'unused' = not needed).
+        candidate_class: (C,) the detection class (and zone, ``class/zone``) each candidate was drawn for.
         drivable: the drivable area used (None when there was none).
         config: the configuration used.
+        class_reasons: detection class -> why an object of it was not placed (empty when all were).
     """
 
     placements: list[Placement]
@@ -148,6 +157,8 @@ class PlacementResult:
     rejected_by: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=object))
     drivable: DrivableArea | None = None
     config: PlacementConfig | None = None
+    candidate_class: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=object))
+    class_reasons: dict[str, str] = field(default_factory=dict)
 
 
 class RuleTally:
@@ -165,14 +176,14 @@ class RuleTally:
         return alive[ok]
 
 
-def prefilter(scene: PlacementScene, cands: Candidates, tally: RuleTally) -> np.ndarray:
-    """Indices of the candidates whose flat footprints pass ``drivable`` and ``annotated_boxes`` (cheap, vectorised)."""
-    cfg = scene.config
+def prefilter(scene: PlacementScene, cands: Candidates, tally: RuleTally, rule: ClassRule, zone: str,
+              config: PlacementConfig) -> np.ndarray:
+    """Indices of the candidates whose flat footprints pass ``surface`` and ``annotated_boxes`` (cheap, vectorised)."""
     everyone = np.arange(len(cands.xy))
-    alive = tally.keep("drivable", everyone, everyone, rule_drivable(scene.drivable, cands.footprints_xy))
+    alive = tally.keep("surface", everyone, everyone, scene.zones.footprints_in(zone, cands.footprints_xy, rule))
     return tally.keep("annotated_boxes", everyone, alive, rule_box_clearance(
-        cands.footprints_xy[alive], scene.box_footprints_xy, scene.box_is_dynamic, cfg.dynamic_clearance_m,
-        cfg.static_clearance_m))
+        cands.footprints_xy[alive], scene.box_footprints_xy, scene.box_is_dynamic, config.dynamic_clearance_m,
+        config.static_clearance_m))
 
 
 @dataclass(frozen=True)
@@ -183,13 +194,39 @@ class ChunkSurvivors:
     visible_fraction: np.ndarray
 
 
-def check_stood(scene: PlacementScene, stood: StoodCandidates, wlh: np.ndarray, placed_xy: np.ndarray,
-                tally: RuleTally) -> ChunkSurvivors:
-    """Apply every rule, in ``RULE_ORDER``, to the standing boxes of one chunk."""
-    cfg, camera, idx = scene.config, scene.camera, stood.index
+OFF_ROAD_ZONES = ("road_edge", "sidewalk")  # zones where the ground must be seen (no ego-plane fallback)
+
+
+@dataclass(frozen=True)
+class PlacedSoFar:
+    """The footprints (Q, 4, 2) of the objects already placed in this image and their mutual clearances (Q,)."""
+
+    footprints_xy: np.ndarray
+    clearance_m: np.ndarray
+
+    @classmethod
+    def empty(cls) -> "PlacedSoFar":
+        return cls(np.zeros((0, 4, 2)), np.zeros(0))
+
+    def plus(self, footprint_xy: np.ndarray, clearance_m: float) -> "PlacedSoFar":
+        return PlacedSoFar(np.concatenate([self.footprints_xy, footprint_xy[None]]), np.r_[self.clearance_m, clearance_m])
+
+
+def check_stood(scene: PlacementScene, stood: StoodCandidates, wlh: np.ndarray, placed: PlacedSoFar,
+                tally: RuleTally, rule: ClassRule, zone: str, config: PlacementConfig,
+                skip_mutual: np.ndarray | None = None) -> ChunkSurvivors:
+    """Apply every rule, in ``RULE_ORDER``, with ``rule``'s thresholds (``config``), to one chunk's standing boxes.
+
+    ``skip_mutual`` (Q,) bool: placed objects this one may come closer to than the mutual clearance (the
+    other members of its own cluster: they only must not touch).
+    """
+    cfg, camera, idx = config, scene.camera, stood.index
     k = np.arange(len(idx))
     rect = stood.footprints_xy
-    k = tally.keep("drivable", idx, k, rule_drivable(scene.drivable, rect[k]))
+    in_zone = scene.zones.footprints_in(zone, rect[k], rule)
+    if zone in OFF_ROAD_ZONES:  # off the road the ground must be measured, not assumed
+        in_zone &= np.array([p.source != "ego-plane" for p in stood.planes], dtype=bool)
+    k = tally.keep("surface", idx, k, in_zone)
     k = tally.keep("annotated_boxes", idx, k, rule_box_clearance(
         rect[k], scene.box_footprints_xy, scene.box_is_dynamic, cfg.dynamic_clearance_m, cfg.static_clearance_m))
     k = tally.keep("distance", idx, k, rule_distance(stood.centers[k, :2], scene.camera_xy, cfg.min_distance_m,
@@ -197,7 +234,8 @@ def check_stood(scene: PlacementScene, stood: StoodCandidates, wlh: np.ndarray, 
     k = tally.keep("lidar_obstacles", idx, k, rule_obstacles(
         rect[k], stood.ground_points[k], stood.ground_normals[k], scene.obstacle_points, cfg.static_clearance_m,
         cfg.obstacle_min_height_m, cfg.obstacle_max_height_m, cfg.obstacle_max_points))
-    k = tally.keep("lidarseg", idx, k, rule_lidarseg(rect[k], scene.non_drivable_xy, cfg.static_clearance_m,
+    blocking = scene.non_drivable_xy if zone not in OFF_ROAD_ZONES else scene.non_ground_xy
+    k = tally.keep("lidarseg", idx, k, rule_lidarseg(rect[k], blocking, cfg.static_clearance_m,
                                                      cfg.lidarseg_max_points))
     visible = np.zeros(len(idx))
     visible[k] = visible_fraction_estimate(stood.T_cam_from_object[k], wlh, camera, scene.depth_m,
@@ -207,13 +245,32 @@ def check_stood(scene: PlacementScene, stood: StoodCandidates, wlh: np.ndarray, 
     if cfg.require_unoccluded_corners:
         k = tally.keep("corners_unoccluded", idx, k, rule_corners_unoccluded(
             stood.corners_cam[k], camera, scene.depth_m, cfg.occlusion_tolerance_m))
-    k = tally.keep("mutual_collision", idx, k, rule_mutual(rect[k], placed_xy, cfg.mutual_clearance_m))
+    need = np.maximum(placed.clearance_m, cfg.mutual_clearance_m)
+    if skip_mutual is not None:
+        need = np.where(skip_mutual, 1e-3, need)  # cluster mates: apart, however small the gap
+    k = tally.keep("mutual_collision", idx, k, rule_box_clearance(
+        rect[k], placed.footprints_xy, np.ones(len(need), bool), need, need) if len(need) and len(k)
+        else np.ones(len(k), bool))
     return ChunkSurvivors(k, visible[k])
 
 
+def placement_attribute(rule: ClassRule, obj: "Placeable", edge_distance_m: float, zone: str,
+                        config: PlacementConfig) -> str | None:
+    """The nuScenes attribute of a placed object of ``rule``'s class (see ``ClassRule.attribute``)."""
+    if rule.attribute == "vehicle":
+        return VEHICLE_PARKED if zone == "kerb" or edge_distance_m <= config.kerb_distance_m else VEHICLE_MOVING
+    if rule.attribute == "parked":
+        return VEHICLE_PARKED
+    if rule.attribute == "asset":
+        return getattr(obj, "attribute", None)
+    return None
+
+
 def make_placement(scene: PlacementScene, asset_index: int, obj: Placeable, wlh: np.ndarray, cands: Candidates,
-                   stood: StoodCandidates, j: int, visible_fraction: float) -> Placement:
+                   stood: StoodCandidates, j: int, visible_fraction: float, rule: ClassRule | None = None,
+                   zone: str = "lane", cluster_of: int = -1) -> Placement:
     """The :class:`Placement` of position ``j`` of ``stood``."""
+    rule = rule or read_class_rules().classes["car"]
     T, center, fp = stood.T_global_from_object[j], stood.centers[j], stood.footprints_xy[j]
     edge = float(scene.drivable.edge_distance(fp[None])[0])
     return Placement(
@@ -225,45 +282,145 @@ def make_placement(scene: PlacementScene, asset_index: int, obj: Placeable, wlh:
         ground_source=str(stood.planes[j].source),
         drivable_source=scene.drivable.source,
         drivable_confidence=scene.drivable.confidence,
-        attribute=VEHICLE_PARKED if edge <= scene.config.kerb_distance_m else VEHICLE_MOVING,
+        attribute=placement_attribute(rule, obj, edge, zone, scene.config),
         distance_m=float(np.linalg.norm(center[:2] - scene.camera_xy)),
         edge_distance_m=edge,
-        yaw_source="lane" if cands.on_lane[stood.index[j]] else "ego",
+        yaw_source="lane" if cands.on_lane[stood.index[j]] else ("random" if rule.heading == "random" else "ego"),
         footprint_xy=fp.copy(),
         visible_fraction=float(visible_fraction),
+        detection_class=rule.name,
+        zone=zone,
+        cluster_of=cluster_of,
     )
 
 
 @dataclass(frozen=True)
 class ObjectAttempt:
-    """One object's candidates, what became of each, and the placement (None when no candidate passed)."""
+    """One object's candidates, what became of each, and the placement (None when no candidate passed).
+
+    ``candidate_class`` (C,) names each candidate's ``class/zone``; ``reason`` says why nothing was placed.
+    """
 
     candidates_xy: np.ndarray
     rejected_by: np.ndarray
     placement: Placement | None
+    candidate_class: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=object))
+    reason: str | None = None
+
+
+def zone_order(rule: ClassRule, scene: PlacementScene, rng: np.random.Generator) -> tuple[list[str], list[str]]:
+    """(the usable zones of ``rule`` in the order to try them, why the others cannot be used).
+
+    The first zone is drawn by weight, the others follow by decreasing weight; draws one uniform from ``rng``.
+    """
+    u = rng.random()
+    usable = [(z, w) for z, w in rule.zones.items() if scene.zones.unavailable(z) is None]
+    notes = [f"{z}: {scene.zones.unavailable(z)}" for z in rule.zones if scene.zones.unavailable(z) is not None]
+    if not usable:
+        return [], notes
+    w = np.array([x[1] for x in usable])
+    first = int(np.searchsorted(np.cumsum(w) / w.sum(), u, side="right").clip(0, len(usable) - 1))
+    rest = sorted((x for i, x in enumerate(usable) if i != first), key=lambda x: -x[1])
+    return [usable[first][0]] + [z for z, _ in rest], notes
 
 
 def place_one(scene: PlacementScene, asset_index: int, obj: Placeable, rng: np.random.Generator,
-              placed_xy: np.ndarray, report: dict[str, int]) -> ObjectAttempt:
+              placed: PlacedSoFar, report: dict[str, int], rule: ClassRule | None = None) -> ObjectAttempt:
     """Sample candidates for one object and keep the first (in sampling order) passing every rule.
 
-    Candidates past the cheap pre-filters are stood on the ground and checked in chunks of ``CHUNK``, so
-    later chunks are only evaluated when needed; the survivors not chosen are marked ``unused``.
+    The zones of the object's class rule are tried in :func:`zone_order` (``n_candidates`` each) until one
+    gives a placement. Candidates past the cheap pre-filters are stood on the ground and checked in chunks of
+    ``CHUNK``, so later chunks are only evaluated when needed; the survivors not chosen are marked ``unused``.
     """
+    rule = rule or read_class_rules().for_category(obj.category)
+    config = rule.config(scene.config)
     wlh = np.asarray(obj.wlh, dtype=np.float64)
-    cands = sample_candidates(scene, wlh, rng)
-    tally = RuleTally(len(cands.xy), report)
-    alive = prefilter(scene, cands, tally)
-    for start in range(0, len(alive), CHUNK):
-        stood = stand_candidates(scene, cands, alive[start:start + CHUNK], wlh)
-        survivors = check_stood(scene, stood, wlh, placed_xy, tally)
-        if len(survivors.alive):
-            j = survivors.alive[0]
-            tally.rejected_by[stood.index[survivors.alive[1:]]] = "unused"
-            tally.rejected_by[alive[start + CHUNK:]] = "unused"  # passed the pre-filters, not evaluated further
-            placement = make_placement(scene, asset_index, obj, wlh, cands, stood, j, survivors.visible_fraction[0])
-            return ObjectAttempt(cands.xy, tally.rejected_by, placement)
-    return ObjectAttempt(cands.xy, tally.rejected_by, None)
+    zones, notes = zone_order(rule, scene, rng)
+    all_xy, all_rej, all_cls = [], [], []
+    for zone in zones:
+        cands = sample_candidates(scene, wlh, rng, rule, zone)
+        tally = RuleTally(len(cands.xy), report)
+        all_xy.append(cands.xy)
+        all_rej.append(tally.rejected_by)
+        all_cls.append(np.full(len(cands.xy), f"{rule.name}/{zone}", dtype=object))
+        alive = prefilter(scene, cands, tally, rule, zone, config)
+        for start in range(0, len(alive), CHUNK):
+            stood = stand_candidates(scene, cands, alive[start:start + CHUNK], wlh, config)
+            survivors = check_stood(scene, stood, wlh, placed, tally, rule, zone, config)
+            if len(survivors.alive):
+                j = survivors.alive[0]
+                tally.rejected_by[stood.index[survivors.alive[1:]]] = "unused"
+                tally.rejected_by[alive[start + CHUNK:]] = "unused"  # passed the pre-filters, not evaluated further
+                placement = make_placement(scene, asset_index, obj, wlh, cands, stood, j,
+                                           survivors.visible_fraction[0], rule, zone)
+                return ObjectAttempt(np.concatenate(all_xy), np.concatenate(all_rej), placement,
+                                     np.concatenate(all_cls))
+    if not zones:
+        reason = f"{rule.name}: no usable zone ({'; '.join(notes)})"
+    else:
+        reason = f"{rule.name}: no candidate passed every rule in zone(s) {', '.join(zones)}"
+        if notes:
+            reason += f" ({'; '.join(notes)})"
+    empty = np.zeros((0, 2))
+    return ObjectAttempt(np.concatenate(all_xy) if all_xy else empty,
+                         np.concatenate(all_rej) if all_rej else np.zeros(0, dtype=object), None,
+                         np.concatenate(all_cls) if all_cls else np.zeros(0, dtype=object), reason)
+
+
+def cluster_members(scene: PlacementScene, leader: Placement, leader_index: int, obj: Placeable,
+                    rule: ClassRule, rng: np.random.Generator, placed: PlacedSoFar,
+                    report: dict[str, int]) -> list[Placement]:
+    """The other members of ``leader``'s cluster: a line along the road, each checked by every rule.
+
+    Draws the size, gap, taper and direction (forward or back along the road) from ``rng``; the line stops at
+    the first member that fails a rule. Members use the leader's object (``asset_index``) and heading noise.
+    """
+    c = rule.cluster
+    n = int(rng.integers(c.size[0], c.size[1] + 1))
+    gap = float(rng.uniform(*c.gap_m))
+    taper = np.radians(float(rng.uniform(*c.taper_deg)))
+    sign = 1.0 if rng.random() < 0.5 else -1.0
+    jitter = rng.normal(0.0, 1.0, (max(n - 1, 0), 3))  # per member: along, across (m), yaw
+    if n <= 1:
+        return []
+    config = rule.config(scene.config)
+    wlh = np.asarray(obj.wlh, dtype=np.float64)
+    lx = leader.T_global_from_object[:2, 0]
+    road_dir = lx / max(np.linalg.norm(lx), 1e-9)
+    if rule.heading == "across":
+        road_dir = np.array([-road_dir[1], road_dir[0]])
+    if scene.lanes is not None:
+        lane_heading, on_lane = scene.lanes.heading_at(leader.box.center[None, :2], scene.config.lane_max_distance_m)
+        if on_lane[0]:
+            road_dir = np.array([np.cos(lane_heading[0]), np.sin(lane_heading[0])])
+    ux = lx / max(np.linalg.norm(lx), 1e-9)  # the leader's x (front) in x/y
+    uy = np.array([-ux[1], ux[0]])
+    extent = float(leader.wlh[1] * abs(ux @ road_dir) + leader.wlh[0] * abs(uy @ road_dir))  # footprint along the road
+    step = extent + gap
+    inward = scene.zones.road_normal(leader.box.center[None, :2])[0]
+    yaw0 = float(np.arctan2(lx[1], lx[0]))
+    members: list[Placement] = []
+    mates = [leader_index]
+    for k in range(1, n):
+        along = sign * k * step + 0.05 * jitter[k - 1, 0]
+        xy = leader.box.center[:2] + along * road_dir + (abs(along) * np.tan(taper) + 0.03 * jitter[k - 1, 1]) * inward
+        yaw = yaw0 + np.radians(config.yaw_sigma_deg) * jitter[k - 1, 2] if rule.heading != "random" else \
+            float(np.mod(yaw0 + 2.4 * k, 2 * np.pi))
+        w, l, _ = wlh
+        cands = Candidates(xy[None], np.array([yaw]), np.zeros(1, bool), footprint_corners(xy[None], np.array([yaw]), l, w))
+        tally = RuleTally(1, report)
+        stood = stand_candidates(scene, cands, np.arange(1), wlh, config)
+        skip = np.zeros(len(placed.clearance_m), bool)
+        skip[mates] = True
+        survivors = check_stood(scene, stood, wlh, placed, tally, rule, leader.zone, config, skip_mutual=skip)
+        if not len(survivors.alive):
+            break
+        p = make_placement(scene, leader.asset_index, obj, wlh, cands, stood, 0, survivors.visible_fraction[0],
+                           rule, leader.zone, cluster_of=leader_index)
+        members.append(p)
+        mates.append(len(placed.clearance_m))
+        placed = placed.plus(p.footprint_xy, config.mutual_clearance_m)
+    return members
 
 
 def check_objects(objects: Sequence[Placeable]) -> None:
@@ -285,41 +442,61 @@ def place_objects(
     rng: np.random.Generator,
     config: PlacementConfig = PlacementConfig(),
     depth_m: np.ndarray | None = None,
+    class_rules: ClassRules | None = None,
 ) -> PlacementResult:
     """Place ``objects`` (assets, or :class:`ObjectBox` sizes and categories) in ``view`` of ``sample``.
 
-    Deterministic for a given ``rng`` state. ``config.n_objects`` is not used here: the caller passes
-    the objects. Each placement names its object by ``asset_index`` (objects that found no place are
-    left out).
+    Each object follows the rule of its category's class (``class_rules``, default the built-in table,
+    :func:`~streetaug.placement.class_rules.read_class_rules`): its zones, distances and clearances. An object
+    of a class with a ``cluster`` rule brings the other members of its line (placements with the same
+    ``asset_index`` and ``cluster_of`` set). Deterministic for a given ``rng`` state. ``config.n_objects`` is
+    not used here: the caller passes the objects. Objects that found no place are left out.
 
     Args:
         depth_m: (H, W) float32 the scene depth of ``view`` (camera z, metres, inf = unknown) the
             renderer will test against; None computes the same (:func:`scene_depth`).
     """
     check_objects(objects)
+    rules = class_rules or read_class_rules()
+    object_rules = [rules.for_category(o.category) for o in objects]
     report = {name: 0 for name in RULE_ORDER}
     drivable, reason = drivable_area_for_sample(sample, view, config)
     if drivable is None:
-        return PlacementResult([], report, reason, config=config)
+        return PlacementResult([], report, reason, config=config,
+                               class_reasons={r.name: reason for r in object_rules})
     scene = PlacementScene.of(sample, view, config, drivable, depth_m)
     placements: list[Placement] = []
+    placed = PlacedSoFar.empty()
     attempts = []
-    for i, obj in enumerate(objects):
-        placed_xy = np.array([p.footprint_xy for p in placements]).reshape(-1, 4, 2)
-        attempt = place_one(scene, i, obj, rng, placed_xy, report)
+    class_reasons: dict[str, str] = {}
+    for i, (obj, rule) in enumerate(zip(objects, object_rules)):
+        attempt = place_one(scene, i, obj, rng, placed, report, rule)
         attempts.append(attempt)
-        if attempt.placement is not None:
-            placements.append(attempt.placement)
+        if attempt.placement is None:
+            class_reasons.setdefault(rule.name, attempt.reason or "no valid placement")
+            continue
+        leader_index = len(placements)
+        placements.append(attempt.placement)
+        mutual = rule.config(config).mutual_clearance_m
+        placed = placed.plus(attempt.placement.footprint_xy, mutual)
+        if rule.cluster is not None:
+            members = cluster_members(scene, attempt.placement, leader_index, obj, rule, rng, placed, report)
+            for p in members:
+                placements.append(p)
+                placed = placed.plus(p.footprint_xy, mutual)
     reason = None
-    if len(placements) < len(objects):
+    n_placed = len({p.asset_index for p in placements})
+    if n_placed < len(objects):
         worst = ", ".join(f"{k}: {v}" for k, v in report.items() if v)
-        reason = (f"placed {len(placements)} of {len(objects)} objects: no candidate passed every rule "
-                  f"({len(objects) * config.n_candidates} candidates; rejected by {worst})")
+        reason = (f"placed {n_placed} of {len(objects)} objects: "
+                  + "; ".join(class_reasons.values()) + (f" (rejected by {worst})" if worst else ""))
     return PlacementResult(placements, report, reason, np.concatenate([a.candidates_xy for a in attempts]),
-                           np.concatenate([a.rejected_by for a in attempts]), drivable, config)
+                           np.concatenate([a.rejected_by for a in attempts]), drivable, config,
+                           np.concatenate([a.candidate_class for a in attempts]), class_reasons)
 
 
 __all__ = [
-    "CHUNK", "RULE_ORDER", "ChunkSurvivors", "ObjectAttempt", "ObjectBox", "Placeable", "Placement", "PlacementResult",
-    "RuleTally", "check_objects", "check_stood", "make_placement", "place_objects", "place_one", "prefilter",
+    "CHUNK", "OFF_ROAD_ZONES", "RULE_ORDER", "ChunkSurvivors", "ObjectAttempt", "ObjectBox", "PlacedSoFar", "Placeable",
+    "Placement", "PlacementResult", "RuleTally", "check_objects", "check_stood", "cluster_members", "make_placement",
+    "place_objects", "place_one", "placement_attribute", "prefilter", "zone_order",
 ]

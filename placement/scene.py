@@ -7,13 +7,13 @@ test see the same surfaces.
 from __future__ import annotations
 
 import functools
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from streetaug.augment.core import PinholeCamera
 from streetaug.augment.core.depth import densify_lidar_depth
-from streetaug.datasets.nuscenes_format import LIDARSEG_NON_DRIVABLE
+from streetaug.datasets.nuscenes_format import LIDARSEG_GROUND, LIDARSEG_NON_DRIVABLE
 from streetaug.datasets.nuscenes_map import LaneCenterlines
 from streetaug.datasets.sample import CameraView, Sample
 
@@ -21,6 +21,7 @@ from .config import PlacementConfig
 from .drivable import DrivableArea
 from .ground import LocalGroundFitter
 from .rules import box_footprints, points_in_boxes
+from .zones import SurfaceZones, surface_zones
 
 
 def scene_depth(sample: Sample, view: CameraView) -> np.ndarray:
@@ -44,7 +45,8 @@ class PlacementScene:
         drivable: where the road is.
         box_footprints_xy: (B, 4, 2) annotated boxes' footprints (global x/y); ``box_is_dynamic`` (B,) bool.
         obstacle_points: (P, 3) LiDAR points (global) in no annotated box (grown by 0.1 m).
-        non_drivable_xy: (Q, 2) global x/y of non-drivable lidarseg points.
+        non_drivable_xy: (Q, 2) global x/y of non-drivable lidarseg points; ``non_ground_xy`` (R, 2) those of
+            them that are not ground either (no ``flat.*`` class: what blocks a sidewalk).
         ground: the local ground plane fitter.
         given_depth_m: (H, W) the caller's scene depth, or None to compute :func:`scene_depth` when needed.
     """
@@ -59,6 +61,7 @@ class PlacementScene:
     non_drivable_xy: np.ndarray
     ground: LocalGroundFitter
     given_depth_m: np.ndarray | None = None
+    non_ground_xy: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
 
     @classmethod
     def of(cls, sample: Sample, view: CameraView, config: PlacementConfig, drivable: DrivableArea,
@@ -67,17 +70,37 @@ class PlacementScene:
         boxes = list(sample.boxes)
         box_dyn = np.array([b.is_dynamic for b in boxes], dtype=bool)
         lidar = sample.lidar
-        obstacles, non_drivable_xy, labels = np.zeros((0, 3)), np.zeros((0, 2)), None
+        obstacles, non_drivable_xy, non_ground_xy, labels = np.zeros((0, 3)), np.zeros((0, 2)), np.zeros((0, 2)), None
         if lidar is not None:
             points = lidar.points_global
             free = ~points_in_boxes(points, boxes, margin_m=0.1)
             obstacles = points[free]
             if lidar.labels is not None:
-                non_drivable_xy = points[np.isin(lidar.labels, LIDARSEG_NON_DRIVABLE)][:, :2]
+                non_drivable = np.isin(lidar.labels, LIDARSEG_NON_DRIVABLE)
+                non_drivable_xy = points[non_drivable][:, :2]
+                non_ground_xy = points[non_drivable & ~np.isin(lidar.labels, LIDARSEG_GROUND)][:, :2]
                 labels = lidar.labels[free]
         fitter = LocalGroundFitter(obstacles if lidar is not None else None, view.T_global_from_ego, labels, config)
         return cls(sample, view, config, drivable, box_footprints(boxes), box_dyn, obstacles, non_drivable_xy,
-                   fitter, depth_m)
+                   fitter, depth_m, non_ground_xy)
+
+    @functools.cached_property
+    def zones(self) -> SurfaceZones:
+        """The surfaces of each zone around the camera (:func:`~streetaug.placement.zones.surface_zones`)."""
+        return surface_zones(self.sample, self.view, self.drivable, self.config)
+
+    def ground_for(self, config: PlacementConfig) -> LocalGroundFitter:
+        """The ground fitter with ``config``'s fit radius (one per radius, built on first use)."""
+        if config.ground_radius_m == self.config.ground_radius_m:
+            return self.ground
+        key = float(config.ground_radius_m)
+        if key not in self._fitters:
+            self._fitters[key] = self.ground.with_config(config)
+        return self._fitters[key]
+
+    @functools.cached_property
+    def _fitters(self) -> dict[float, LocalGroundFitter]:
+        return {}
 
     @functools.cached_property
     def camera(self) -> PinholeCamera:

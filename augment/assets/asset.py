@@ -26,6 +26,8 @@ class Material:
         opacity: 1 = opaque; < 1 for glass (the renderer blends the environment seen through it).
         emission: (3,) emitted radiance (lights), usually zero.
         clearcoat: 0..1 strength of a smooth clear-coat lobe over the base (car paint).
+        retroreflective: 0..1 strength of a retro-reflective lobe (light sent back towards where it came
+            from: the reflective bands of cones and barriers, number plates).
         base_color_texture: optional (h, w, 3) float32 linear texture multiplied with ``base_color``.
         metallic_roughness_texture: optional (h, w, 3) float32 (glTF: G = roughness, B = metallic).
         normal_texture: optional (h, w, 3) float32 tangent-space normal map in [0, 1].
@@ -39,6 +41,7 @@ class Material:
     opacity: float = 1.0
     emission: np.ndarray = field(default_factory=lambda: np.zeros(3))
     clearcoat: float = 0.0
+    retroreflective: float = 0.0
     base_color_texture: np.ndarray | None = None
     metallic_roughness_texture: np.ndarray | None = None
     normal_texture: np.ndarray | None = None
@@ -57,6 +60,9 @@ class Asset:
         vertex_normals: (V, 3) float64 unit smooth-shading normals (object frame).
         uv: (V, 2) float64 texture coordinates, or None.
         category: nuScenes category of the object, e.g. ``vehicle.car``.
+        attribute: the nuScenes attribute the asset's own shape implies, or None: ``cycle.with_rider`` /
+            ``cycle.without_rider`` (a rider is modelled or not), ``pedestrian.moving`` /
+            ``pedestrian.standing`` (walking or standing pose). Vehicle motion states come from placement.
     """
 
     name: str
@@ -67,6 +73,7 @@ class Asset:
     vertex_normals: np.ndarray
     uv: np.ndarray | None = None
     category: str = "vehicle.car"
+    attribute: str | None = None
     # Values later stages derive from this (immutable) asset, e.g. the renderer's BVH: see :meth:`derived`.
     _derived: dict[str, Any] = field(default_factory=dict, init=False, repr=False, compare=False)
 

@@ -344,7 +344,7 @@ def test_place_objects_impossible_rules_give_reason():
     s = _scene()
     cfg = dataclasses.replace(CFG, min_distance_m=80.0, max_distance_m=90.0, n_candidates=50)
     r = place_objects(s, s.cameras["CAM_FRONT"], [ObjectBox(np.array([1.8, 4.5, 1.5]))], np.random.default_rng(0), cfg)
-    assert r.placements == [] and "no candidate passed" in r.reason and r.report["drivable"] > 0
+    assert r.placements == [] and "no candidate passed" in r.reason and r.report["surface"] > 0
 
 
 def test_yaw_along_ego_heading_faces_plus_z_in_front_camera():
@@ -537,8 +537,8 @@ def test_real_sample_front_left_sees_no_road_in_range(real_sample):
     s = real_sample
     view = s.cameras["CAM_FRONT_LEFT"]
     r = place_objects(s, view, [ObjectBox(np.array([1.9, 4.6, 1.6]))], np.random.default_rng(0))
-    assert r.placements == [] and "drivable" in r.reason
-    assert r.report["drivable"] >= 0.95 * CFG.n_candidates
+    assert r.placements == [] and "surface" in r.reason
+    assert r.report["surface"] >= 0.95 * CFG.n_candidates
     near = dataclasses.replace(CFG, min_distance_m=5.0, n_candidates=3000)
     placed = place_objects(s, view, [ObjectBox(np.array([1.9, 4.6, 1.6]))], np.random.default_rng(0), near).placements
     assert placed and placed[0].distance_m < 7.0

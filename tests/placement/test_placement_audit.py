@@ -67,7 +67,7 @@ def test_final_placements_pass_the_audit_and_the_audit_can_fail():
     p = r.placements[0]
     y_ego = transform_points(np.linalg.inv(T_GLOBAL_FROM_EGO), p.box.center[None])[0, 1]
     kerb = _moved(p, 0.0, np.sign(y_ego or 1.0) * (ROAD_HALF_WIDTH_M - abs(y_ego) - WLH[0] / 2 + 0.05))
-    assert not audit_placements(s, view, [kerb], r.drivable, CFG)[0].passed["drivable"]
+    assert not audit_placements(s, view, [kerb], r.drivable, CFG)[0].passed["surface"]
     car_xy = transform_points(np.linalg.inv(T_GLOBAL_FROM_EGO), s.boxes[0].center[None])[0]
     p_xy = transform_points(np.linalg.inv(T_GLOBAL_FROM_EGO), p.box.center[None])[0]
     into_car = _moved(p, car_xy[0] - p_xy[0], car_xy[1] - p_xy[1] - WLH[0] - 2.9)  # 2.9 m gap beside a car

@@ -1,0 +1,234 @@
+"""The surfaces objects of each class stand on, around one camera: lane, kerb, road edge, sidewalk, crossing.
+
+Everything is measured against the drivable area (:class:`DrivableArea`) with a signed distance to its edge,
+``s`` (metres, positive on the road, negative off it):
+
+* ``lane``: the footprint grown by the class's ``lane_margin_m`` is on the road.
+* ``kerb``: the footprint is on the road, within ``kerb_distance_m`` of its edge (parked).
+* ``road_edge``: the footprint's centre has ``s`` in ``ROAD_EDGE_BAND_M`` (straddling the edge; partly on the road).
+* ``sidewalk``: the footprint is off the road and on a map ``walkway`` when the map has that layer, else on
+  lidarseg ``flat.sidewalk`` cells when the sweep is labelled, else in the band ``sidewalk_band_m`` off the
+  road's edge (what a kerb-side pavement usually is; the LiDAR obstacle rule keeps walls and poles out).
+* ``crossing``: the footprint is on a map ``ped_crossing``.
+
+Off-road zones need a real road edge: a map or lidarseg drivable area (not the LiDAR-ground corridor, whose
+edge is only the corridor's).
+"""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+import shapely
+
+from streetaug.augment.core import check_shape
+from streetaug.datasets.nuscenes_format import LIDARSEG_SIDEWALK
+from streetaug.datasets.sample import CameraView, Sample
+
+from .class_rules import ClassRule
+from .config import PlacementConfig
+from .drivable import DrivableArea
+
+ROAD_EDGE_BAND_M = (-0.6, 1.0)  # centre's signed distance to the road edge of the road_edge zone
+_GRID_RES_M = 0.25
+
+
+def grow_footprints(corners_xy: np.ndarray, margin_m: float) -> np.ndarray:
+    """Footprints (N, 4, 2) (corner order of :func:`~streetaug.placement.rules.footprint_corners`) grown by
+    ``margin_m`` on every side."""
+    corners_xy = np.asarray(corners_xy, dtype=np.float64)
+    if margin_m == 0 or len(corners_xy) == 0:
+        return corners_xy
+    ex = corners_xy[:, 0] - corners_xy[:, 3]  # length direction
+    ey = corners_xy[:, 0] - corners_xy[:, 1]  # width direction
+    ux = ex / np.maximum(np.linalg.norm(ex, axis=1, keepdims=True), 1e-9)
+    uy = ey / np.maximum(np.linalg.norm(ey, axis=1, keepdims=True), 1e-9)
+    sx = np.array([1, 1, -1, -1])[None, :, None]
+    sy = np.array([1, -1, -1, 1])[None, :, None]
+    return corners_xy + margin_m * (sx * ux[:, None] + sy * uy[:, None])
+
+
+@dataclass(frozen=True, eq=False)
+class SurfaceZones:
+    """The zones of one camera's surroundings (global x/y).
+
+    Attributes:
+        drivable: the road.
+        walkway: the map's walkway polygons near the camera, or None.
+        crossings: the map's pedestrian crossings near the camera, or None.
+        sidewalk_cells: (H, W) bool lidarseg ``flat.sidewalk`` grid on the drivable area's grid frame
+            (``sidewalk_origin_xy``, 0.25 m cells), or None.
+        kerb_distance_m: the kerb zone's width.
+    """
+
+    drivable: DrivableArea
+    walkway: shapely.Geometry | None = None
+    crossings: shapely.Geometry | None = None
+    sidewalk_cells: np.ndarray | None = None
+    sidewalk_origin_xy: np.ndarray | None = None
+    kerb_distance_m: float = 1.0
+
+    @property
+    def has_road_edge(self) -> bool:
+        """Whether the drivable area's edge is a real one (map or lidarseg), so off-road zones make sense."""
+        return self.drivable.confidence in ("high", "medium")
+
+    @property
+    def sidewalk_source(self) -> str | None:
+        """``"map-walkway"``, ``"lidarseg"``, ``"kerb-band"`` or None (no real road edge)."""
+        if self.walkway is not None:
+            return "map-walkway"
+        if self.sidewalk_cells is not None:
+            return "lidarseg"
+        return "kerb-band" if self.has_road_edge else None
+
+    def unavailable(self, zone: str) -> str | None:
+        """Why ``zone`` cannot be used here (None when it can)."""
+        if zone in ("lane", "kerb"):
+            return None
+        if zone == "crossing":
+            return None if self.crossings is not None else "the map has no ped_crossing here"
+        if not self.has_road_edge:
+            return f"the drivable area ({self.drivable.source}) has no real road edge"
+        return None
+
+    # ------------------------------------------------------------------ signed distance to the road edge
+    @functools.cached_property
+    def _grid_sdf(self) -> np.ndarray:
+        g = np.pad(self.drivable.grid, 1).astype(np.uint8)
+        inside = cv2.distanceTransform(g, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)[1:-1, 1:-1]
+        outside = cv2.distanceTransform(1 - g, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)[1:-1, 1:-1]
+        return (np.where(self.drivable.grid, inside - 0.5, 0.5 - outside) * self.drivable.resolution_m).astype(np.float64)
+
+    def signed_distance(self, xy: np.ndarray) -> np.ndarray:
+        """(N,) signed distance (m) of global x/y points (N, 2) to the road edge: + on the road, - off it."""
+        xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+        area = self.drivable
+        if area.region is not None:
+            pts = shapely.points(xy)
+            d = shapely.distance(pts, shapely.boundary(area.region))
+            return np.where(shapely.contains_xy(area.region, xy[:, 0], xy[:, 1]), d, -d)
+        ix, iy, inside = area._cells(xy)
+        out = np.full(len(xy), -1e3)
+        out[inside] = self._grid_sdf[iy[inside], ix[inside]]
+        return out
+
+    def on_sidewalk_cells(self, xy: np.ndarray) -> np.ndarray:
+        """(N,) bool: global x/y points (N, 2) on lidarseg sidewalk cells."""
+        rel = np.floor((np.asarray(xy, float).reshape(-1, 2) - self.sidewalk_origin_xy) / _GRID_RES_M).astype(np.int64)
+        H, W = self.sidewalk_cells.shape
+        ok = (rel[:, 0] >= 0) & (rel[:, 0] < W) & (rel[:, 1] >= 0) & (rel[:, 1] < H)
+        out = np.zeros(len(rel), dtype=bool)
+        out[ok] = self.sidewalk_cells[rel[ok, 1], rel[ok, 0]]
+        return out
+
+    def road_normal(self, xy: np.ndarray, step_m: float = 0.5) -> np.ndarray:
+        """(N, 2) unit direction in which the signed distance grows (towards the road's inside) at points (N, 2)."""
+        xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+        gx = self.signed_distance(xy + [step_m, 0]) - self.signed_distance(xy - [step_m, 0])
+        gy = self.signed_distance(xy + [0, step_m]) - self.signed_distance(xy - [0, step_m])
+        g = np.c_[gx, gy]
+        return g / np.maximum(np.linalg.norm(g, axis=1, keepdims=True), 1e-9)
+
+    # ------------------------------------------------------------------ zone tests
+    def plausible_centres(self, zone: str, xy: np.ndarray, wlh: np.ndarray, rule: ClassRule) -> np.ndarray:
+        """(N,) bool: a cheap test of candidate centres (N, 2) for ``zone`` (sampling keeps these first)."""
+        s = self.signed_distance(xy)
+        half_w, half_diag = 0.5 * float(wlh[0]), 0.5 * float(np.hypot(wlh[0], wlh[1]))
+        if zone == "lane":
+            return s >= half_w + rule.lane_margin_m
+        if zone == "kerb":
+            return (s >= half_w - 0.1) & (s <= half_diag + self.kerb_distance_m + 0.5)
+        if zone == "road_edge":
+            return (s >= ROAD_EDGE_BAND_M[0]) & (s <= ROAD_EDGE_BAND_M[1])
+        if zone == "sidewalk":
+            off = s < -rule.sidewalk_band_m[0]
+            if self.walkway is not None:
+                return off & shapely.contains_xy(self.walkway, xy[:, 0], xy[:, 1])
+            if self.sidewalk_cells is not None:
+                return off & self.on_sidewalk_cells(xy)
+            return off & (s >= -(rule.sidewalk_band_m[1] - half_w))
+        if zone == "crossing":
+            return shapely.contains_xy(self.crossings, xy[:, 0], xy[:, 1])
+        raise ValueError(f"unknown zone {zone!r}")
+
+    def footprints_in(self, zone: str, corners_xy: np.ndarray, rule: ClassRule) -> np.ndarray:
+        """(N,) bool: whether each footprint (N, 4, 2) lies in ``zone`` as the module docstring defines it."""
+        corners_xy = np.asarray(corners_xy, dtype=np.float64)
+        check_shape(corners_xy, ("N", 4, 2), "corners_xy")
+        N = len(corners_xy)
+        if N == 0:
+            return np.zeros(0, dtype=bool)
+        area = self.drivable
+        centre = corners_xy.mean(axis=1)
+        if zone == "lane":
+            return area.contains_footprints(grow_footprints(corners_xy, rule.lane_margin_m))
+        if zone == "kerb":
+            return area.contains_footprints(corners_xy) & (area.edge_distance(corners_xy) <= self.kerb_distance_m)
+        if zone == "road_edge":
+            s = self.signed_distance(centre)
+            return (s >= ROAD_EDGE_BAND_M[0]) & (s <= ROAD_EDGE_BAND_M[1])
+        pts = np.concatenate([corners_xy, centre[:, None]], axis=1).reshape(-1, 2)  # (N * 5, 2)
+        if zone == "sidewalk":
+            s = self.signed_distance(pts).reshape(N, 5)
+            ok = np.all(s <= -rule.sidewalk_band_m[0], axis=1)
+            if area.region is not None:
+                ok &= ~shapely.intersects(shapely.polygons(corners_xy), area.region)
+            if self.walkway is not None:
+                return ok & shapely.contains_xy(self.walkway, pts[:, 0], pts[:, 1]).reshape(N, 5).all(axis=1)
+            if self.sidewalk_cells is not None:
+                return ok & self.on_sidewalk_cells(pts).reshape(N, 5).all(axis=1)
+            return ok & np.all(s >= -rule.sidewalk_band_m[1], axis=1)
+        if zone == "crossing":
+            grown = shapely.buffer(self.crossings, 0.3)
+            return shapely.contains_xy(grown, pts[:, 0], pts[:, 1]).reshape(N, 5).all(axis=1)
+        raise ValueError(f"unknown zone {zone!r}")
+
+
+def _near(polygons, center_xy: np.ndarray, roi_m: float) -> shapely.Geometry | None:
+    if not polygons:
+        return None
+    roi = shapely.Point(float(center_xy[0]), float(center_xy[1])).buffer(roi_m, quad_segs=16)
+    geoms = np.asarray(polygons, dtype=object)
+    geoms = geoms[shapely.intersects(geoms, roi)]
+    if len(geoms) == 0:
+        return None
+    region = shapely.intersection(shapely.union_all(shapely.make_valid(geoms)), roi)
+    if region.is_empty or region.area <= 0:
+        return None
+    shapely.prepare(region)
+    return region
+
+
+def _sidewalk_cells(sample: Sample, center_xy: np.ndarray, roi_m: float) -> tuple[np.ndarray, np.ndarray] | None:
+    lidar = sample.lidar
+    if lidar is None or lidar.labels is None:
+        return None
+    xy = lidar.points_global[lidar.labels == LIDARSEG_SIDEWALK, :2]
+    xy = xy[np.linalg.norm(xy - center_xy, axis=1) <= roi_m]
+    if len(xy) < 20:
+        return None
+    origin = center_xy - roi_m
+    n = int(np.ceil(2 * roi_m / _GRID_RES_M))
+    cells = np.floor((xy - origin) / _GRID_RES_M).astype(np.int64)
+    grid = np.zeros((n, n), np.uint8)
+    grid[cells[:, 1], cells[:, 0]] = 1
+    k = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (7, 7))  # sparse far rings: close ~0.75 m gaps
+    grid = cv2.morphologyEx(grid, cv2.MORPH_CLOSE, k)
+    return grid.astype(bool), origin
+
+
+def surface_zones(sample: Sample, view: CameraView, drivable: DrivableArea, config: PlacementConfig) -> SurfaceZones:
+    """The zones around ``view``'s camera: ``drivable`` with the map's walkways and crossings, lidarseg sidewalks."""
+    cam_xy = view.T_global_from_cam[:2, 3]
+    cells = _sidewalk_cells(sample, cam_xy, config.map_roi_m)
+    return SurfaceZones(drivable, _near(list(sample.walkways_global), cam_xy, config.map_roi_m),
+                        _near(list(sample.ped_crossings_global), cam_xy, config.map_roi_m),
+                        None if cells is None else cells[0], None if cells is None else cells[1],
+                        config.kerb_distance_m)
+
+
+__all__ = ["ROAD_EDGE_BAND_M", "SurfaceZones", "grow_footprints", "surface_zones"]
