@@ -16,7 +16,7 @@ from .asset import Asset, Material
 from .class_sizes import read_class_sizes
 from .mesh_parts import MeshPart, merge_parts
 from .procedural import srgb_to_linear
-from .revolve import box, ellipse_rings, loft, revolve, tube, with_material
+from .revolve import box, loft, revolve, tube, with_material
 from .validate import validate_asset
 
 _VARIANTS = ("concrete", "water_filled", "fence")

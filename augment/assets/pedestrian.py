@@ -20,7 +20,7 @@ from .asset import Asset, Material
 from .class_sizes import read_class_sizes
 from .mesh_parts import MeshPart, merge_parts
 from .procedural import srgb_to_linear
-from .revolve import capsule, ellipse_rings, ellipsoid, frame_from_axis, loft, rot_y, transform_part
+from .revolve import capsule, ellipse_rings, ellipsoid, loft, rot_y, with_material
 from .validate import validate_asset
 
 # Material slots of a figure (indices into :func:`figure_materials`' table).
@@ -235,7 +235,9 @@ def riding_joints(b: Body, seat: np.ndarray, hands: np.ndarray, feet: np.ndarray
     sh = pelvis[None, :] + trunk_len * np.stack([np.sin(lean), 0 * lean, np.cos(lean)], 1)
     mid = hands.mean(axis=0)
     half = np.array([0.0, b.shoulder_half, 0.0])
-    err = np.abs(np.linalg.norm(mid[None] - sh, axis=1) - np.sqrt(reach ** 2 + max(0.0, (abs(hands[0, 1] - hands[1, 1]) / 2 - b.shoulder_half)) ** 2))
+    lateral = abs(hands[0, 1] - hands[1, 1]) / 2 - b.shoulder_half  # hands outside (+) or inside the shoulders
+    in_plane = np.sqrt(max(reach ** 2 - lateral ** 2, (0.3 * reach) ** 2))  # shoulder -> hand in the x-z plane
+    err = np.abs(np.linalg.norm((mid[None] - sh)[:, [0, 2]], axis=1) - in_plane)
     k = int(np.argmin(err))
     trunk = np.array([np.sin(lean[k]), 0.0, np.cos(lean[k])])
     J["trunk"] = trunk
@@ -310,14 +312,14 @@ def draw_outfit(rng: np.random.Generator, child: bool, allow_skirt: bool = True,
     else:
         bottom = "trousers"
     bag = "backpack" if u[2] < (0.22 if not child else 0.35) else ("shoulder" if u[2] < 0.36 and not child else "none")
-    hair = "long" if u[3] < 0.35 else ("none" if u[3] > 0.93 else "short")
+    hair = "long" if u[3] < 0.35 else ("none" if u[3] > 0.93 and not child else "short")
     return Outfit(sleeves, bottom, "none" if helmet else bag, hair, helmet)
 
 
 # ----------------------------------------------------------------------------- the mesh
 
 
-def _torso(b: Body, J: dict[str, np.ndarray], material: int) -> MeshPart:
+def _torso(b: Body, J: dict[str, np.ndarray], material: int, bottom_material: int) -> MeshPart:
     """The trunk: a loft of ellipses along the pelvis -> neck axis (hips, waist, chest, shoulders)."""
     trunk = J["trunk"]
     pelvis = J["pelvis"]
@@ -333,7 +335,11 @@ def _torso(b: Body, J: dict[str, np.ndarray], material: int) -> MeshPart:
     hw[:-1] *= np.clip(b.shoulder_half / (0.1295 * H * 0.835 / 0.87 + 1e-9), 0.8, 1.3) ** 0.5 * g ** 0.7
     hd[:-1] *= g
     centres = pelvis[None] + (s * span)[:, None] * trunk + off[:, None] * fwd
-    return loft(ellipse_rings(centres, fwd, lat, hd, hw, 16), material)
+    part = loft(ellipse_rings(centres, fwd, lat, hd, hw, 16), material)
+    # below the waist the trunk wears the trousers / shorts / skirt
+    waist = pelvis + 0.12 * span * trunk
+    below = (part.vertices[part.faces].mean(axis=1) - waist) @ trunk < 0
+    return with_material(part, np.where(below, bottom_material, material))
 
 
 def _foot(b: Body, ankle: np.ndarray, toe: np.ndarray, sole_z: float, material: int) -> MeshPart:
@@ -353,7 +359,7 @@ def figure_parts(b: Body, J: dict[str, np.ndarray], outfit: Outfit, sole_z: floa
     """
     if sole_z is None:
         sole_z = min(J["ankle_l"][2], J["ankle_r"][2]) - b.ankle_h
-    parts = [_torso(b, J, TOP)]
+    parts = [_torso(b, J, TOP, BOTTOM)]
     neck_top = J["neck"] + 0.6 * b.neck_len * np.array([0.0, 0.0, 1.0]) + 0.3 * b.neck_len * J["trunk"]
     parts.append(capsule(J["neck"] - 0.03 * b.height * J["trunk"], neck_top, b.neck_r, b.neck_r * 0.95, SKIN,
                          n_around=10, n_cap=2))
@@ -364,7 +370,8 @@ def figure_parts(b: Body, J: dict[str, np.ndarray], outfit: Outfit, sole_z: floa
     head_r = np.array([0.5 * b.head_d, 0.5 * b.head_w, 0.53 * b.head_h])
     parts.append(ellipsoid(head_c, head_r, SKIN, rotation=Rh, n_around=16, n_rings=11))
     if outfit.helmet:
-        parts.append(ellipsoid(head_c + Rh @ np.array([-0.02, 0.0, 0.12]) * b.head_h, head_r * np.array([1.18, 1.22, 0.92]),
+        parts.append(ellipsoid(head_c + Rh @ np.array([-0.02, 0.0, 0.12]) * b.head_h,
+                               head_r * np.array([1.18, 1.22, 0.92]),
                                HELMET, rotation=Rh, n_around=16, n_rings=10))
     elif outfit.hair != "none":
         long_ = outfit.hair == "long"
@@ -379,7 +386,6 @@ def figure_parts(b: Body, J: dict[str, np.ndarray], outfit: Outfit, sole_z: floa
         parts.append(capsule(sh, el, b.arm_r[0], b.arm_r[1], TOP, n_around=10, n_cap=2))
         parts.append(capsule(el, wr, b.forearm_r[0], b.forearm_r[1], sleeve_fore, n_around=10, n_cap=2))
         hdir = (wr - el) / np.linalg.norm(wr - el)
-        u, v, w = frame_from_axis(hdir)
         lat = np.array([0.0, 1.0, 0.0]) - hdir * hdir[1]
         lat /= max(np.linalg.norm(lat), 1e-9)
         Rm = np.stack([np.cross(lat, hdir), lat, hdir], 1)
@@ -404,10 +410,10 @@ def figure_parts(b: Body, J: dict[str, np.ndarray], outfit: Outfit, sole_z: floa
     if outfit.bag == "backpack":
         trunk = J["trunk"]
         fwd = np.array([trunk[2], 0.0, -trunk[0]])
-        c = J["pelvis"] + 0.62 * (b.shoulder_z - b.hip_z) * trunk - (0.068 * b.height * b.girth + 0.06 * b.height * 0.55) * fwd
+        half = np.array([0.045, 0.14, 0.2]) * b.height * 0.6  # half depth, width, height
+        c = J["pelvis"] + 0.6 * (b.shoulder_z - b.hip_z) * trunk - (0.058 * b.height * b.girth + half[0]) * fwd
         Rm = np.stack([fwd, np.array([0.0, 1.0, 0.0]), trunk], 1)
-        parts.append(ellipsoid(c, np.array([0.06, 0.15, 0.22]) * b.height * 0.58, BAG, rotation=Rm, n_around=12,
-                               n_rings=8))
+        parts.append(ellipsoid(c, half * 1.3, BAG, rotation=Rm, n_around=16, n_rings=9, clamp=half))
     elif outfit.bag == "shoulder":
         c = J["pelvis"] + np.array([0.02, -(0.1 * b.girth + 0.03) * b.height, 0.07 * b.height])
         parts.append(ellipsoid(c, np.array([0.14, 0.04, 0.11]) * b.height * 0.6, BAG, n_around=10, n_rings=7))
@@ -506,18 +512,18 @@ def procedural_pedestrian(seed: int, wlh=None, variant: str | None = None, pose:
         vertices = (vertices - np.array([(vmin[0] + vmax[0]) / 2, (vmin[1] + vmax[1]) / 2, vmin[2]])) * scale
         ext = vertices.max(axis=0) - vertices.min(axis=0)
         w, l = ext[1], ext[0]
+        # Newton-like steps: l grows with the feet's fore-aft spread (~ the gain), w with the arms' and
+        # feet's sideways spread (~ arm length per radian of abduction, plus the stance)
+        feet_dx = max(abs(J["ankle_l"][0] - J["ankle_r"][0]) * scale, 0.05 * target_h)
+        arms = 2 * (body.upper_arm + body.forearm + body.hand_len) * scale + 0.3 * target_h
         ok = True
-        if w < lo[0]:
-            spread += np.radians(4)
+        if not lo[0] <= w <= hi[0]:
+            goal = lo[0] * 1.02 if w < lo[0] else hi[0] * 0.98
+            spread += (goal - w) / arms
             ok = False
-        elif w > hi[0]:
-            spread -= np.radians(4)
-            ok = False
-        if l < lo[1]:
-            gain *= 1.18
-            ok = False
-        elif l > hi[1]:
-            gain *= 0.85
+        if not lo[1] <= l <= hi[1]:
+            goal = lo[1] * 1.02 if l < lo[1] else hi[1] * 0.98
+            gain *= float(np.clip(1.0 + (goal - l) / feet_dx, 0.5, 2.0))
             ok = False
         if ok:
             break

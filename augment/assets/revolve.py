@@ -114,16 +114,23 @@ def revolve(axis_pos: np.ndarray, radius: np.ndarray, origin: np.ndarray, axis: 
 
 
 def ellipsoid(centre: np.ndarray, radii: np.ndarray, material: int, rotation: np.ndarray | None = None,
-              n_around: int = 14, n_rings: int = 9, z_floor: float | None = None) -> MeshPart:
+              n_around: int = 14, n_rings: int = 9, z_floor: float | None = None,
+              clamp: np.ndarray | None = None) -> MeshPart:
     """An ellipsoid with semi-axes ``radii`` (3,) along the columns of ``rotation`` (3, 3), at ``centre``.
 
     ``z_floor``: vertices below this object-frame height are clamped onto it (a flat sole or base).
+    ``clamp``: (3,) half-extents in the ellipsoid's own axes the vertices are clamped to (smaller than
+    ``radii``: a box with rounded edges, e.g. a backpack).
     """
     R = np.eye(3) if rotation is None else np.asarray(rotation, dtype=np.float64)
     t = np.linspace(0.0, np.pi, n_rings)
     a, b, c = np.asarray(radii, dtype=np.float64)
-    rings = ellipse_rings((-c * np.cos(t))[:, None] * R[:, 2], R[:, 0], R[:, 1], a * np.sin(t), b * np.sin(t),
-                          n_around) + np.asarray(centre, dtype=np.float64)
+    rings = ellipse_rings((-c * np.cos(t))[:, None] * np.array([0.0, 0.0, 1.0]), np.array([1.0, 0.0, 0.0]),
+                          np.array([0.0, 1.0, 0.0]), a * np.sin(t), b * np.sin(t), n_around)
+    if clamp is not None:
+        lim = np.asarray(clamp, dtype=np.float64)
+        rings = np.clip(rings, -lim, lim)
+    rings = rings @ R.T + np.asarray(centre, dtype=np.float64)
     if z_floor is not None:
         rings[..., 2] = np.maximum(rings[..., 2], z_floor)
     return loft(rings, material)

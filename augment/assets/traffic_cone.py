@@ -84,7 +84,8 @@ def procedural_traffic_cone(seed: int, wlh=None, variant: str | None = None) -> 
             p_tall = 0.6 if h > 0.95 and side < 0.45 else (0.15 if h > 0.8 else 0.0)
             variant = "drum" if u[0] < p_drum else ("tall" if u[0] < p_drum + p_tall else "cone")
     if variant not in _VARIANTS:
-        raise ValueError(f"procedural_traffic_cone: unknown variant {variant!r}; expected one of {', '.join(_VARIANTS)}")
+        raise ValueError(f"procedural_traffic_cone: unknown variant {variant!r}; "
+                         f"expected one of {', '.join(_VARIANTS)}")
     if target is None:
         size = read_class_sizes()["movable_object.trafficcone"]
         typical = {"cone": (0.40, 0.40, 0.72), "tall": (0.32, 0.32, 1.05), "drum": (0.58, 0.58, 1.0)}[variant]
@@ -117,7 +118,7 @@ def procedural_traffic_cone(seed: int, wlh=None, variant: str | None = None) -> 
         n_bands = 1 if h < 0.6 or u[9] < 0.4 else 2
         bands = [(plate_t + 0.55 * body_h, plate_t + 0.72 * body_h)]
         if n_bands == 2:
-            bands = [(plate_t + 0.63 * body_h, plate_t + 0.78 * body_h), (plate_t + 0.38 * body_h, plate_t + 0.5 * body_h)]
+            bands = [(plate_t + f0 * body_h, plate_t + f1 * body_h) for f0, f1 in ((0.63, 0.78), (0.38, 0.5))]
     elif variant == "tall":
         rb = min(half * 0.55, 0.06)
         rt = rb * 0.75

@@ -20,7 +20,9 @@ from .class_sizes import read_class_sizes
 from .mesh_parts import MeshPart, merge_parts
 from .pedestrian import rider_parts
 from .procedural import srgb_to_linear
-from .revolve import box, capsule, straight_tubes, ellipse_rings, ellipsoid, loft, revolve, rot_y, torus, tube, with_material
+from .revolve import (
+    box, capsule, ellipse_rings, ellipsoid, loft, revolve, rot_y, straight_tubes, torus, tube, with_material,
+)
 from .validate import validate_asset
 
 _RIDER_VARIANTS = ("with_rider", "without_rider")
@@ -87,7 +89,8 @@ def spoked_wheel(centre: np.ndarray, r: float, tyre_r: float, n_spokes: int, hub
     ang = np.arange(n_spokes) * 2 * np.pi / n_spokes
     side = np.where(np.arange(n_spokes) % 2 == 0, 1.0, -1.0)
     hub_pts = centre + np.stack([0.02 * np.cos(ang), side * 0.8 * hub_half, 0.02 * np.sin(ang)], 1)
-    rim_pts = centre + np.stack([(rim_R - 0.006) * np.cos(ang + 0.25), 0.0 * ang, (rim_R - 0.006) * np.sin(ang + 0.25)], 1)
+    rim_a = ang + 0.25  # spokes leave the hub tangentially-ish: offset from their hub angle
+    rim_pts = centre + (rim_R - 0.006) * np.stack([np.cos(rim_a), 0.0 * ang, np.sin(rim_a)], 1)
     parts.append(straight_tubes(hub_pts, rim_pts, 0.0022, STEEL, n_around=4))
     return parts
 
@@ -197,9 +200,9 @@ def _bike_parts(g: _BikeGeometry) -> tuple[list[MeshPart], np.ndarray]:
                                     + 0.5 * (g.head_top - g.head_bottom)]), 0.012, PAINT))
     else:
         parts.append(tube(np.stack([g.bb, g.head_bottom]), tr, PAINT))
-        parts.append(tube(np.stack([g.seat_top - 0.03 * (g.seat_top - g.bb) / np.linalg.norm(g.seat_top - g.bb),
-                                    g.head_top - 0.02 * (g.head_top - g.head_bottom) / np.linalg.norm(g.head_top - g.head_bottom)]),
-                          0.0135, PAINT))
+        seat_dir = (g.seat_top - g.bb) / np.linalg.norm(g.seat_top - g.bb)
+        head_dir = (g.head_top - g.head_bottom) / np.linalg.norm(g.head_top - g.head_bottom)
+        parts.append(tube(np.stack([g.seat_top - 0.03 * seat_dir, g.head_top - 0.02 * head_dir]), 0.0135, PAINT))
     parts.append(tube(np.stack([g.bb, g.seat_top]), 0.0145, PAINT))
     parts.append(tube(np.stack([g.head_bottom, g.head_top]), 0.019, PAINT))
     for s in (1.0, -1.0):
@@ -435,13 +438,15 @@ def _moto_parts(g: _MotoGeometry, u: np.ndarray) -> tuple[list[MeshPart], np.nda
         parts.append(loft(ellipse_rings(cen, np.array([1.0, 0, 0]), np.array([0.0, 1, 0]), a, b, 16), PAINT))
         # rear body over the rear wheel and the engine
         rb_len = (x_seat + 0.25) - (rear[0] - 0.2)
-        rb_c = np.array([0.5 * (x_seat + 0.25 + rear[0] - 0.2), 0.0, 0.5 * (g.seat[2] - 0.05 + g.r + 0.05)])
-        parts.append(ellipsoid(rb_c, np.array([0.5 * rb_len, 0.19, 0.5 * (g.seat[2] - 0.05 - g.r + 0.05) + 0.06]),
-                               PAINT, n_around=16, n_rings=9))
+        rb_lo, rb_hi = g.r - 0.04, g.seat[2] - 0.04
+        rb_c = np.array([0.5 * (x_seat + 0.25 + rear[0] - 0.2), 0.0, 0.5 * (rb_lo + rb_hi)])
+        rb_half = np.array([0.5 * rb_len, 0.17, 0.5 * (rb_hi - rb_lo)])
+        parts.append(ellipsoid(rb_c, rb_half * np.array([1.12, 1.3, 1.2]), PAINT, n_around=20, n_rings=11,
+                               clamp=rb_half))  # a rounded panel box over the rear wheel and engine
         parts.append(box(np.array([rear[0] - 0.05, -0.14, 0.12]), np.array([rear[0] + 0.35, -0.02, 0.3]), ENGINE))
         seat_c = g.seat + np.array([-0.05, 0.0, -0.04])
         parts.append(ellipsoid(seat_c, np.array([0.3, 0.15, 0.055]), BLACK, n_around=14, n_rings=7))
-        tail = np.array([rear[0] - 0.2 + 0.02, 0.0, rb_c[2] + 0.05])
+        tail = np.array([rear[0] - 0.2 + 0.02 - rb_half[0] * 0.0, 0.0, rb_hi - 0.06])
         parts.append(ellipsoid(tail, np.array([0.02, 0.08, 0.03]), TAIL, n_around=8, n_rings=5))
     else:
         # engine block and cylinder, tank, seat, tail, exhaust, side frame rails
@@ -461,12 +466,11 @@ def _moto_parts(g: _MotoGeometry, u: np.ndarray) -> tuple[list[MeshPart], np.nda
         parts.append(ellipsoid(np.array([tail_end - 0.02, 0.0, g.seat[2] - 0.04]), np.array([0.02, 0.07, 0.025]), TAIL,
                                n_around=8, n_rings=5))
         for s in (1.0, -1.0):
-            parts.append(tube(np.stack([steer_top - 0.1 * fdir, eng_c + np.array([0.15, s * 0.1, -0.1]),
-                                        eng_c + np.array([-0.22, s * 0.1, -0.12]), rear + np.array([0.05, s * 0.09, 0.0])]),
-                              0.016, ENGINE, n_around=6))
-            parts.append(tube(np.stack([np.array([x_seat - 0.05, s * 0.1, g.seat[2] - 0.08]), rear + np.array([0.0, s * 0.09,
-                                                                                                               0.02])]),
-                              0.012, ENGINE, n_around=6))
+            rail = [steer_top - 0.1 * fdir, eng_c + np.array([0.15, s * 0.1, -0.1]),
+                    eng_c + np.array([-0.22, s * 0.1, -0.12]), rear + np.array([0.05, s * 0.09, 0.0])]
+            parts.append(tube(np.stack(rail), 0.016, ENGINE, n_around=6))
+            sub = [np.array([x_seat - 0.05, s * 0.1, g.seat[2] - 0.08]), rear + np.array([0.0, s * 0.09, 0.02])]
+            parts.append(tube(np.stack(sub), 0.012, ENGINE, n_around=6))
         ex0 = eng_c + np.array([0.12, -0.1, -0.05])
         ex1 = np.array([rear[0] + 0.25, -0.16, g.r - 0.05])
         parts.append(tube(np.stack([ex0, eng_c + np.array([0.0, -0.16, -0.16]), ex1]), 0.022, STEEL, n_around=8))
@@ -503,7 +507,8 @@ def procedural_motorcycle(seed: int, wlh=None, variant: str | None = None) -> As
     u = rng.random(10)
     size = read_class_sizes()["vehicle.motorcycle"]
     if target is None:
-        target = np.array([0.6 + 0.12 * u[0], 1.85 + 0.4 * u[1], 1.15 + 0.1 * u[2] if not ridden else 1.38 + 0.12 * u[2]])
+        typical_h = 1.15 + 0.1 * u[2] if not ridden else 1.38 + 0.12 * u[2]
+        target = np.array([0.6 + 0.12 * u[0], 1.85 + 0.4 * u[1], typical_h])
         target = np.clip(target, size.min_wlh, size.max_wlh)
     w, l, h = (float(x) for x in target)
     scooter = bool(u[3] < (0.7 if l < 1.9 else 0.25))

@@ -9,7 +9,9 @@ import trimesh
 from streetaug.augment.assets.barrier import procedural_barrier, procedural_barrier_variants
 from streetaug.augment.assets.class_sizes import read_class_sizes
 from streetaug.augment.assets.mesh_parts import signed_volume
-from streetaug.augment.assets.pedestrian import body_for, procedural_pedestrian, procedural_pedestrian_variants, rider_parts
+from streetaug.augment.assets.pedestrian import (
+    body_for, procedural_pedestrian, procedural_pedestrian_variants, rider_parts,
+)
 from streetaug.augment.assets.revolve import box, capsule, ellipsoid, prism, revolve, straight_tubes, torus, tube
 from streetaug.augment.assets.traffic_cone import procedural_traffic_cone, procedural_traffic_cone_variants
 from streetaug.augment.assets.two_wheeler import (
@@ -69,7 +71,7 @@ def test_rigid_box_matches_target_at_min_mean_max(kind, variant):
 
 @pytest.mark.parametrize("kind", list(RIGID))
 def test_rigid_defaults_are_typical_and_deterministic(kind):
-    gen, variants, category = RIGID[kind]
+    gen, _, category = RIGID[kind]
     s = SIZES[category]
     seen = set()
     for seed in range(6):
@@ -105,7 +107,8 @@ def test_cones_and_barriers_stand_flat_on_the_ground():
             assert (z == 0.0).sum() >= 4, f"{kind}/{v}: the base is not flat"
             hit = _down_hits(a)
             # a fence is a thin panel on two feet: seen from above mostly its feet
-            assert hit.mean() > {"trafficcone": 0.45, "barrier": 0.1 if v == "fence" else 0.6}[kind], (kind, v, hit.mean())
+            least = {"trafficcone": 0.45, "barrier": 0.1 if v == "fence" else 0.6}[kind]
+            assert hit.mean() > least, (kind, v, hit.mean())
 
 
 def test_cone_bands_are_retroreflective_and_body_orange():
@@ -142,7 +145,7 @@ def test_two_wheelers_ray_cast_from_above():
 def test_bicycle_frame_tubes_are_thin_and_still_hit():
     a = procedural_bicycle(7, [0.6, 1.75, 1.05], "without_rider")
     paint = [m.name for m in a.materials].index("frame_paint")
-    lo, hi = a.vertices.min(axis=0), a.vertices.max(axis=0)
+    hi = a.vertices.max(axis=0)
     # horizontal rays along -y on a 2 mm grid over the middle of the frame
     x, z = np.meshgrid(np.linspace(-0.15, 0.15, 31), np.arange(0.3, hi[2], 0.002), indexing="ij")
     origins = np.stack([x.ravel(), np.full(x.size, hi[1] + 1.0), z.ravel()], 1)
@@ -246,7 +249,8 @@ def test_child_has_the_bigger_head():
 def test_primitives_are_closed_and_outward():
     parts = [
         ellipsoid([0, 0, 1], [0.1, 0.2, 0.3], 0), capsule([0, 0, 0], [0.3, 0.1, 0.5], 0.05, 0.03, 0),
-        tube(np.array([[0, 0, 0], [0.2, 0, 0.1], [0.4, 0.1, 0.1]]), 0.02, 0), torus([0, 0, 0.3], [0, 1, 0], 0.3, 0.03, 0),
+        tube(np.array([[0, 0, 0], [0.2, 0, 0.1], [0.4, 0.1, 0.1]]), 0.02, 0),
+        torus([0, 0, 0.3], [0, 1, 0], 0.3, 0.03, 0),
         prism(np.array([[0, 0], [1, 0], [1, 1], [0, 1]]), [0, 0, 0], [1, 0, 0], [0, 0, 1], [0, 1, 0], 2.0, 0),
         box([0, 0, 0], [1, 2, 3], 0), revolve([0, 0, 1], [0.3, 0.2, 0.0], [0, 0, 0], [0, 0, 1], 0, caps="flat"),
         straight_tubes(np.eye(3) * 0.5 + 1.0, np.eye(3) + 1.0, 0.01, 0),
