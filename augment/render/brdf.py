@@ -10,6 +10,15 @@ spherical-Gaussian exponent ``2^((-5.55473 v.h - 6.98316) v.h)`` and, as in UE4'
 ``F90 = saturate(50 F0_green)`` so that specular = 0 really is a pure Lambertian.  The clear coat is a second GGX
 lobe (roughness :data:`CLEARCOAT_ROUGHNESS`, F0 = 0.04) weighted by ``clearcoat``; the layer below
 is attenuated by the light the coat reflects, ``1 - clearcoat F_c(v.h)``.
+
+Retro-reflection (cone and barrier bands, plates, signs) is a separate, narrow lobe around the
+direction back to the light (:func:`retro_lobe`): ``f_r = c_r G(angle(v, l))`` with ``G`` a unit-integral
+Gaussian of width :data:`RETRO_LOBE_RAD` and ``c_r = retro x min(RETRO_ALBEDO c_base, cap - c_diff)``
+the fraction of the light it returns.  Its coefficient of retro-reflection ``R_A = f_r cos(l) cos(v)``
+is ~210 cd/lx/m^2 coaxially for a white (0.8) base, the order of real sheeting; at a few degrees
+from the light it is zero, so in daylight with the sun at the side the material is its base BRDF.
+It is not part of :func:`eval_brdf` (a sampled lobe of 0.4 deg would only give fireflies): the
+shader adds it for the sun's samples and in closed form for the environment.
 """
 
 from __future__ import annotations
@@ -24,6 +33,9 @@ from ..core import luminance
 CLEARCOAT_ROUGHNESS = 0.05
 CLEARCOAT_F0 = 0.04
 MIN_ROUGHNESS = 0.03  # below this GGX is a delta lobe that a few samples cannot integrate
+RETRO_ALBEDO = 0.08  # fraction of the light a full-strength retro-reflector returns into its narrow cone
+RETRO_LOBE_RAD = np.radians(0.4)  # angular sigma of the returned cone (sheeting: R_A halves by ~0.5 deg)
+RETRO_ENERGY_CAP = 0.96  # the diffuse colour plus the retro lobe's albedo stays below this (+ ~4 % specular)
 
 
 @dataclass(frozen=True)
@@ -36,6 +48,7 @@ class BRDFParams:
         roughness: (N,) perceptual roughness in [0, 1] (clamped to :data:`MIN_ROUGHNESS`).
         specular: (N,) UE4 specular, 0.5 = 4 % reflectance.
         clearcoat: (N,) clear-coat strength in [0, 1].
+        retroreflective: (N,) retro-reflective strength in [0, 1], or None (none anywhere: no retro lobe).
     """
 
     base_color: np.ndarray
@@ -43,9 +56,11 @@ class BRDFParams:
     roughness: np.ndarray
     specular: np.ndarray
     clearcoat: np.ndarray
+    retroreflective: np.ndarray | None = None
 
     @staticmethod
-    def uniform(n: int, base_color=(0.8, 0.8, 0.8), metallic=0.0, roughness=0.5, specular=0.5, clearcoat=0.0) -> "BRDFParams":
+    def uniform(n: int, base_color=(0.8, 0.8, 0.8), metallic=0.0, roughness=0.5, specular=0.5, clearcoat=0.0,
+                retroreflective=0.0) -> "BRDFParams":
         """N identical samples (handy for tests)."""
         return BRDFParams(
             base_color=np.tile(np.asarray(base_color, dtype=np.float64), (n, 1)),
@@ -53,6 +68,7 @@ class BRDFParams:
             roughness=np.full(n, float(roughness)),
             specular=np.full(n, float(specular)),
             clearcoat=np.full(n, float(clearcoat)),
+            retroreflective=np.full(n, float(retroreflective)) if retroreflective else None,
         )
 
     @cached_property
@@ -62,9 +78,11 @@ class BRDFParams:
 
     def take(self, index: np.ndarray) -> "BRDFParams":
         """The parameters of the samples ``index`` (any numpy index); derived arrays already computed are taken too."""
-        out = BRDFParams(*(getattr(self, f)[index] for f in ("base_color", "metallic", "roughness", "specular", "clearcoat")))
-        for key in ("c_diff", "c_spec", "alpha", "lobe_probs"):
-            if key in self.__dict__:
+        retro = None if self.retroreflective is None else self.retroreflective[index]
+        out = BRDFParams(*(getattr(self, f)[index] for f in ("base_color", "metallic", "roughness", "specular", "clearcoat")),
+                         retroreflective=retro)
+        for key in ("c_diff", "c_spec", "alpha", "lobe_probs", "c_retro"):
+            if self.__dict__.get(key) is not None:
                 out.__dict__[key] = self.__dict__[key][index]
         return out
 
@@ -84,6 +102,19 @@ class BRDFParams:
         """(N, 3) specular colour at normal incidence (F0)."""
         m = self.metallic[:, None]
         return (1.0 - m) * 0.08 * self.specular[:, None] + m * self.base_color
+
+    @cached_property
+    def c_retro(self) -> np.ndarray | None:
+        """(N, 3) fraction of the light the retro lobe returns (see the module docstring), or None."""
+        if self.retroreflective is None:
+            return None
+        r = np.clip(self.retroreflective, 0.0, 1.0)[:, None]
+        return r * np.clip(np.minimum(RETRO_ALBEDO * self.base_color, RETRO_ENERGY_CAP - self.c_diff), 0.0, None)
+
+    @property
+    def has_retro(self) -> bool:
+        """Whether any sample has a retro-reflective lobe."""
+        return self.retroreflective is not None and bool(np.any(self.retroreflective > 0))
 
     @cached_property
     def alpha(self) -> np.ndarray:
@@ -143,6 +174,28 @@ def eval_brdf(n: np.ndarray, v: np.ndarray, l: np.ndarray, params: BRDFParams) -
         coat = ggx_d(n_h, a_c) * smith_g(n_l, n_v, r_c) / (4.0 * n_l * n_v) * F_c
         f = f * (1.0 - cc * F_c)[:, None] + (cc * coat)[:, None]
     return np.where(ok[:, None], f, 0.0)
+
+
+def retro_lobe(n: np.ndarray, v: np.ndarray, l: np.ndarray, params: BRDFParams) -> np.ndarray:
+    """Retro-reflective BRDF term (N, 3), 1/sr: ``c_retro G(angle(v, l))``, zero below the horizon or without retro.
+
+    ``G = exp(-(1 - v.l) / sigma^2) / (2 pi sigma^2)`` (sigma = :data:`RETRO_LOBE_RAD`) integrates to 1 over
+    the sphere; symmetric in ``v`` and ``l`` (reciprocal).
+    """
+    if params.c_retro is None:
+        return np.zeros((len(n), 3))
+    ok = (_dot(n, l) > 1e-6) & (_dot(n, v) > 1e-6)
+    s2 = RETRO_LOBE_RAD**2
+    g = np.exp(-np.clip(1.0 - _dot(v, l), 0.0, None) / s2) / (2.0 * np.pi * s2)
+    return np.where(ok[:, None], params.c_retro * g[:, None], 0.0)
+
+
+def retro_env_factor(n: np.ndarray, v: np.ndarray, params: BRDFParams) -> np.ndarray:
+    """(N, 3) factor of the environment radiance L(v) (arriving from the viewer's direction) that the retro lobe
+    returns to the viewer: ``int f_r L cos(l) dl ~ c_retro cos(v) L(v)`` (the lobe is narrower than any map texel)."""
+    if params.c_retro is None:
+        return np.zeros((len(n), 3))
+    return params.c_retro * np.clip(_dot(n, v), 0.0, 1.0)[:, None]
 
 
 # ----------------------------------------------------------------------------- sampling

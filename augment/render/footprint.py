@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import cv2
 import numpy as np
 
 from ..assets.asset import Asset
@@ -59,6 +60,23 @@ class PixelBox:
     def as_list(self) -> list[int]:
         """[x0, y0, x1, y1] (for JSON stats)."""
         return [self.x0, self.y0, self.x1, self.y1]
+
+
+def edge_pixels(uv_tri: np.ndarray, box: PixelBox) -> np.ndarray:
+    """(h, w) bool over ``box``: pixels the edges of projected triangles cross (or pass within about a pixel of).
+
+    ``uv_tri`` (F, 3, 2) are image pixel coordinates (pixel centres at integers) of the triangles'
+    corners.  Every pixel a triangle partly overlaps is crossed by one of its edges, so these pixels
+    together with the pixels some sample already hit hold every pixel the triangles touch: thin
+    geometry far under a pixel (spokes, wires) is found even where a first, sparse pass of samples
+    missed it.  Anti-aliased lines with 4 fractional bits (a conservative raster of each edge).
+    """
+    mask = np.zeros((box.height, box.width), np.uint8)
+    if len(uv_tri):
+        local = np.clip(np.asarray(uv_tri, dtype=np.float64) - [box.x0, box.y0], -1e5, 1e5)
+        pts = np.round(local * 16.0).astype(np.int32)
+        cv2.polylines(mask, pts, True, 255, 1, cv2.LINE_AA, 4)
+    return mask > 0
 
 
 def _clipped(x0: int, y0: int, x1: int, y1: int, camera: PinholeCamera) -> PixelBox | None:

@@ -2,8 +2,9 @@
 
 Pipeline (all vectorised, rays in big Embree batches)::
 
-    object pixel box -> n x n jittered camera samples (+ k x k more in silhouette pixels, 2 x 2
-      at material boundaries and shading discontinuities)
+    object pixel box -> n x n jittered camera samples (+ k x k more in silhouette pixels -- mixed
+      coverage, or crossed by a projected triangle edge: thin parts -- and 2 x 2 at material
+      boundaries and shading discontinuities)
       -> ray-mesh hits (object frame) -> surface at the hits (:mod:`.surface`)
       -> shading (:mod:`.shade`): sun + environment, self-occlusion, one bounce, the ground's shadow
       -> glass: reflection on the glass + the continued ray (dark interior or what lies behind)
@@ -22,7 +23,7 @@ import numpy as np
 
 from ..core import PinholeCamera, invert_transform, luminance
 from .brdf import BRDFParams, row_norm, schlick_weight
-from .footprint import PixelBox
+from .footprint import PixelBox, edge_pixels
 from .shade import RAY_EPS_M, ShadingContext, shade
 from .surface import SurfaceHits, surface_at_hits
 
@@ -98,7 +99,7 @@ def render_foreground(camera: PinholeCamera, box: PixelBox | None, ctx: ShadingC
     n = settings.aa_grid
     traced = _cast(ctx, camera, T_cam_from_object, *_jittered_samples(xs + box.x0, ys + box.y0, n, ctx.rng))
     counts = np.full(w * h, n * n, dtype=np.float64)
-    silhouette, inner = _refine_masks(traced, w, h, n)
+    silhouette, inner = _refine_masks(traced, w, h, n, _crossed_pixels(camera, box, ctx, T_cam_from_object))
     n_edge = 0
     # The extra samples are there for coverage and sharp shading edges; each pixel averages k x k of
     # them, so each needs fewer light samples (EDGE_LIGHT_SAMPLES instead of the preset's).
@@ -124,12 +125,27 @@ def _cast(ctx: ShadingContext, camera: PinholeCamera, T_cam_from_object: np.ndar
     return _trace(ctx, np.ascontiguousarray(o_obj), d_obj, pixel)
 
 
-def _refine_masks(traced: CameraSamples, w: int, h: int, n: int) -> tuple[np.ndarray, np.ndarray]:
+def _crossed_pixels(camera: PinholeCamera, box: PixelBox, ctx: ShadingContext, T_cam_from_object: np.ndarray) -> np.ndarray | None:
+    """(h, w) bool: pixels of ``box`` the object's projected triangle edges cross (:func:`.footprint.edge_pixels`),
+    or None when the object reaches behind the camera (no projection)."""
+    R, t = T_cam_from_object[:3, :3], T_cam_from_object[:3, 3]
+    v_cam = ctx.prep.asset.vertices @ R.T + t
+    if np.any(v_cam[:, 2] <= 1e-3):
+        return None
+    uv, _ = camera.project(v_cam)
+    return edge_pixels(uv[ctx.prep.faces], box)
+
+
+def _refine_masks(traced: CameraSamples, w: int, h: int, n: int,
+                  crossed: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """(silhouette, inner), each (h, w) bool: pixels that get more camera samples after the first pass.
 
-    Silhouette pixels (mixed coverage or next to one); inside the object, material boundaries (window
-    frames, tyres, lights) and shading discontinuities (creases between flat faces, self-shadow edges:
-    the noise-free part of the first pass jumps by more than SHADING_EDGE_REL between neighbours).
+    Silhouette pixels (mixed coverage or next to one, or crossed by a projected triangle edge
+    ``crossed`` (h, w) where not every neighbour is fully covered: geometry thinner than the first
+    pass's sample spacing, spokes and wires, is found there even where every first sample missed it);
+    inside the object, material boundaries (window frames, tyres, lights) and shading discontinuities
+    (creases between flat faces, self-shadow edges: the noise-free part of the first pass jumps by
+    more than SHADING_EDGE_REL between neighbours).
     """
     pix = traced.pixel
     hit = np.isfinite(traced.t_first)
@@ -137,7 +153,10 @@ def _refine_masks(traced: CameraSamples, w: int, h: int, n: int) -> tuple[np.nda
     any_hit = (nhit > 0).astype(np.uint8)
     all_hit = (nhit == n * n).astype(np.uint8)
     kernel = np.ones((3, 3), np.uint8)
-    silhouette = (cv2.dilate(any_hit, kernel) > 0) & ~(cv2.erode(all_hit, kernel, borderType=cv2.BORDER_REPLICATE) > 0)
+    reach = cv2.dilate(any_hit, kernel) > 0
+    if crossed is not None:
+        reach |= crossed
+    silhouette = reach & ~(cv2.erode(all_hit, kernel, borderType=cv2.BORDER_REPLICATE) > 0)
     mat = np.full(w * h, -1.0, np.float32)
     first_hit = traced.material_first >= 0
     mat[pix[first_hit]] = traced.material_first[first_hit]
@@ -247,7 +266,8 @@ def _shade_hits(ctx: ShadingContext, surf: SurfaceHits, p: np.ndarray, v: np.nda
     if len(fr):
         pr = surf.params.take(fr)
         op = surf.opacity[fr]
-        pr = BRDFParams(pr.base_color * op[:, None], pr.metallic, pr.roughness, pr.specular, pr.clearcoat)
+        pr = BRDFParams(pr.base_color * op[:, None], pr.metallic, pr.roughness, pr.specular, pr.clearcoat,
+                        pr.retroreflective)
         scale = None if ctx.bounce is None else ctx.bounce.face_sky_visibility(face[fr])
         smooth, noisy = shade(ctx, p[fr], surf.normal[fr], surf.geometric_normal[fr], v[fr], pr, scale)
         radiance[idx[fr], :3] += tp[fr] * (smooth + surf.emission[fr])

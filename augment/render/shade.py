@@ -7,6 +7,8 @@ For shading points (object frame) with their :class:`~streetaug.augment.render.s
       control variates: the unoccluded diffuse term and, for rough lobes, the specular albedo x cosine
       term are integrated exactly from the irradiance map, so only occlusion and the lobes' shape
       carry Monte Carlo noise.
+    + retro-reflection (:func:`~streetaug.augment.render.brdf.retro_lobe`, materials that have it): for
+      the sun's samples, and in closed form for the environment seen from the viewer's direction.
 
 Rays the object blocks see its own surface (the one-bounce model of :mod:`.bounce`); free rays
 leaving it downwards see the environment's lower hemisphere (the ground radiance of the estimate)
@@ -25,7 +27,8 @@ import numpy as np
 from ..core import camera_dir_to_lonlat, sample_equirect
 from ..lighting.light import DistantLight
 from .bounce import BounceLight
-from .brdf import BRDFParams, brdf_pdf, eval_brdf, sample_brdf, schlick_weight, specular_albedo
+from .brdf import (BRDFParams, brdf_pdf, eval_brdf, retro_env_factor, retro_lobe, sample_brdf, schlick_weight,
+                   specular_albedo)
 from .environment import EnvironmentTables
 from .sampling import lookup_irradiance, sample_cone
 from .settings import RenderSettings
@@ -181,6 +184,8 @@ def _shade_batch(ctx: ShadingContext, p: np.ndarray, n_s: np.ndarray, n_g: np.nd
     if cv_scale is not None:
         g_color = g_color * cv_scale[:, None]
     smooth += g_color * lookup_irradiance(ctx.env.irradiance, n_s @ ctx.R_cam_from_obj.T)
+    if params.has_retro:  # the environment behind the viewer, returned by the retro lobe (closed form)
+        smooth += retro_env_factor(n_s, v, params) * lookup_envmap(ctx.env.pyramid[0], v @ ctx.R_cam_from_obj.T)
     for kind in ("env", "brdf"):
         if (ctx.settings.env_samples if kind == "env" else ctx.settings.brdf_samples) > 0:
             samples.append(_env_samples(ctx, kind, p, n_s, n_g, v, params, g_color, noisy))
@@ -196,7 +201,10 @@ def _sun_samples(ctx: ShadingContext, p: np.ndarray, n_s: np.ndarray, n_g: np.nd
     sun = ctx.light.sun
     idx_sun = np.repeat(np.arange(len(p)), ns_sun)
     l_sun = sample_cone(ctx.sun_dir_obj, sun.half_angle_rad, ctx.rng.random(len(idx_sun)), ctx.rng.random(len(idx_sun)))
-    f = eval_brdf(n_s[idx_sun], v[idx_sun], l_sun, params.take(idx_sun))
+    p_sun = params.take(idx_sun)
+    f = eval_brdf(n_s[idx_sun], v[idx_sun], l_sun, p_sun)
+    if p_sun.has_retro:
+        f = f + retro_lobe(n_s[idx_sun], v[idx_sun], l_sun, p_sun)
     cos = np.clip(np.einsum("ij,ij->i", n_s[idx_sun], l_sun), 0.0, 1.0)
     up = np.einsum("ij,ij->i", n_g[idx_sun], l_sun) > 0
     contrib_sun = f * (cos * up / ns_sun)[:, None] * np.asarray(sun.irradiance_rgb)[None]

@@ -10,10 +10,15 @@ since the light is distant)::
 * Sun: ``V_sun`` is traced at full resolution where the object's box, projected along the sun onto the
   ground, can fall -- one ray per pixel to the sun's centre, then ``shadow_sun_dirs`` jittered rays
   (sub-pixel position x disc direction) in the pixels at the shadow's edge, so the shadow is as sharp
-  as the sun disc makes it and anti-aliased.
+  as the sun disc makes it and anti-aliased.  The edge pixels include every pixel an edge of a triangle's
+  shadow crosses (not deep inside the shadow): the shadow of a spoke, far thinner than a pixel, is
+  found and comes out as the fraction of the pixel it darkens.  Sub-pixel positions lie on the
+  ground-parallel plane through their pixel's point (a grazing ground pixel is decimetres deep).
 * Sky: every ``shadow_factor`` pixels, ``shadow_sky_dirs`` directions in the cone around the object's
   bounding sphere (the only directions it can block; the whole upper hemisphere under it), each
-  standing for ``w_k = cone solid angle / N``; smoothed and upsampled.
+  standing for ``w_k = cone solid angle / N``; smoothed and upsampled; at full resolution where it
+  changes fast between cells and within a band around where the object touches the ground (the
+  contact shadow of feet, tyres and posts: the sky they hide, not only the sun).
 * A blocked ray sees the object's own surface, ``L_hit`` from the one-bounce model of
   :mod:`.bounce` (instead of the paper's constant 0.1): ``A + B S_foot`` with ``S_foot`` the mean
   ratio under the object, solved in closed form from the map itself.
@@ -35,7 +40,7 @@ from ..core import PinholeCamera, camera_dir_to_lonlat, luminance, sample_equire
 from ..lighting.light import DistantLight
 from .bounce import BounceLight
 from .brdf import row_norm, to_world
-from .footprint import PixelBox
+from .footprint import PixelBox, edge_pixels
 from .environment import EnvironmentTables
 from .sampling import GOLDEN_ANGLE, sample_cone
 from .settings import RenderSettings
@@ -221,6 +226,9 @@ def _refine_sky_edges(geo: "_Ground", box: PixelBox, low: np.ndarray, light: Dis
     k3 = np.ones((3, 3), np.uint8)
     jump = cv2.dilate(low, k3) - cv2.erode(low, k3, borderType=cv2.BORDER_REPLICATE)
     sharp = np.repeat(np.repeat(jump > SKY_REFINE_JUMP, f, axis=0), f, axis=1)[:h, :w]
+    contact = _contact_pixels(geo, box, prep)
+    if contact is not None:
+        sharp |= contact
     ys, xs = np.nonzero(sharp)
     if not len(ys):
         return
@@ -238,6 +246,35 @@ def _refine_sky_edges(geo: "_Ground", box: PixelBox, low: np.ndarray, light: Dis
     stats["sky_refined_pixels"] = int(len(sel))
 
 
+def _contact_pixels(geo: "_Ground", box: PixelBox, prep: PreparedAsset) -> np.ndarray | None:
+    """(h, w) bool over ``box``: ground within :data:`CONTACT_BAND_M` of where the object touches the ground
+    (vertices less than :data:`CONTACT_HEIGHT_M` above it: feet, tyres, posts), or None if none.
+
+    The sky occlusion there falls from strong to weak within centimetres (the contact shadow of a foot),
+    much faster than the coarse cells every ``shadow_factor`` pixels resolve, so it is evaluated at
+    full resolution.  Up to :data:`CONTACT_MAX_POINTS` contact points (a 2 cm grid), one disc each.
+    """
+    V = prep.asset.vertices
+    low = V[V @ geo.n_obj < CONTACT_HEIGHT_M]
+    if not len(low):
+        return None
+    _, first = np.unique(np.round(low[:, :2] / 0.02).astype(np.int64), axis=0, return_index=True)
+    pts = low[np.sort(first)]
+    if len(pts) > CONTACT_MAX_POINTS:
+        pts = pts[np.linspace(0, len(pts) - 1, CONTACT_MAX_POINTS).astype(np.int64)]
+    p_cam = pts @ geo.R.T + geo.t
+    front = p_cam[:, 2] > 0.3
+    if not front.any():
+        return None
+    uv, z = geo.camera.project(p_cam[front])
+    radius = np.ceil(float(geo.camera.K[0, 0]) * CONTACT_BAND_M / z).astype(np.int64) + 1
+    mask = np.zeros((box.height, box.width), np.uint8)
+    for (x, y), r in zip(np.round(uv - [box.x0, box.y0]).astype(np.int64), radius):
+        if -r <= x < box.width + r and -r <= y < box.height + r:
+            cv2.circle(mask, (int(x), int(y)), int(r), 1, -1)
+    return mask > 0
+
+
 def _foot_ratio(geo: "_Ground", box: PixelBox, prep: PreparedAsset, sky: SkyOcclusion, sun_def: np.ndarray,
                 E_safe: np.ndarray) -> np.ndarray:
     """(3,) mean ratio on the ground under the object, solved in closed form (it closes the bounce model's loop)."""
@@ -253,6 +290,9 @@ def _foot_ratio(geo: "_Ground", box: PixelBox, prep: PreparedAsset, sky: SkyOccl
 
 
 FOOT_RATIO_FALLBACK = 0.15  # mean shadow ratio under a car when its footprint is not in view
+CONTACT_HEIGHT_M = 0.03  # vertices this close to the ground plane touch it
+CONTACT_BAND_M = 0.1  # ground this close to a contact gets full-resolution sky occlusion
+CONTACT_MAX_POINTS = 256
 SKY_REFINE_JUMP = 0.08  # sky-occlusion change (fraction of E) between neighbouring cells that asks for full resolution
 
 
@@ -270,7 +310,9 @@ class _Ground:
     def points_obj(self, uv: np.ndarray, depth_uv: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Object-frame ground points (N, 3) seen through pixel positions uv (N, 2), and which are valid (N,).
 
-        The depth is read at ``depth_uv`` (default: uv rounded), so sub-pixel positions share their pixel's depth.
+        The depth is read at ``depth_uv`` (default: uv rounded).  With ``depth_uv``, a sub-pixel position
+        lies on the ground-parallel plane through its pixel's point (a grazing ground pixel spans
+        decimetres in depth: sub-pixel samples must spread over them, not share the centre's depth).
         """
         H, W = self.depth.shape
         src = uv if depth_uv is None else depth_uv
@@ -282,7 +324,15 @@ class _Ground:
         with np.errstate(divide="ignore", invalid="ignore"):
             z_plane = (self.t @ self.n_cam) / denom
         z_plane = np.where((denom < -1e-9) & (z_plane > 0), z_plane, np.inf)  # rays going down hit the ground
-        z = np.where(np.isfinite(d) & (d > 0), d, z_plane)
+        known = np.isfinite(d) & (d > 0)
+        if depth_uv is not None and np.any(known):
+            # The pixel's point P0 (its depth along its centre ray), then the sub-pixel ray on the plane
+            # n . p = n . P0; kept at the pixel's depth where that plane is seen edge-on.
+            h0 = (self.camera.rays(np.asarray(depth_uv, dtype=np.float64), unit=False) @ self.n_cam) * np.where(known, d, 0.0)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                z_tan = h0 / denom
+            d = np.where(known & (denom < -1e-9) & (z_tan > 0) & (z_tan < 2.0 * d), z_tan, d)
+        z = np.where(known, d, z_plane)
         valid = np.isfinite(z)
         p_cam = rays * np.where(valid, z, 0.0)[:, None]
         return (p_cam - self.t) @ self.R, valid
@@ -367,6 +417,20 @@ def _sun_polygon_mask(geo: _Ground, box: PixelBox, light: DistantLight, prep: Pr
     return cv2.dilate(mask, np.ones((5, 5), np.uint8)) > 0
 
 
+def _shadow_edge_pixels(geo: _Ground, box: PixelBox, prep: PreparedAsset, s_obj: np.ndarray) -> np.ndarray | None:
+    """(h, w) bool over ``box``: pixels the edges of the object's triangles, projected along the sun
+    ``s_obj`` (3,) (object frame) onto the ground plane, cross (:func:`.footprint.edge_pixels`); None
+    when the projection reaches behind the camera."""
+    n = geo.n_obj
+    V = prep.asset.vertices
+    along = np.maximum(V @ n, 0.0) / max(float(s_obj @ n), 1e-6)
+    g_cam = (V - along[:, None] * s_obj[None]) @ geo.R.T + geo.t
+    if np.any(g_cam[:, 2] < 0.3):
+        return None
+    uv, _ = geo.camera.project(g_cam)
+    return edge_pixels(uv[prep.faces], box)
+
+
 def _sun_blocked(geo: _Ground, box: PixelBox, light: DistantLight, prep: PreparedAsset, settings: RenderSettings,
                  rng: np.random.Generator, stats: dict) -> np.ndarray:
     """(h, w) float32 fraction of the sun disc the object hides from each pixel's ground point.
@@ -392,10 +456,16 @@ def _sun_blocked(geo: _Ground, box: PixelBox, light: DistantLight, prep: Prepare
     hit0 = prep.scene.occluded(org, np.broadcast_to(s_obj, org.shape))
     stats["rays"]["shadow_sun"] = stats["rays"].get("shadow_sun", 0) + int(len(org))
     blocked[ys, xs] = hit0
-    # Edge pixels: the 3 x 3 neighbourhood is not uniform.
+    # Edge pixels: the 3 x 3 neighbourhood is not uniform, or the edge of a triangle's shadow crosses
+    # the pixel without the pixel being deep inside the shadow (thin parts: their shadow is thinner
+    # than a pixel and the centre rays miss most of it).
     b8 = blocked.astype(np.uint8)
     k3 = np.ones((3, 3), np.uint8)
-    edge = (cv2.dilate(b8, k3) != cv2.erode(b8, k3, borderType=cv2.BORDER_REPLICATE)) & mask
+    core = cv2.erode(b8, k3, borderType=cv2.BORDER_REPLICATE)
+    edge = (cv2.dilate(b8, k3) != core) & mask
+    crossed = _shadow_edge_pixels(geo, box, prep, s_obj)
+    if crossed is not None:
+        edge |= crossed & mask & (core == 0)
     ey, ex = np.nonzero(edge)
     ns = settings.shadow_sun_dirs
     if len(ey) and ns > 1:

@@ -37,6 +37,7 @@ class PreparedAsset:
         face_tangent, face_bitangent: (F, 3) unit dP/du and -dP/dv (glTF uv, v down) or None.
         base_color, emission: (M, 3) float64; metallic, roughness, specular, opacity, clearcoat: (M,).
         mean_albedo: area-weighted mean diffuse-plus-specular albedo (luminance) of the surface.
+        retroreflective: (M,) retro-reflective strength per material, or None when no material has any.
     """
 
     asset: Asset
@@ -54,6 +55,7 @@ class PreparedAsset:
     clearcoat: np.ndarray
     emission: np.ndarray
     mean_albedo: float
+    retroreflective: np.ndarray | None = None
 
     @property
     def materials(self) -> tuple[Material, ...]:
@@ -134,6 +136,7 @@ def _prepare(asset: Asset, backend: str) -> PreparedAsset:
     opacity = np.array([m.opacity for m in mats], dtype=np.float64)
     clearcoat = np.array([m.clearcoat for m in mats], dtype=np.float64)
     emission = np.array([np.asarray(m.emission, dtype=np.float64)[:3] for m in mats])
+    retro = np.array([float(getattr(m, "retroreflective", 0.0)) for m in mats], dtype=np.float64)
     fm = np.asarray(asset.face_material, dtype=np.int64)[keep]
     base_lum = luminance(base)
     albedo = (1 - metallic) * base_lum + (1 - metallic) * 0.08 * specular + metallic * base_lum
@@ -154,6 +157,7 @@ def _prepare(asset: Asset, backend: str) -> PreparedAsset:
         clearcoat=clearcoat,
         emission=emission,
         mean_albedo=mean_albedo,
+        retroreflective=retro if np.any(retro > 0) else None,
     )
 
 
@@ -233,7 +237,9 @@ def surface_at_hits(prep: PreparedAsset, face: np.ndarray, bary: np.ndarray, dir
     if np.any(fix):
         n_s[fix] += view[fix] * (0.02 - nv[fix])[:, None]
         n_s[fix] /= row_norm(n_s[fix])[:, None]
-    params = BRDFParams(base, np.clip(metallic, 0, 1), np.clip(rough, 0, 1), prep.specular[mid], prep.clearcoat[mid])
+    retro = None if prep.retroreflective is None else prep.retroreflective[mid]
+    params = BRDFParams(base, np.clip(metallic, 0, 1), np.clip(rough, 0, 1), prep.specular[mid], prep.clearcoat[mid],
+                        retro)
     return SurfaceHits(n_s, n_g, front, mid, params, prep.opacity[mid], prep.emission[mid])
 
 
