@@ -198,7 +198,9 @@ def standing_joints(b: Body, p: Pose) -> dict[str, np.ndarray]:
         ankle = knee + b.shin * sdir
         J[f"hip_{side}"], J[f"knee_{side}"], J[f"ankle_{side}"] = hipj, knee, ankle
         J[f"toe_{side}"] = np.array([1.0, 0.12 * s, 0.0]) / np.hypot(1.0, 0.12)
-        sh = pelvis + (b.shoulder_z - b.hip_z) * trunk + np.array([0.0, s * b.shoulder_half, 0.0])
+        # the shoulder joint sits a little below and inside the top of the shoulder
+        sh = (pelvis + (b.shoulder_z - b.hip_z - 0.022 * b.height) * trunk
+              + np.array([0.0, 0.94 * s * b.shoulder_half, 0.0]))
         adir = _limb_dir(p.shoulder[i], p.abduct, s)
         elbow = sh + b.upper_arm * adir
         fdir = _limb_dir(p.shoulder[i] + p.elbow[i], p.abduct * 0.6, s)
@@ -249,7 +251,7 @@ def riding_joints(b: Body, seat: np.ndarray, hands: np.ndarray, feet: np.ndarray
         knee = _two_bone(hipj, ankle, b.thigh, b.shin, np.array([1.0, 0.25 * s, 0.6]))
         ankle = knee + b.shin * (ankle - knee) / np.linalg.norm(ankle - knee)
         J[f"hip_{side}"], J[f"knee_{side}"], J[f"ankle_{side}"], J[f"toe_{side}"] = hipj, knee, ankle, toe
-        shj = pelvis + trunk_len * trunk + s * half
+        shj = pelvis + (trunk_len - 0.022 * b.height) * trunk + 0.94 * s * half
         wrist = hands[i] - np.array([0.02 * b.height, 0.0, 0.0])
         elbow = _two_bone(shj, wrist, b.upper_arm, b.forearm, np.array([-0.3, 0.6 * s, -1.0]))
         wrist = elbow + b.forearm * (wrist - elbow) / np.linalg.norm(wrist - elbow)
