@@ -541,7 +541,7 @@ def procedural_motorcycle(seed: int, wlh=None, variant: str | None = None) -> As
         Hr = h / 0.85
         bar_z = 1.0 + 0.06 * u[6] if not scooter else 0.98 + 0.06 * u[6]
         seat_z = 0.78 + 0.06 * u[7] if not scooter else 0.76 + 0.05 * u[7]
-        scale_v = min(1.0, (h - 0.2) / 1.25)
+        scale_v = float(np.clip((h - 0.2) / 1.25, 0.6, 1.1))  # a low box: a smaller bike under a smaller rider
         bar_z, seat_z = bar_z * scale_v, seat_z * scale_v
         mirror_z = bar_z + 0.2
         g = geometry(bar_z, seat_z, mirror_z)
