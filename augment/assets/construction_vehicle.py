@@ -92,7 +92,7 @@ def _excavator(rng: np.random.Generator, W: float, L: float, H: float) -> list:
     parts = []
     for s in (1.0, -1.0):
         y0, y1 = sorted((s * W / 2, s * (W / 2 - tt)))
-        parts.append(prism(stadium(xt - Lt / 2, xt + Lt / 2, 0.0, ht), "y", y0, y1, TYRE, smooth=True))
+        parts.append(prism(stadium(xt - Lt / 2, xt + Lt / 2, 0.0, ht, n_end=12), "y", y0, y1, TYRE, smooth=True))
         # idler / sprocket hubs on the inner side of each loop
         for xe in (xt - Lt / 2 + ht / 2, xt + Lt / 2 - ht / 2):
             yi = s * (W / 2 - tt)

@@ -300,7 +300,7 @@ def loft_x(xs, z_lo, z_hi, half_w, radius: float, mat=PAINT, regions: list[Regio
     """
     xs = np.asarray(xs, dtype=np.float64)
     lo, hi, hw = (np.broadcast_to(np.asarray(v, float), xs.shape) for v in (z_lo, z_hi, half_w))
-    # extra stations rounding the ends: inset d = e (1 - cos t) at x = end -/+ e (1 - sin t)
+    # extra stations rounding the ends: inset d = e (1 - cos t) at x = end +/- e sin t, t in (0, 90 deg]
     t = np.linspace(0.0, np.pi / 2, 4)[1:]
     e_rear, e_front = end_round
     st_x, st_lo, st_hi, st_hw, st_in = list(xs), list(lo), list(hi), list(hw), [0.0] * len(xs)
