@@ -180,6 +180,20 @@ def intrinsics_option(intrinsics: str | None, fov_deg: float | None, width: int,
     return intrinsics_from_fov(width, height, fov_deg)
 
 
+def _check_classes(ctx, param, value):
+    """--classes: comma-separated detection classes (clear error listing the valid ones)."""
+    if value is None:
+        return None
+    from streetaug.augment.assets.categories import DETECTION_CLASSES  # light: no meshes, no torch
+
+    names = [n.strip() for n in value.split(",") if n.strip()]
+    bad = [n for n in names if n not in DETECTION_CLASSES]
+    if not names or bad:
+        raise click.BadParameter(f"unknown class {bad[0] if bad else value!r}; valid classes: "
+                                 f"{', '.join(DETECTION_CLASSES)}", ctx, param)
+    return ",".join(names)
+
+
 def asset_options(func: Callable) -> Callable:
     options = [
         click.option("--asset", type=click.Path(dir_okay=False, path_type=Path),
@@ -191,6 +205,16 @@ def asset_options(func: Callable) -> Callable:
                      help="Axis the asset's front points along (the Kenney cars: -z)."),
         click.option("--asset-length", type=ASSET_LENGTH_RANGE,
                      help="Rescale the asset to this length in metres (0 < L <= 100)."),
+        click.option("--classes", default=None, callback=_check_classes, metavar="A,B,...",
+                     help="Detection classes to insert (car, truck, bus, trailer, construction_vehicle, pedestrian, "
+                          "motorcycle, bicycle, traffic_cone, barrier); procedural, or the --assets files of those "
+                          "classes. Default: cars."),
+        click.option("--class-weights", default=None, metavar="W,W,... | NAME=W,...",
+                     help="Weights of --classes (same order, or name=weight; unlisted 1), e.g. "
+                          "construction_vehicle=4 to oversample. Alone: every class."),
+        click.option("--class-rules", type=click.Path(dir_okay=False, exists=True, path_type=Path), default=None,
+                     help="JSON file overriding the per-class placement rules (schema streetaug.class_rules/1; "
+                          "see placement/class_rules.json)."),
     ]
     for option in reversed(options):
         func = option(func)

@@ -138,8 +138,8 @@ def predict_light(dataroot, version, scene, sample_token, camera, image, fov_deg
 @click.option("--debug", is_flag=True, help="Also write mask.png and shadow.exr; show tracebacks.")
 @limit_options
 @runtime_errors
-def insert(dataroot, version, scene, sample_token, camera, asset, assets_dir, asset_front, asset_length,
-           quality, seed, ev, match_camera, level, n_objects, yaw_sigma, image, intrinsics, depth, envmap, pose_camera, out, explain,
+def insert(dataroot, version, scene, sample_token, camera, asset, assets_dir, asset_front, asset_length, classes,
+           class_weights, class_rules, quality, seed, ev, match_camera, level, n_objects, yaw_sigma, image, intrinsics, depth, envmap, pose_camera, out, explain,
            debug):
     """Insert a car into one image; write image.png|jpg and labels.json.
 
@@ -157,8 +157,11 @@ def insert(dataroot, version, scene, sample_token, camera, asset, assets_dir, as
     from streetaug.augment.pipeline import (InsertOptions, check_image_input, insert_image_to_files,
                                             insert_view_to_files, item_seed)
 
+    from streetaug.augment.assets.classes import ClassMix
+
+    class_mix = ClassMix.parse(classes, class_weights)
     options = InsertOptions(quality=quality, level=level, seed=seed, n_objects=n_objects, yaw_sigma_deg=yaw_sigma, ev=ev,
-                            match_camera=match_camera)
+                            match_camera=match_camera, class_rules=str(class_rules) if class_rules else None)
     if image is not None:
         missing = [n for n, v in [("--intrinsics", intrinsics), ("--depth", depth), ("--envmap", envmap),
                                   ("--asset", asset), ("--pose-camera", pose_camera)] if v is None]
@@ -178,7 +181,7 @@ def insert(dataroot, version, scene, sample_token, camera, asset, assets_dir, as
         sample = reader.sample(resolve_sample(reader, scene, sample_token))
         view = camera_view(sample, camera)
         assets = select_assets(item_seed(seed, "asset", sample.token, camera), n_objects, asset, assets_dir,
-                               asset_front, asset_length)
+                               asset_front, asset_length, class_mix)
         result, path = insert_view_to_files(sample, view, assets, options, out, debug, explain)
     if result.skipped_reason:
         click.echo(f"no object inserted: {result.skipped_reason} (image copied unchanged to {path})")

@@ -30,7 +30,7 @@ from .class_rules import ClassRule, ClassRules, read_class_rules
 from .config import PlacementConfig
 from .drivable import MAP_SOURCES, DrivableArea
 from .place import OFF_ROAD_ZONES, Placement
-from .zones import ROAD_EDGE_BAND_M, SurfaceZones, surface_zones
+from .zones import CLUSTER_TAPER_M, ROAD_EDGE_BAND_M, SurfaceZones, surface_zones
 
 AUDITED_RULES = ("surface", "distance", "annotated_boxes", "lidar_obstacles", "lidarseg", "in_view",
                  "corners_unoccluded", "mutual_collision")
@@ -102,7 +102,8 @@ def _surface_ok(p: Placement, hull, rule: ClassRule, road, area: DrivableArea, z
     else:
         d_centre = float(zones.signed_distance(p.box.center[None, :2])[0])
     if p.zone == "road_edge":
-        return ROAD_EDGE_BAND_M[0] - tol <= d_centre <= ROAD_EDGE_BAND_M[1] + tol
+        taper = CLUSTER_TAPER_M if p.cluster_of >= 0 else 0.0
+        return ROAD_EDGE_BAND_M[0] - tol <= d_centre <= ROAD_EDGE_BAND_M[1] + taper + tol
     if p.zone == "sidewalk":
         if road is not None:
             if road.intersects(hull) or hull.distance(road) < rule.sidewalk_band_m[0] - 1e-3:

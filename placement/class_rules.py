@@ -19,6 +19,7 @@ from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
 
+from streetaug.augment.assets.categories import DETECTION_CLASSES
 from streetaug.augment.core import InputError
 
 from .config import PlacementConfig
@@ -26,8 +27,6 @@ from .config import PlacementConfig
 CLASS_RULES_PATH = Path(__file__).with_name("class_rules.json")
 SCHEMA = "streetaug.class_rules/1"
 
-DETECTION_CLASSES = ("car", "truck", "bus", "trailer", "construction_vehicle", "pedestrian", "motorcycle",
-                     "bicycle", "traffic_cone", "barrier")
 ZONES = ("lane", "kerb", "road_edge", "sidewalk", "crossing")
 HEADINGS = ("lane", "path", "across", "random")
 ATTRIBUTE_MODES = ("vehicle", "parked", "asset", "none")

@@ -223,7 +223,7 @@ def check_stood(scene: PlacementScene, stood: StoodCandidates, wlh: np.ndarray, 
     cfg, camera, idx = config, scene.camera, stood.index
     k = np.arange(len(idx))
     rect = stood.footprints_xy
-    in_zone = scene.zones.footprints_in(zone, rect[k], rule)
+    in_zone = scene.zones.footprints_in(zone, rect[k], rule, member=skip_mutual is not None)
     if zone in OFF_ROAD_ZONES:  # off the road the ground must be measured, not assumed
         in_zone &= np.array([p.source != "ego-plane" for p in stood.planes], dtype=bool)
     k = tally.keep("surface", idx, k, in_zone)
@@ -372,8 +372,8 @@ def cluster_members(scene: PlacementScene, leader: Placement, leader_index: int,
                     report: dict[str, int]) -> list[Placement]:
     """The other members of ``leader``'s cluster: a line along the road, each checked by every rule.
 
-    Draws the size, gap, taper and direction (forward or back along the road) from ``rng``; the line stops at
-    the first member that fails a rule. Members use the leader's object (``asset_index``) and heading noise.
+    Draws the size, gap, taper and direction (forward or back along the road) from ``rng``; the line grows
+    that way until a member fails a rule, then the other way from the first member. Members use the leader's object (``asset_index``) and heading noise.
     """
     c = rule.cluster
     n = int(rng.integers(c.size[0], c.size[1] + 1))
@@ -386,11 +386,10 @@ def cluster_members(scene: PlacementScene, leader: Placement, leader_index: int,
     config = rule.config(scene.config)
     wlh = np.asarray(obj.wlh, dtype=np.float64)
     lx = leader.T_global_from_object[:2, 0]
-    road_dir = lx / max(np.linalg.norm(lx), 1e-9)
-    if rule.heading == "across":
-        road_dir = np.array([-road_dir[1], road_dir[0]])
+    road_dir = scene.zones.edge_tangent(leader.box.center[None, :2])[0]  # along the road's edge
     if scene.lanes is not None:
-        lane_heading, on_lane = scene.lanes.heading_at(leader.box.center[None, :2], scene.config.lane_max_distance_m)
+        lane_heading, on_lane = scene.lanes.heading_at(leader.box.center[None, :2],
+                                                       scene.config.lane_max_distance_m + 4.0)
         if on_lane[0]:
             road_dir = np.array([np.cos(lane_heading[0]), np.sin(lane_heading[0])])
     ux = lx / max(np.linalg.norm(lx), 1e-9)  # the leader's x (front) in x/y
@@ -401,11 +400,18 @@ def cluster_members(scene: PlacementScene, leader: Placement, leader_index: int,
     yaw0 = float(np.arctan2(lx[1], lx[0]))
     members: list[Placement] = []
     mates = [leader_index]
-    for k in range(1, n):
-        along = sign * k * step + 0.05 * jitter[k - 1, 0]
-        xy = leader.box.center[:2] + along * road_dir + (abs(along) * np.tan(taper) + 0.03 * jitter[k - 1, 1]) * inward
-        yaw = yaw0 + np.radians(config.yaw_sigma_deg) * jitter[k - 1, 2] if rule.heading != "random" else \
-            float(np.mod(yaw0 + 2.4 * k, 2 * np.pi))
+    steps = [(sign, k) for k in range(1, n)] + [(-sign, k) for k in range(1, n)]  # forward, then back
+    failed_side = set()
+    for i, (side, k) in enumerate(steps):
+        if len(members) >= n - 1:
+            break
+        if side in failed_side:
+            continue
+        along = side * k * step + 0.05 * jitter[len(members), 0]
+        xy = leader.box.center[:2] + along * road_dir + (abs(along) * np.tan(taper) + 0.03 * jitter[len(members), 1]) \
+            * inward
+        yaw = yaw0 + np.radians(config.yaw_sigma_deg) * jitter[len(members), 2] if rule.heading != "random" else \
+            float(np.mod(yaw0 + 2.4 * (i + 1), 2 * np.pi))
         w, l, _ = wlh
         cands = Candidates(xy[None], np.array([yaw]), np.zeros(1, bool), footprint_corners(xy[None], np.array([yaw]), l, w))
         tally = RuleTally(1, report)
@@ -414,7 +420,8 @@ def cluster_members(scene: PlacementScene, leader: Placement, leader_index: int,
         skip[mates] = True
         survivors = check_stood(scene, stood, wlh, placed, tally, rule, leader.zone, config, skip_mutual=skip)
         if not len(survivors.alive):
-            break
+            failed_side.add(side)  # the line ends on this side
+            continue
         p = make_placement(scene, leader.asset_index, obj, wlh, cands, stood, 0, survivors.visible_fraction[0],
                            rule, leader.zone, cluster_of=leader_index)
         members.append(p)

@@ -6,8 +6,8 @@ Everything is measured against the drivable area (:class:`DrivableArea`) with a 
 * ``lane``: the footprint grown by the class's ``lane_margin_m`` is on the road.
 * ``kerb``: the footprint is on the road, within ``kerb_distance_m`` of its edge (parked).
 * ``road_edge``: the footprint's centre has ``s`` in ``ROAD_EDGE_BAND_M`` (straddling the edge; partly on the road).
-* ``sidewalk``: the footprint is off the road and on a map ``walkway`` when the map has that layer, else on
-  lidarseg ``flat.sidewalk`` cells when the sweep is labelled, else in the band ``sidewalk_band_m`` off the
+* ``sidewalk``: the footprint is off the road and on a map ``walkway`` when the map has that layer, else where the
+  nearest static lidarseg point is ``flat.sidewalk`` when the sweep is labelled, else in the band ``sidewalk_band_m`` off the
   road's edge (what a kerb-side pavement usually is; the LiDAR obstacle rule keeps walls and poles out).
 * ``crossing``: the footprint is on a map ``ped_crossing``.
 
@@ -25,7 +25,9 @@ import numpy as np
 import shapely
 
 from streetaug.augment.core import check_shape
-from streetaug.datasets.nuscenes_format import LIDARSEG_SIDEWALK
+from scipy.spatial import cKDTree
+
+from streetaug.datasets.nuscenes_format import CATEGORY_NAMES, LIDARSEG_SIDEWALK
 from streetaug.datasets.sample import CameraView, Sample
 
 from .class_rules import ClassRule
@@ -33,7 +35,8 @@ from .config import PlacementConfig
 from .drivable import DrivableArea
 
 ROAD_EDGE_BAND_M = (-0.6, 1.0)  # centre's signed distance to the road edge of the road_edge zone
-_GRID_RES_M = 0.25
+CLUSTER_TAPER_M = 2.0  # members of a line (a work zone's taper) may reach this much farther into the road
+LIDARSEG_STATIC = tuple(i for i, n in enumerate(CATEGORY_NAMES) if n.startswith(("flat.", "static.")))
 
 
 def grow_footprints(corners_xy: np.ndarray, margin_m: float) -> np.ndarray:
@@ -59,16 +62,15 @@ class SurfaceZones:
         drivable: the road.
         walkway: the map's walkway polygons near the camera, or None.
         crossings: the map's pedestrian crossings near the camera, or None.
-        sidewalk_cells: (H, W) bool lidarseg ``flat.sidewalk`` grid on the drivable area's grid frame
-            (``sidewalk_origin_xy``, 0.25 m cells), or None.
+        sidewalk_cells: the lidarseg evidence of sidewalks, or None: a :class:`LabelledGround` whose
+            nearest-label test says whether a place is sidewalk.
         kerb_distance_m: the kerb zone's width.
     """
 
     drivable: DrivableArea
     walkway: shapely.Geometry | None = None
     crossings: shapely.Geometry | None = None
-    sidewalk_cells: np.ndarray | None = None
-    sidewalk_origin_xy: np.ndarray | None = None
+    sidewalk_cells: "LabelledGround | None" = None
     kerb_distance_m: float = 1.0
 
     @property
@@ -117,13 +119,8 @@ class SurfaceZones:
         return out
 
     def on_sidewalk_cells(self, xy: np.ndarray) -> np.ndarray:
-        """(N,) bool: global x/y points (N, 2) on lidarseg sidewalk cells."""
-        rel = np.floor((np.asarray(xy, float).reshape(-1, 2) - self.sidewalk_origin_xy) / _GRID_RES_M).astype(np.int64)
-        H, W = self.sidewalk_cells.shape
-        ok = (rel[:, 0] >= 0) & (rel[:, 0] < W) & (rel[:, 1] >= 0) & (rel[:, 1] < H)
-        out = np.zeros(len(rel), dtype=bool)
-        out[ok] = self.sidewalk_cells[rel[ok, 1], rel[ok, 0]]
-        return out
+        """(N,) bool: global x/y points (N, 2) the lidarseg evidence calls sidewalk (:class:`LabelledGround`)."""
+        return self.sidewalk_cells.is_sidewalk(xy)
 
     def road_normal(self, xy: np.ndarray, step_m: float = 0.5) -> np.ndarray:
         """(N, 2) unit direction in which the signed distance grows (towards the road's inside) at points (N, 2)."""
@@ -132,6 +129,11 @@ class SurfaceZones:
         gy = self.signed_distance(xy + [0, step_m]) - self.signed_distance(xy - [0, step_m])
         g = np.c_[gx, gy]
         return g / np.maximum(np.linalg.norm(g, axis=1, keepdims=True), 1e-9)
+
+    def edge_tangent(self, xy: np.ndarray) -> np.ndarray:
+        """(N, 2) unit direction along the road's edge at points (N, 2) (the road normal turned by 90 deg)."""
+        n = self.road_normal(xy)
+        return np.c_[-n[:, 1], n[:, 0]]
 
     # ------------------------------------------------------------------ zone tests
     def plausible_centres(self, zone: str, xy: np.ndarray, wlh: np.ndarray, rule: ClassRule) -> np.ndarray:
@@ -155,8 +157,12 @@ class SurfaceZones:
             return shapely.contains_xy(self.crossings, xy[:, 0], xy[:, 1])
         raise ValueError(f"unknown zone {zone!r}")
 
-    def footprints_in(self, zone: str, corners_xy: np.ndarray, rule: ClassRule) -> np.ndarray:
-        """(N,) bool: whether each footprint (N, 4, 2) lies in ``zone`` as the module docstring defines it."""
+    def footprints_in(self, zone: str, corners_xy: np.ndarray, rule: ClassRule, member: bool = False) -> np.ndarray:
+        """(N,) bool: whether each footprint (N, 4, 2) lies in ``zone`` as the module docstring defines it.
+
+        ``member``: the footprints are later members of a cluster, whose ``road_edge`` band reaches
+        ``CLUSTER_TAPER_M`` farther into the road (a taper of cones closing a lane).
+        """
         corners_xy = np.asarray(corners_xy, dtype=np.float64)
         check_shape(corners_xy, ("N", 4, 2), "corners_xy")
         N = len(corners_xy)
@@ -170,13 +176,13 @@ class SurfaceZones:
             return area.contains_footprints(corners_xy) & (area.edge_distance(corners_xy) <= self.kerb_distance_m)
         if zone == "road_edge":
             s = self.signed_distance(centre)
-            return (s >= ROAD_EDGE_BAND_M[0]) & (s <= ROAD_EDGE_BAND_M[1])
+            return (s >= ROAD_EDGE_BAND_M[0]) & (s <= ROAD_EDGE_BAND_M[1] + (CLUSTER_TAPER_M if member else 0.0))
         pts = np.concatenate([corners_xy, centre[:, None]], axis=1).reshape(-1, 2)  # (N * 5, 2)
         if zone == "sidewalk":
             s = self.signed_distance(pts).reshape(N, 5)
             ok = np.all(s <= -rule.sidewalk_band_m[0], axis=1)
-            if area.region is not None:
-                ok &= ~shapely.intersects(shapely.polygons(corners_xy), area.region)
+            if area.region is not None:  # the whole footprint, edges included, keeps the band's near side
+                ok &= shapely.distance(shapely.polygons(corners_xy), area.region) >= rule.sidewalk_band_m[0]
             if self.walkway is not None:
                 return ok & shapely.contains_xy(self.walkway, pts[:, 0], pts[:, 1]).reshape(N, 5).all(axis=1)
             if self.sidewalk_cells is not None:
@@ -203,32 +209,52 @@ def _near(polygons, center_xy: np.ndarray, roi_m: float) -> shapely.Geometry | N
     return region
 
 
-def _sidewalk_cells(sample: Sample, center_xy: np.ndarray, roi_m: float) -> tuple[np.ndarray, np.ndarray] | None:
+SIDEWALK_REACH_M = 2.5  # a place is sidewalk when its nearest static lidarseg point is, within this distance
+
+
+@dataclass(frozen=True, eq=False)
+class LabelledGround:
+    """The static lidarseg points (``flat.*``, ``static.*``) around a camera, for a nearest-label test.
+
+    A place is sidewalk when its nearest such point (x/y) is ``flat.sidewalk`` and closer than
+    ``SIDEWALK_REACH_M``: the sparse far rings leave metres between points, which a cell grid would call holes.
+
+    Attributes:
+        xy: (P, 2) global x/y of the points; ``is_sidewalk_point`` (P,) bool.
+    """
+
+    xy: np.ndarray
+    is_sidewalk_point: np.ndarray
+
+    @functools.cached_property
+    def _tree(self) -> cKDTree:
+        return cKDTree(self.xy)
+
+    def is_sidewalk(self, xy: np.ndarray) -> np.ndarray:
+        """(N,) bool for global x/y points (N, 2)."""
+        d, i = self._tree.query(np.asarray(xy, dtype=np.float64).reshape(-1, 2))
+        return (d <= SIDEWALK_REACH_M) & self.is_sidewalk_point[np.minimum(i, len(self.xy) - 1)]
+
+
+def _sidewalk_cells(sample: Sample, center_xy: np.ndarray, roi_m: float) -> LabelledGround | None:
     lidar = sample.lidar
     if lidar is None or lidar.labels is None:
         return None
-    xy = lidar.points_global[lidar.labels == LIDARSEG_SIDEWALK, :2]
-    xy = xy[np.linalg.norm(xy - center_xy, axis=1) <= roi_m]
-    if len(xy) < 20:
+    static = np.isin(lidar.labels, LIDARSEG_STATIC)
+    xy = lidar.points_global[static, :2]
+    near = np.linalg.norm(xy - center_xy, axis=1) <= roi_m
+    sidewalk = lidar.labels[static][near] == LIDARSEG_SIDEWALK
+    if sidewalk.sum() < 20:
         return None
-    origin = center_xy - roi_m
-    n = int(np.ceil(2 * roi_m / _GRID_RES_M))
-    cells = np.floor((xy - origin) / _GRID_RES_M).astype(np.int64)
-    grid = np.zeros((n, n), np.uint8)
-    grid[cells[:, 1], cells[:, 0]] = 1
-    k = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (7, 7))  # sparse far rings: close ~0.75 m gaps
-    grid = cv2.morphologyEx(grid, cv2.MORPH_CLOSE, k)
-    return grid.astype(bool), origin
+    return LabelledGround(xy[near], sidewalk)
 
 
 def surface_zones(sample: Sample, view: CameraView, drivable: DrivableArea, config: PlacementConfig) -> SurfaceZones:
     """The zones around ``view``'s camera: ``drivable`` with the map's walkways and crossings, lidarseg sidewalks."""
     cam_xy = view.T_global_from_cam[:2, 3]
-    cells = _sidewalk_cells(sample, cam_xy, config.map_roi_m)
     return SurfaceZones(drivable, _near(list(sample.walkways_global), cam_xy, config.map_roi_m),
                         _near(list(sample.ped_crossings_global), cam_xy, config.map_roi_m),
-                        None if cells is None else cells[0], None if cells is None else cells[1],
-                        config.kerb_distance_m)
+                        _sidewalk_cells(sample, cam_xy, config.map_roi_m), config.kerb_distance_m)
 
 
-__all__ = ["ROAD_EDGE_BAND_M", "SurfaceZones", "grow_footprints", "surface_zones"]
+__all__ = ["CLUSTER_TAPER_M", "LabelledGround", "SIDEWALK_REACH_M", "ROAD_EDGE_BAND_M", "SurfaceZones", "grow_footprints", "surface_zones"]

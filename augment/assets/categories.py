@@ -31,6 +31,10 @@ NUSCENES_OBJECT_CATEGORIES = (
     "vehicle.truck",
 )
 
+# The nuScenes detection benchmark's ten classes (what detectors are scored on; each groups some categories).
+DETECTION_CLASSES = ("car", "truck", "bus", "trailer", "construction_vehicle", "pedestrian", "motorcycle",
+                     "bicycle", "traffic_cone", "barrier")
+
 
 @lru_cache(maxsize=32)
 def _read_mapping(path: str, mtime_ns: int) -> tuple[tuple[tuple[str, str], ...], str | None]:

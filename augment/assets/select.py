@@ -1,4 +1,9 @@
-"""Choose the assets for an insertion from the CLI options: one file, a folder, or procedural cars."""
+"""Choose the assets for an insertion from the CLI options: one file, a folder, or procedural objects.
+
+Without a class mix (``--classes`` / ``--class-weights``) procedural objects are cars, as they always were;
+with one, each object's class is drawn by weight and built by :func:`~.classes.procedural_object`, or drawn
+from the folder's files of that class (their categories from :func:`~.categories.category_for_asset`).
+"""
 
 from __future__ import annotations
 
@@ -7,7 +12,10 @@ from pathlib import Path
 
 import numpy as np
 
+from ..core import InputError
 from .asset import Asset
+from .categories import category_for_asset
+from .classes import CLASS_CATEGORIES, ClassMix, procedural_object
 from .loader import list_assets, load_asset
 from .procedural import procedural_car
 
@@ -25,6 +33,23 @@ def _procedural(seed: int) -> Asset:
     return procedural_car(seed)
 
 
+@lru_cache(maxsize=256)
+def _procedural_of(detection_class: str, seed: int) -> Asset:
+    return procedural_object(detection_class, seed)
+
+
+CATEGORY_CLASS = {category: name for name, options in CLASS_CATEGORIES.items() for category, _, _ in options}
+
+
+def _files_by_class(assets_dir: str | Path) -> dict[str, list[Path]]:
+    out: dict[str, list[Path]] = {}
+    for f in list_assets(assets_dir):
+        name = CATEGORY_CLASS.get(category_for_asset(f))
+        if name is not None:
+            out.setdefault(name, []).append(f)
+    return out
+
+
 def select_assets(
     rng: np.random.Generator,
     n_objects: int,
@@ -32,8 +57,9 @@ def select_assets(
     assets_dir: str | Path | None = None,
     asset_front: str = "+z",
     asset_length: float | None = None,
+    class_mix: ClassMix | None = None,
 ) -> list[Asset]:
-    """``n_objects`` assets: the file ``asset`` repeated, random files of ``assets_dir``, or procedural cars.
+    """``n_objects`` assets: the file ``asset`` repeated, random files of ``assets_dir``, or procedural objects.
 
     Args:
         rng: seeded generator (deterministic choice per item).
@@ -41,13 +67,30 @@ def select_assets(
         asset: one asset file (wins over ``assets_dir``).
         assets_dir: a folder of asset files to sample from (uniformly, with replacement).
         asset_front, asset_length: loader options for files (see :func:`load_asset`).
+        class_mix: the classes to draw from (None: procedural cars, or any file of the folder). With a folder,
+            only classes that have files can be drawn (an error names the classes without any).
     """
     if n_objects < 1:
         raise ValueError(f"n_objects must be >= 1, got {n_objects}")
     if asset is not None:
         return [load_asset_options(asset, asset_front, asset_length)] * n_objects
+    if assets_dir is not None and class_mix is not None:
+        by_class = _files_by_class(assets_dir)
+        missing = [c for c, w in zip(class_mix.classes, class_mix.weights) if w > 0 and c not in by_class]
+        if missing:
+            raise InputError(f"{assets_dir}: no asset file of class(es) {', '.join(missing)} (file categories come "
+                             f"from their names or the folder's categories.json); classes with files: "
+                             f"{', '.join(sorted(by_class)) or 'none'}")
+        out = []
+        for name in class_mix.draw(rng, n_objects):
+            files = by_class[name]
+            out.append(load_asset_options(files[int(rng.integers(0, len(files)))], asset_front, asset_length))
+        return out
     if assets_dir is not None:
         files = list_assets(assets_dir)
         picks = rng.integers(0, len(files), size=n_objects)
         return [load_asset_options(files[int(i)], asset_front, asset_length) for i in picks]
+    if class_mix is not None:
+        names = class_mix.draw(rng, n_objects)
+        return [_procedural_of(name, int(s)) for name, s in zip(names, rng.integers(0, _SEED_RANGE, size=n_objects))]
     return [_procedural(int(s)) for s in rng.integers(0, _SEED_RANGE, size=n_objects)]

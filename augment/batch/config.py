@@ -12,7 +12,7 @@ from ..core import InputError, write_json_atomic
 CONFIG_FILE = "batch_config.json"
 CONFIG_SCHEMA = "streetaug.batch/1"
 # Fields added after the schema's first release: a batch_config.json without them means their default.
-OPTIONAL_FIELDS = {"limit", "match_camera", "tracks", "sweeps"}
+OPTIONAL_FIELDS = {"limit", "match_camera", "tracks", "sweeps", "classes", "class_weights", "class_rules"}
 # Fields that may change between runs into the same output folder (everything else must match to resume).
 _MAY_CHANGE = ("limit",)
 
@@ -39,6 +39,8 @@ class BatchConfig:
             rendered into every camera of every keyframe that sees it (``n_objects`` is then not used).
         sweeps: with ``tracks``, also render them into the camera and LiDAR sweeps between keyframes (poses
             interpolated at each sweep's time); a dataset without sweep files skips them with one reason.
+        classes, class_weights: the class mix (``--classes``, ``--class-weights``; :class:`ClassMix`), None = cars.
+        class_rules: absolute path of a class-rules file overriding the built-in placement rules, or None.
     """
 
     dataroot: str
@@ -58,6 +60,16 @@ class BatchConfig:
     asset_length: float | None = None
     tracks: int = 0
     sweeps: bool = False
+    classes: str | None = None
+    class_weights: str | None = None
+    class_rules: str | None = None
+
+    @property
+    def class_mix(self):
+        """The :class:`~streetaug.augment.assets.classes.ClassMix` of ``classes`` / ``class_weights`` (None = cars)."""
+        from ..assets.classes import ClassMix  # deferred: the procedural generators
+
+        return ClassMix.parse(self.classes, self.class_weights)
 
     def __post_init__(self) -> None:
         if self.tracks < 0:

@@ -22,7 +22,8 @@ from .write import plan_rows, with_file_checks, write_camera, write_lidar
 def insert_options(config: BatchConfig) -> InsertOptions:
     """The insertion options of a batch."""
     return InsertOptions(quality=config.quality, level=config.level, seed=config.seed,
-                         yaw_sigma_deg=config.yaw_sigma_deg, ev=config.ev, match_camera=config.match_camera)
+                         yaw_sigma_deg=config.yaw_sigma_deg, ev=config.ev, match_camera=config.match_camera,
+                         class_rules=config.class_rules)
 
 
 def readable_views(sample: Sample, cameras: list[str], fail_fast: bool = False
@@ -68,8 +69,9 @@ def augment_sample(reader: NuScenesReader, config: BatchConfig, out_dir: Path, t
     t0 = time.perf_counter()
     sample = reader.sample(token)
     views, failed = readable_views_and_failures(sample, token, cameras, fail_fast)
+    mix = config.class_mix
     assets = {v.channel: select_assets(item_seed(config.seed, "asset", token, v.channel), config.n_objects,
-                                       config.asset, config.assets_dir, config.asset_front, config.asset_length)
+                                       config.asset, config.assets_dir, config.asset_front, config.asset_length, mix)
               for v in views}
     options = insert_options(config)
     load_s = time.perf_counter() - t0

@@ -46,6 +46,7 @@ def summarize(rows: list[LogRow], this_run: dict | None = None) -> dict:
             w["peak_rss_mb"] = max(w["peak_rss_mb"], float(r.peak_rss_mb or 0.0))
     objects = [o for r in rows if r.done for o in r.objects or ()]
     return {
+        **per_class(rows, objects),
         "schema": SUMMARY_SCHEMA,
         "counts": {k: counts[k] for k in sorted(counts)},
         "images": len(rows),
@@ -60,6 +61,18 @@ def summarize(rows: list[LogRow], this_run: dict | None = None) -> dict:
         "workers": workers,
         "this_run": this_run or {},
     }
+
+
+def per_class(rows: list[LogRow], objects: list) -> dict:
+    """``objects_per_category`` (nuScenes category -> objects inserted) and ``classes_not_placed`` (detection
+    class -> the most common reasons an object of it found no place, with counts)."""
+    per_category = Counter(o.category for o in objects)
+    not_placed: dict[str, Counter] = {}
+    for r in rows:
+        for name, why in (r.class_reasons or {}).items():
+            not_placed.setdefault(name, Counter())[reason_key("", why)] += 1
+    return {"objects_per_category": dict(sorted(per_category.items())),
+            "classes_not_placed": {k: dict(v.most_common(3)) for k, v in sorted(not_placed.items())}}
 
 
 def _stage_order(stage: str) -> tuple[int, str]:
@@ -82,6 +95,12 @@ def format_summary(summary: dict) -> str:
                      + f"; {run.get('resumed_samples', 0)} samples already done")
     for i, (key, n) in enumerate(list(summary.get("reasons", {}).items())[:6]):
         lines.append(("  reasons:  " if i == 0 else "            ") + f"{n:4d}  {key}")
+    per_category = summary.get("objects_per_category") or {}
+    if len(per_category) > 1 or summary.get("classes_not_placed"):
+        lines.append("  per class: " + ", ".join(f"{k} {n}" for k, n in per_category.items()))
+        for name, reasons in summary.get("classes_not_placed", {}).items():
+            key, n = next(iter(reasons.items()))
+            lines.append(f"  not placed: {name} in {sum(reasons.values())} view(s), e.g. {key}")
     if summary.get("lighting"):
         lines.append("  lighting: " + ", ".join(f"{k} ({n})" for k, n in summary["lighting"].items()))
     stages = summary.get("stage_seconds", {})

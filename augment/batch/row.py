@@ -139,6 +139,7 @@ class LogRow:
         sweep_files: ``--sweeps``: sweep ``sample_data`` token -> its new file, for the sweeps before this
             sample of this camera (the LiDAR sweeps on every camera row of the sample); also in ``files``.
         sweeps_note: ``--sweeps``: why this sample's sweeps were not rendered (e.g. their files are absent).
+        class_reasons: detection class -> why an object of it drawn for this camera's view was not placed.
         extra: keys this version does not know (kept on rewriting).
     """
 
@@ -162,6 +163,7 @@ class LogRow:
     file_checks: dict[str, dict[str, Any]] | None = None
     sweep_files: dict[str, str] | None = None
     sweeps_note: str | None = None
+    class_reasons: dict[str, str] | None = None
     extra: dict[str, Any] = field(default_factory=dict)
 
     @property
@@ -188,6 +190,7 @@ class LogRow:
             "worker": self.worker, "peak_rss_mb": self.peak_rss_mb,
             "file_checks": None if self.file_checks is None else {k: dict(v) for k, v in self.file_checks.items()},
             "sweep_files": None if self.sweep_files is None else dict(self.sweep_files), "sweeps_note": self.sweeps_note,
+            "class_reasons": dict(self.class_reasons) if self.class_reasons else None,
         }
         doc = _drop_none(doc)
         if self.status in ("planned", "no_placement"):
@@ -210,5 +213,6 @@ class LogRow:
             seconds=doc.get("seconds"), cpu_s=doc.get("cpu_s"), worker=doc.get("worker"),
             peak_rss_mb=doc.get("peak_rss_mb"), file_checks=doc.get("file_checks"),
             sweep_files=doc.get("sweep_files"), sweeps_note=doc.get("sweeps_note"),
+            class_reasons=doc.get("class_reasons"),
             extra={k: v for k, v in doc.items() if k not in known},
         )

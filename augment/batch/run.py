@@ -110,9 +110,21 @@ def planned_outputs(reader: NuScenesReader, tokens: list[str], cameras: tuple[st
 
 def check_assets(config: BatchConfig) -> None:
     """Load ``--asset`` or every asset of ``--assets`` once before any work, so that a broken file stops the
-    batch at once with its name (instead of failing every image that drew it)."""
+    batch at once with its name (instead of failing every image that drew it); likewise the class mix and
+    class rules, and, with both a folder and a class mix, that every weighted class has a file."""
+    from streetaug.placement.class_rules import read_class_rules
+
+    mix = config.class_mix
+    read_class_rules(config.class_rules)
     if config.asset is None and config.assets_dir is None:
         return
+    if mix is not None and config.assets_dir is not None:
+        import numpy as np
+
+        from ..assets.select import select_assets
+
+        select_assets(np.random.default_rng(0), 1, None, config.assets_dir, config.asset_front, config.asset_length,
+                      mix)
     from ..assets.loader import list_assets  # deferred: trimesh and scipy, only when assets are given
     from ..assets.select import load_asset_options
 

@@ -82,9 +82,11 @@ def write_camera(out_dir: Path, sample: Sample, camera: str, result: SampleInser
     timing = {**r.timing_s, **shared_s}
     lighting = None if r.lighting is None else LoggedLighting(
         r.lighting.level, r.lighting.sun_source, round(float(r.lighting.sun_visibility), 3))
+    placed = result.placement_results.get(camera)
+    class_reasons = dict(placed.class_reasons) if placed is not None and placed.class_reasons else None
     row = LogRow(sample.token, camera, "skipped", r.skipped_reason or "image unchanged", timing_s=timing, files=files,
                  sample_data_token=view.sample_data_token, objects=logged_objects(result, camera, lidar), lidar=lidar,
-                 lighting=lighting)
+                 lighting=lighting, class_reasons=class_reasons)
     if np.array_equal(r.image, view.image):
         return row
     t = time.perf_counter()
@@ -100,7 +102,7 @@ def write_camera(out_dir: Path, sample: Sample, camera: str, result: SampleInser
     timing["write"] = time.perf_counter() - t
     return LogRow(sample.token, camera, "ok", "", timing_s=timing, files=(image_rel, labels_rel, *files),
                   image=image_rel, sample_data_token=view.sample_data_token, objects=row.objects, lidar=lidar,
-                  lighting=lighting, n_objects_visible=len(r.objects))
+                  lighting=lighting, n_objects_visible=len(r.objects), class_reasons=class_reasons)
 
 
 def with_file_checks(out_dir: Path, rows: list[LogRow]) -> list[LogRow]:
@@ -128,5 +130,6 @@ def plan_rows(token: str, cameras: list[str], placed: SamplePlacement) -> list[L
         reason = "" if objects else (res.reason if res is not None else f"camera {camera} not in this sample")
         rows.append(LogRow(token, camera, "planned" if objects else "no_placement", reason,
                            timing_s={"placement": placed.seconds.get(camera, 0.0)}, objects=objects,
-                           placement_report=None if res is None else res.report))
+                           placement_report=None if res is None else res.report,
+                           class_reasons=dict(res.class_reasons) if res is not None and res.class_reasons else None))
     return rows

@@ -25,6 +25,8 @@ class InsertOptions:
         ev: exposure of the camera response (contract: LDR = response(HDR * 2^EV)).
         match_camera: blur the objects and add noise like the image around them (estimated locally;
             ``RenderSettings.match_camera``), so they are not sharper or cleaner than the photo.
+        class_rules: a class-rules file overriding the built-in placement rules per class (None: built-in;
+            :func:`streetaug.placement.class_rules.read_class_rules`).
     """
 
     quality: str = "default"
@@ -34,6 +36,7 @@ class InsertOptions:
     yaw_sigma_deg: float = 3.0
     ev: float = 0.0
     match_camera: bool = False
+    class_rules: str | None = None
 
 
 def item_seed(seed: int, *keys: str) -> np.random.Generator:

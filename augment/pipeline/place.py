@@ -9,6 +9,7 @@ from typing import Sequence
 import numpy as np
 
 from streetaug.datasets.sample import CameraView, Sample
+from streetaug.placement.class_rules import read_class_rules
 from streetaug.placement.config import PlacementConfig
 from streetaug.placement.place import Placement, PlacementResult, place_objects
 
@@ -24,11 +25,11 @@ def place_in_view(sample: Sample, view: CameraView, assets: Sequence[Asset], pla
     Seeded by (seed, sample token, channel). ``depth_m``: the view's scene depth (the renderer's), None to
     let placement compute the same. Each placement's ``asset_index`` indexes ``assets``.
     """
-    if placed:  # earlier objects count as annotated vehicles (3 m clearance); LiDAR is shared, not re-read
+    if placed:  # earlier objects count as annotated boxes (their class's clearance); LiDAR is shared, not re-read
         sample = sample.evolve(boxes=sample.boxes + tuple(p.box for p in placed))
     config = PlacementConfig(yaw_sigma_deg=options.yaw_sigma_deg, n_objects=len(assets))
     return place_objects(sample, view, assets, item_seed(options.seed, sample.token, view.channel), config,
-                         depth_m=depth_m)
+                         depth_m=depth_m, class_rules=read_class_rules(options.class_rules))
 
 
 @dataclass(frozen=True)
