@@ -28,6 +28,7 @@ Everything is deterministic for a given ``rng``; each object's draws come in a f
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 from typing import Sequence
 
@@ -40,10 +41,11 @@ from streetaug.datasets.nuscenes_format import VEHICLE_MOVING, VEHICLE_PARKED, V
 from streetaug.datasets.sample import Box, Sample
 
 from .candidates import object_transforms, sample_candidates
+from .class_rules import ClassRule, ClassRules, read_class_rules
 from .config import PlacementConfig
 from .drivable import DrivableArea, drivable_area_for_sample
 from .ego_path import EgoPath, PathCoords, traffic_side
-from .place import Placeable, Placement, check_objects
+from .place import OFF_ROAD_ZONES, Placeable, Placement, check_objects, zone_order
 from .rules import (box_corners_object, box_footprint_rect, footprint_corners, rule_box_clearance, rule_drivable,
                     rule_in_view, rule_lidarseg, rule_mutual, rule_obstacles, visible_fraction_estimate)
 from .scene import PlacementScene
@@ -65,7 +67,7 @@ SPEED_RANGE_MPS = {
     "human.pedestrian": (0.8, 1.8),
 }
 
-TRACK_RULES = ("lane_offset", "span", "drivable", "annotated_boxes", "ego_path", "mutual_collision", "kerb", "lidar_obstacles",
+TRACK_RULES = ("lane_offset", "span", "surface", "annotated_boxes", "ego_path", "mutual_collision", "kerb", "lidar_obstacles",
                "lidarseg", "in_view")
 SWEPT_PATH_STEPS = 4  # ego footprints per keyframe interval in the swept path
 MAX_LATERAL_ACCEL_MPS2 = 2.0  # comfortable cornering: a moving track slows down to this in curves
@@ -167,6 +169,10 @@ class Track:
         ground_source: (K,) the ground each pose stands on (``"lidar-plane"``, ``"lidarseg"``, ``"ego-plane"``).
         drivable_source, drivable_confidence: the drivable area's source at the anchor keyframe.
         anchor_sample_token, anchor_camera: where it was sampled (it is in that camera's view there).
+        detection_class, zone: the class whose rule placed it and the surface it stands on.
+        fixed_attribute: ``""`` for vehicles (``vehicle.parked`` / ``moving`` / ``stopped`` from the motion);
+            otherwise the attribute of every annotation (the asset's: ``pedestrian.standing``,
+            ``cycle.without_rider``), or None (cones and barriers have none).
     """
 
     track_index: int
@@ -185,10 +191,15 @@ class Track:
     drivable_confidence: str = ""
     anchor_sample_token: str = ""
     anchor_camera: str = ""
+    detection_class: str = "car"
+    zone: str = ""
+    fixed_attribute: str | None = ""
 
     @property
-    def attribute(self) -> str:
-        """The track's attribute while it moves (``vehicle.parked`` / ``vehicle.moving``)."""
+    def attribute(self) -> str | None:
+        """The track's attribute while it moves (``vehicle.parked`` / ``vehicle.moving``; see ``fixed_attribute``)."""
+        if self.fixed_attribute != "":
+            return self.fixed_attribute
         return VEHICLE_PARKED if self.motion == "parked" else VEHICLE_MOVING
 
     def attribute_at(self, i: int) -> str:
@@ -235,7 +246,8 @@ class Track:
                          drivable_source=self.drivable_source, drivable_confidence=self.drivable_confidence,
                          attribute=self.attribute_at(i), distance_m=distance,
                          yaw_source="lane" if self.lane_source == "map lanes" else "ego",
-                         footprint_xy=box_footprint_rect(T[None], self.wlh)[0])
+                         footprint_xy=box_footprint_rect(T[None], self.wlh)[0], detection_class=self.detection_class,
+                         zone=self.zone or ("lane" if self.motion == "moving" else "kerb"))
 
     def _box(self, T: np.ndarray) -> Box:
         center = T[:3, 3] + 0.5 * self.wlh[2] * T[:3, 2]
@@ -249,7 +261,8 @@ class Track:
                 "T_global_from_object": self.T_global_from_object.tolist(),
                 "velocity_global": self.velocity_global.tolist(), "ground_source": list(self.ground_source),
                 "drivable_source": self.drivable_source, "drivable_confidence": self.drivable_confidence,
-                "anchor_sample_token": self.anchor_sample_token, "anchor_camera": self.anchor_camera}
+                "anchor_sample_token": self.anchor_sample_token, "anchor_camera": self.anchor_camera,
+                "detection_class": self.detection_class, "zone": self.zone, "fixed_attribute": self.fixed_attribute}
 
     @classmethod
     def from_json(cls, doc: dict) -> "Track":
@@ -263,7 +276,8 @@ class Track:
                    ground_source=tuple(doc["ground_source"]), drivable_source=doc.get("drivable_source", ""),
                    drivable_confidence=doc.get("drivable_confidence", ""),
                    anchor_sample_token=doc.get("anchor_sample_token", ""),
-                   anchor_camera=doc.get("anchor_camera", ""))
+                   anchor_camera=doc.get("anchor_camera", ""), detection_class=doc.get("detection_class", "car"),
+                   zone=doc.get("zone", ""), fixed_attribute=doc.get("fixed_attribute", ""))
 
 
 # ---------------------------------------------------------------------------------------------- the scene
@@ -426,11 +440,17 @@ def plan_tracks(
     rng: np.random.Generator,
     config: TrackConfig = TrackConfig(),
     location: str = "",
+    class_rules: ClassRules | None = None,
 ) -> TrackPlan:
     """Plan one track per object through ``frames`` (a scene's keyframes, :func:`track_frames`).
 
     Draws per object, in order: parked or moving; then per attempt the anchor keyframe, the anchor camera,
     the candidates (:func:`sample_candidates`), their speeds and yaw noise.
+
+    Vehicles (class rules whose ``attribute`` is ``vehicle``) park by the kerb or move along lanes; the other
+    classes (``class_rules``, default the built-in table) stand still for the whole span in a zone of their
+    rule, with its clearances (a cone at the road's edge, a standing pedestrian on the sidewalk); clusters are
+    not formed in tracks.
     """
     check_objects(objects)
     report = {name: 0 for name in TRACK_RULES}
@@ -454,9 +474,13 @@ def plan_tracks(
             side_source = "default (no location rule, no annotated traffic)"
     swept = swept_ego_footprints(frames)
     tracks: list[Track] = []
+    rules = class_rules or read_class_rules()
     for index, obj in enumerate(objects):
-        moving = bool(rng.random() < config.moving_probability) and speed_range(obj.category)[1] > 0
-        track = _plan_one(frames, usable, index, obj, moving, rng, config, path, votes, side, swept, tracks, report)
+        rule = rules.for_category(obj.category)
+        moving = bool(rng.random() < config.moving_probability) and speed_range(obj.category)[1] > 0 \
+            and rule.attribute == "vehicle"
+        track = _plan_one(frames, usable, index, obj, moving, rng, config, path, votes, side, swept, tracks, report,
+                          None if rule.attribute in ("vehicle", "parked") else rule)
         if track is not None:
             tracks.append(track)
     reason = None
@@ -504,7 +528,13 @@ class LaneMotion:
 
 
 def _plan_one(frames, usable, index, obj, moving, rng, config: TrackConfig, path: EgoPath, votes: DirectionVotes,
-              side: str, swept: np.ndarray, placed: list[Track], report: dict[str, int]) -> Track | None:
+              side: str, swept: np.ndarray, placed: list[Track], report: dict[str, int],
+              rule: ClassRule | None = None) -> Track | None:
+    """One track of ``obj``; ``rule`` None: a vehicle (kerb or lane), else a still object in ``rule``'s zones."""
+    if rule is not None:
+        config = dataclasses.replace(config, placement=rule.config(config.placement))
+    rules = read_class_rules()
+    vehicle_class = rules.class_of(obj.category) if obj.category in rules.categories else "car"
     pc = config.placement
     wlh = np.asarray(obj.wlh, dtype=np.float64)
     w, l, _ = wlh
@@ -533,7 +563,14 @@ def _plan_one(frames, usable, index, obj, moving, rng, config: TrackConfig, path
         else:
             channel = frame.channels[int(rng.integers(len(frame.channels)))]
             scene = frame.scene(channel)
-            cands = sample_candidates(scene, wlh, rng)
+            zone = None
+            if rule is not None:
+                zones, _ = zone_order(rule, scene, rng)
+                if not zones:
+                    report["surface"] += 1
+                    continue
+                zone = zones[0]
+            cands = sample_candidates(scene, wlh, rng, rule, zone or "kerb")
             C = len(cands.xy)
             coords = path.locate(cands.xy)
         lo, hi = speed_range(obj.category)
@@ -576,6 +613,13 @@ def _plan_one(frames, usable, index, obj, moving, rng, config: TrackConfig, path
                 (direction > 0) | (np.abs(coords.d) >= config.min_lane_offset_m))
             alive = np.flatnonzero(lateral_ok)
             report["lane_offset"] += C - len(alive)
+        elif rule is not None:  # a still object: the heading its class rule gives
+            yaw = cands.yaw_rad
+            lane_source = np.where(cands.on_lane, "map lanes", "ego path").astype(object)
+            dir_source = np.full(C, f"class rule heading '{rule.heading}'", dtype=object)
+            xy_j = np.repeat(cands.xy[:, None], K, axis=1)
+            yaw_j = np.repeat(yaw[:, None], K, axis=1)
+            alive = np.arange(C)
         else:
             along = np.where(cands.on_lane, 0.0, _side_direction(coords.d, side))
             yaw = np.where(cands.on_lane, cands.yaw_rad,
@@ -595,13 +639,14 @@ def _plan_one(frames, usable, index, obj, moving, rng, config: TrackConfig, path
         flat = footprint_corners(xy_j.reshape(-1, 2), yaw_j.reshape(-1), l, w).reshape(C, K, 4, 2)
         if moving:  # clear of the ego at the same time, also between keyframes
             alive = _clear_of_ego_in_time(frames, path, motion, coords.d, t_s, span, alive, wlh, config, tally)
-        alive = _check_flat(frames, flat, span, alive, None if moving else swept, placed, config, tally)
-        if not moving:
+        surface = None if moving or rule is None else (rule, zone)
+        alive = _check_flat(frames, flat, span, alive, None if moving else swept, placed, config, tally, surface)
+        if not moving and rule is None:
             edge = scene.drivable.edge_distance(flat[alive, k])
             alive = tally.keep("kerb", alive, edge <= pc.kerb_distance_m + 0.5)
         for c in alive[:CHUNK]:  # the first survivors only: a bounded cost per attempt
             track = _stand_and_check(frames, k, channel, c, xy_j[c], yaw_j[c], span[c], wlh, moving, swept, placed,
-                                     config, tally)
+                                     config, tally, surface)
             if track is None:
                 continue
             velocity = (_trajectory_velocity(path, motion, c, coords.d[c], t_s[span[c]]) if moving
@@ -616,7 +661,11 @@ def _plan_one(frames, usable, index, obj, moving, rng, config: TrackConfig, path
                          timestamps_us=np.array([frames[j].timestamp_us for j in keep], dtype=np.int64),
                          T_global_from_object=track[0], velocity_global=velocity, ground_source=track[1],
                          drivable_source=scene.drivable.source, drivable_confidence=scene.drivable.confidence,
-                         anchor_sample_token=frame.token, anchor_camera=track[2])
+                         anchor_sample_token=frame.token, anchor_camera=track[2],
+                         detection_class=rule.name if rule is not None else vehicle_class,
+                         zone=zone if rule is not None else ("lane" if moving else "kerb"),
+                         fixed_attribute="" if rule is None else
+                         (getattr(obj, "attribute", None) if rule.attribute == "asset" else None))
     return None
 
 
@@ -650,9 +699,21 @@ def _tracks_at(placed: Sequence[Track], token: str) -> np.ndarray:
     return np.array(rects).reshape(-1, 4, 2)
 
 
+def _surface_ok(frame, fp: np.ndarray, surface: tuple[ClassRule, str] | None) -> np.ndarray:
+    """(N,) bool: footprints (N, 4, 2) on the road (``surface`` None) or in the class rule's zone at ``frame``."""
+    if frame.drivable is None:
+        return np.zeros(len(fp), dtype=bool)
+    if surface is None:
+        return rule_drivable(frame.drivable, fp)
+    rule, zone = surface
+    return frame.scene().zones.footprints_in(zone, fp, rule)
+
+
 def _check_flat(frames, flat: np.ndarray, span: np.ndarray, alive: np.ndarray, swept: np.ndarray,
-                placed: Sequence[Track], config: TrackConfig, tally: _Tally) -> np.ndarray:
-    """Candidates ``alive`` whose flat footprints (C, K, 4, 2) pass the footprint rules at every frame of their span."""
+                placed: Sequence[Track], config: TrackConfig, tally: _Tally,
+                surface: tuple[ClassRule, str] | None = None) -> np.ndarray:
+    """Candidates ``alive`` whose flat footprints (C, K, 4, 2) pass the footprint rules at every frame of their span
+    (``surface``: the (class rule, zone) of a still non-vehicle object, else the road)."""
     pc = config.placement
     for j, frame in enumerate(frames):
         here = alive[span[alive, j]]
@@ -660,8 +721,7 @@ def _check_flat(frames, flat: np.ndarray, span: np.ndarray, alive: np.ndarray, s
             continue
         fp = flat[here, j]
         checks = [
-            ("drivable", lambda fp: rule_drivable(frame.drivable, fp) if frame.drivable is not None
-             else np.zeros(len(fp), dtype=bool)),
+            ("surface", lambda fp: _surface_ok(frame, fp, surface)),
             ("annotated_boxes", lambda fp: rule_box_clearance(fp, frame.scene().box_footprints_xy,
                                                               frame.scene().box_is_dynamic, pc.dynamic_clearance_m,
                                                               pc.static_clearance_m)),
@@ -732,11 +792,13 @@ def stand_heights(frames, keep: np.ndarray, xy_j: np.ndarray, moving: bool) -> t
 
 def _stand_and_check(frames, k: int, channel: str | None, c: int, xy_j: np.ndarray, yaw_j: np.ndarray, span: np.ndarray,
                      wlh: np.ndarray, moving: bool, swept: np.ndarray, placed: Sequence[Track], config: TrackConfig,
-                     tally: _Tally) -> tuple[np.ndarray, tuple[str, ...], str] | None:
+                     tally: _Tally, surface: tuple[ClassRule, str] | None = None
+                     ) -> tuple[np.ndarray, tuple[str, ...], str] | None:
     """Stand candidate ``c`` on the ground (:func:`stand_heights`) and apply every
     rule to its tilted boxes at every frame of its span; (T (K', 4, 4), ground sources, anchor camera) or None.
     ``channel``: the camera that must see it at the anchor; None: any of the anchor's cameras."""
     pc = config.placement
+    off_road = surface is not None and surface[1] in OFF_ROAD_ZONES
     keep = np.flatnonzero(span)
     planes, heights = stand_heights(frames, keep, xy_j, moving)
     T_all, sources = [], []
@@ -748,7 +810,8 @@ def _stand_and_check(frames, k: int, channel: str | None, c: int, xy_j: np.ndarr
         scene = frame.scene()
         rect = box_footprint_rect(T, wlh)
         rules = (
-            ("drivable", lambda: frame.drivable is not None and rule_drivable(frame.drivable, rect)[0]),
+            ("surface", lambda: bool(_surface_ok(frame, rect, surface)[0]) and not (
+                off_road and plane.source == "ego-plane")),
             ("annotated_boxes", lambda: rule_box_clearance(rect, scene.box_footprints_xy, scene.box_is_dynamic,
                                                            pc.dynamic_clearance_m, pc.static_clearance_m)[0]),
             ("ego_path", lambda: moving or rule_mutual(rect, swept, config.ego_clearance_m)[0]),
@@ -757,14 +820,14 @@ def _stand_and_check(frames, k: int, channel: str | None, c: int, xy_j: np.ndarr
                                                        scene.obstacle_points, pc.static_clearance_m,
                                                        pc.obstacle_min_height_m, pc.obstacle_max_height_m,
                                                        pc.obstacle_max_points)[0]),
-            ("lidarseg", lambda: rule_lidarseg(rect, scene.non_drivable_xy, pc.static_clearance_m,
-                                               pc.lidarseg_max_points)[0]),
+            ("lidarseg", lambda: rule_lidarseg(rect, scene.non_ground_xy if off_road else scene.non_drivable_xy,
+                                               pc.static_clearance_m, pc.lidarseg_max_points)[0]),
         )
         for name, rule in rules:
             if not rule():
                 tally.report[name] += 1
                 return None
-        if not moving and j == keep[0]:
+        if not moving and surface is None and j == keep[0]:
             edge = float(frames[k].drivable.edge_distance(rect)[0])
             if edge > pc.kerb_distance_m:
                 tally.report["kerb"] += 1

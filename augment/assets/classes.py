@@ -71,13 +71,15 @@ def _variant_wlh(variant: str | None, wlh: np.ndarray, size: CategorySize) -> np
     return np.array([wlh[0], wlh[1], lo + float(np.clip(t, 0, 1)) * (hi - lo)])
 
 
-def procedural_object(detection_class: str, seed: int, sizes: dict[str, CategorySize] | None = None) -> Asset:
+def procedural_object(detection_class: str, seed: int, sizes: dict[str, CategorySize] | None = None,
+                      still: bool = False) -> Asset:
     """One procedural object of ``detection_class``, deterministic in ``seed``.
 
     Args:
         detection_class: one of :data:`DETECTION_CLASSES`.
         seed: draws the category within the class, the variant, the size and the generator's own choices.
         sizes: the class-sizes table (default the shipped one, :func:`read_class_sizes`).
+        still: an object that stays put for a whole track: pedestrians stand, two-wheelers have no rider.
 
     Raises:
         InputError: unknown class, or the table lacks the drawn category.
@@ -87,13 +89,16 @@ def procedural_object(detection_class: str, seed: int, sizes: dict[str, Category
     options = CLASS_CATEGORIES[detection_class]
     weights = np.array([o[2] for o in options])
     category, variant, _ = options[int(rng.choice(len(options), p=weights / weights.sum()))]
+    if still and variant == "with_rider":
+        variant = "without_rider"
     if detection_class == "car":
         return procedural_car(int(rng.integers(2**31)))
     table = sizes if sizes is not None else read_class_sizes()
     if category not in table:
         raise InputError(f"class sizes table: no entry for {category!r} (needed for class {detection_class!r})")
     wlh = _variant_wlh(variant, draw_wlh(table[category], rng), table[category])
-    return _GENERATORS[detection_class](int(rng.integers(2**31)), wlh=wlh, variant=variant)
+    extra = {"pose": "standing"} if still and detection_class == "pedestrian" else {}
+    return _GENERATORS[detection_class](int(rng.integers(2**31)), wlh=wlh, variant=variant, **extra)
 
 
 @dataclass(frozen=True)

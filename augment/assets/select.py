@@ -34,8 +34,8 @@ def _procedural(seed: int) -> Asset:
 
 
 @lru_cache(maxsize=256)
-def _procedural_of(detection_class: str, seed: int) -> Asset:
-    return procedural_object(detection_class, seed)
+def _procedural_of(detection_class: str, seed: int, still: bool = False) -> Asset:
+    return procedural_object(detection_class, seed, still=still)
 
 
 CATEGORY_CLASS = {category: name for name, options in CLASS_CATEGORIES.items() for category, _, _ in options}
@@ -58,6 +58,7 @@ def select_assets(
     asset_front: str = "+z",
     asset_length: float | None = None,
     class_mix: ClassMix | None = None,
+    still: bool = False,
 ) -> list[Asset]:
     """``n_objects`` assets: the file ``asset`` repeated, random files of ``assets_dir``, or procedural objects.
 
@@ -69,6 +70,7 @@ def select_assets(
         asset_front, asset_length: loader options for files (see :func:`load_asset`).
         class_mix: the classes to draw from (None: procedural cars, or any file of the folder). With a folder,
             only classes that have files can be drawn (an error names the classes without any).
+        still: procedural objects for a whole track (standing pedestrians, riderless two-wheelers).
     """
     if n_objects < 1:
         raise ValueError(f"n_objects must be >= 1, got {n_objects}")
@@ -92,5 +94,6 @@ def select_assets(
         return [load_asset_options(files[int(i)], asset_front, asset_length) for i in picks]
     if class_mix is not None:
         names = class_mix.draw(rng, n_objects)
-        return [_procedural_of(name, int(s)) for name, s in zip(names, rng.integers(0, _SEED_RANGE, size=n_objects))]
+        return [_procedural_of(name, int(s), still)
+                for name, s in zip(names, rng.integers(0, _SEED_RANGE, size=n_objects))]
     return [_procedural(int(s)) for s in rng.integers(0, _SEED_RANGE, size=n_objects)]

@@ -37,11 +37,14 @@ def track_rng(seed: int, *keys: str) -> np.random.Generator:
 
 
 def track_assets(config: BatchConfig, scene_token: str, n: int) -> list:
-    """The asset of each of the scene's ``n`` tracks (one draw per track: the same in every task)."""
+    """The asset of each of the scene's ``n`` tracks (one draw per track: the same in every task); with a class
+    mix, procedural pedestrians stand and two-wheelers have no rider (only vehicles move in tracks)."""
     from ..assets.select import select_assets  # deferred: trimesh, procedural meshes
 
+    mix = config.class_mix
     return [select_assets(track_rng(config.seed, "track-asset", scene_token, str(i)), 1, config.asset,
-                          config.assets_dir, config.asset_front, config.asset_length)[0] for i in range(n)]
+                          config.assets_dir, config.asset_front, config.asset_length, mix, still=True)[0]
+            for i in range(n)]
 
 
 @dataclass(frozen=True)
@@ -93,7 +96,9 @@ def plan_key(config: BatchConfig) -> dict:
     """What a scene's plan depends on: a saved plan made with other values is planned again."""
     return {"dataroot": config.dataroot, "version": config.version, "seed": config.seed, "tracks": config.tracks,
             "asset": config.asset, "assets_dir": config.assets_dir, "asset_front": config.asset_front,
-            "asset_length": config.asset_length}
+            "asset_length": config.asset_length,
+            **({"classes": config.classes, "class_weights": config.class_weights, "class_rules": config.class_rules}
+               if config.classes or config.class_weights or config.class_rules else {})}
 
 
 def read_scene_tracks(out_dir: Path, scene_token: str, config: BatchConfig,

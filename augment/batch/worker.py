@@ -139,6 +139,7 @@ def plan_scene(config: BatchConfig, scene_token: str, scene_name: str, sample_to
     reason; the batch skips its samples and goes on.
     """
     # deferred: the driver sends this function to workers and must not pay for the planner's imports
+    from streetaug.placement.class_rules import read_class_rules
     from streetaug.placement.track import TrackConfig, plan_tracks, track_frames
 
     from .tracks import SceneTracks, track_assets, track_rng
@@ -150,7 +151,7 @@ def plan_scene(config: BatchConfig, scene_token: str, scene_name: str, sample_to
         frames = track_frames(samples)
         assets = track_assets(config, scene_token, config.tracks)
         plan = plan_tracks(frames, assets, track_rng(config.seed, "tracks", scene_token),
-                           TrackConfig(), samples[0].location)
+                           TrackConfig(), samples[0].location, read_class_rules(config.class_rules))
     except Exception as e:  # noqa: BLE001 - one inconsistent scene is skipped, the batch goes on
         reason = f"scene {scene_name or scene_token}: {type(e).__name__}: {e}".splitlines()[0][:300]
         return SceneTracks(scene_token, scene_name, tuple(sample_tokens), (), {}, reason, failed=True,
