@@ -67,7 +67,7 @@ def _dataroot(dataroot: Path | None, version: str | None) -> tuple[str, str]:
 @limit_options
 @runtime_errors
 def batch(dataroot, version, out, cameras, limit, n_objects, tracks, sweeps, yaw_sigma, asset, assets_dir, asset_front, asset_length,
-          classes, class_weights, class_rules, quality, seed, ev, match_camera, level, workers, scheduler, dask_local, shard, dry_run, contact_sheet, fail_fast,
+          classes, class_weights, class_rules, class_sizes, quality, seed, ev, match_camera, level, workers, scheduler, dask_local, shard, dry_run, contact_sheet, fail_fast,
           no_progress, debug):
     """Augment every sample of a dataset into a new nuScenes-format dataset; rerunning resumes.
 
@@ -97,6 +97,7 @@ def batch(dataroot, version, out, cameras, limit, n_objects, tracks, sweeps, yaw
         asset=str(asset.resolve()) if asset else None, assets_dir=str(assets_dir.resolve()) if assets_dir else None,
         asset_front=asset_front, asset_length=asset_length, tracks=tracks, sweeps=sweeps, classes=classes,
         class_weights=class_weights, class_rules=str(class_rules.resolve()) if class_rules else None,
+        class_sizes=str(class_sizes.resolve()) if class_sizes else None,
     )
     run = RunOptions(workers=workers or default_workers(), scheduler=scheduler, dask_local=dask_local,
                      shard=parse_shard(shard) if shard else None, fail_fast=fail_fast, dry_run=dry_run,

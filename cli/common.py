@@ -215,6 +215,9 @@ def asset_options(func: Callable) -> Callable:
         click.option("--class-rules", type=click.Path(dir_okay=False, exists=True, path_type=Path), default=None,
                      help="JSON file overriding the per-class placement rules (schema streetaug.class_rules/1; "
                           "see placement/class_rules.json)."),
+        click.option("--class-sizes", type=click.Path(dir_okay=False, exists=True, path_type=Path), default=None,
+                     help="Box-size table procedural objects are built to (from 'streetaug class-sizes' on your "
+                          "own dataset; default: the shipped nuScenes statistics)."),
     ]
     for option in reversed(options):
         func = option(func)

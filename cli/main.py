@@ -139,7 +139,7 @@ def predict_light(dataroot, version, scene, sample_token, camera, image, fov_deg
 @limit_options
 @runtime_errors
 def insert(dataroot, version, scene, sample_token, camera, asset, assets_dir, asset_front, asset_length, classes,
-           class_weights, class_rules, quality, seed, ev, match_camera, level, n_objects, yaw_sigma, image, intrinsics, depth, envmap, pose_camera, out, explain,
+           class_weights, class_rules, class_sizes, quality, seed, ev, match_camera, level, n_objects, yaw_sigma, image, intrinsics, depth, envmap, pose_camera, out, explain,
            debug):
     """Insert a car into one image; write image.png|jpg and labels.json.
 
@@ -181,7 +181,7 @@ def insert(dataroot, version, scene, sample_token, camera, asset, assets_dir, as
         sample = reader.sample(resolve_sample(reader, scene, sample_token))
         view = camera_view(sample, camera)
         assets = select_assets(item_seed(seed, "asset", sample.token, camera), n_objects, asset, assets_dir,
-                               asset_front, asset_length, class_mix)
+                               asset_front, asset_length, class_mix, class_sizes=class_sizes)
         result, path = insert_view_to_files(sample, view, assets, options, out, debug, explain)
     if result.skipped_reason:
         click.echo(f"no object inserted: {result.skipped_reason} (image copied unchanged to {path})")
@@ -191,6 +191,37 @@ def insert(dataroot, version, scene, sample_token, camera, asset, assets_dir, as
 
 
 # ----------------------------------------------------------------------------- make-samples
+
+
+@main.command("class-sizes")
+@click.option("--dataroot", "dataroots", required=True, multiple=True,
+              type=click.Path(file_okay=False, exists=True, path_type=Path),
+              help="nuScenes dataroot(s) to measure (repeat the option to pool several).")
+@click.option("--version", required=True, help="Table folder in each dataroot, e.g. v1.0-trainval.")
+@click.option("--out", required=True, type=click.Path(dir_okay=False, path_type=Path),
+              help="The class-sizes table to write (JSON; pass it to insert/batch --class-sizes).")
+@click.option("--debug", is_flag=True, help="Show tracebacks.")
+@runtime_errors
+def class_sizes(dataroots, version, out, debug):
+    """Measure box sizes per category from annotations: the table procedural objects are built to.
+
+    \b
+    Example:
+      streetaug class-sizes --dataroot /data/nuscenes --version v1.0-trainval --out sizes.json
+      streetaug batch ... --classes bus,trailer --class-sizes sizes.json
+    """
+    from streetaug.augment.assets.class_sizes import class_sizes_document
+    from streetaug.augment.core import write_json_atomic
+    from streetaug.datasets.box_statistics import measure_box_sizes
+
+    dirs = [Path(d) / version for d in dataroots]
+    measured = measure_box_sizes(dirs)
+    doc = class_sizes_document(measured, [str(d.resolve()) for d in dirs])
+    write_json_atomic(out, doc)
+    for category, e in doc["categories"].items():
+        click.echo(f"{category:32s} {e['source']:15s} {e['n_instances']:6d} instances {e['n_boxes']:7d} boxes  "
+                   f"mean wlh {', '.join(f'{v:.2f}' for v in e['mean_wlh'])}")
+    click.echo(f"wrote {out}")
 
 
 @main.command("make-samples")

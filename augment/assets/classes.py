@@ -44,9 +44,9 @@ CLASS_CATEGORIES: dict[str, tuple[tuple[str, str | None, float], ...]] = {
     "barrier": (("movable_object.barrier", None, 1.0),),
 }
 
-# The size table pools ridden and parked two-wheelers; their heights differ by the rider: each variant maps the
-# drawn height's place in the table's range into its own band (metres).
-CYCLE_HEIGHT_BAND_M = {"with_rider": (1.45, 1.90), "without_rider": (0.95, 1.25)}
+# The size table pools ridden and parked two-wheelers, whose heights differ by the rider: a riderless one takes
+# the lower part of the table's height range (min..mean), a ridden one the upper part (mean..max).
+CYCLE_HEIGHT_PART = {"without_rider": (0.0, 1.0), "with_rider": (1.0, 2.0)}  # in units of [min, mean, max]
 
 _GENERATORS: dict[str, Callable[..., Asset]] = {
     "truck": procedural_truck, "bus": procedural_bus, "trailer": procedural_trailer,
@@ -64,11 +64,14 @@ def check_detection_class(name: str, where: str = "--classes") -> str:
 
 
 def _variant_wlh(variant: str | None, wlh: np.ndarray, size: CategorySize) -> np.ndarray:
-    if variant not in CYCLE_HEIGHT_BAND_M:
+    """``wlh`` with a two-wheeler's height moved into its variant's part of the table's range."""
+    if variant not in CYCLE_HEIGHT_PART:
         return wlh
-    lo, hi = CYCLE_HEIGHT_BAND_M[variant]
-    t = (wlh[2] - size.min_wlh[2]) / max(size.max_wlh[2] - size.min_wlh[2], 1e-9)
-    return np.array([wlh[0], wlh[1], lo + float(np.clip(t, 0, 1)) * (hi - lo)])
+    t = (wlh[2] - size.min_wlh[2]) / max(size.max_wlh[2] - size.min_wlh[2], 1e-9)  # 0..1 in the whole range
+    lo, hi = CYCLE_HEIGHT_PART[variant]
+    u = lo + float(np.clip(t, 0, 1)) * (hi - lo)  # 0..2 over [min, mean, max]
+    knots = [size.min_wlh[2], size.mean_wlh[2], size.max_wlh[2]]
+    return np.array([wlh[0], wlh[1], float(np.interp(u, [0.0, 1.0, 2.0], knots))])
 
 
 def procedural_object(detection_class: str, seed: int, sizes: dict[str, CategorySize] | None = None,
@@ -167,5 +170,5 @@ def _weight(text: str) -> float:
         raise InputError(f"--class-weights: {text!r} is not a number") from None
 
 
-__all__ = ["CLASS_CATEGORIES", "CYCLE_HEIGHT_BAND_M", "ClassMix", "DETECTION_CLASSES", "check_detection_class",
+__all__ = ["CLASS_CATEGORIES", "CYCLE_HEIGHT_PART", "ClassMix", "DETECTION_CLASSES", "check_detection_class",
            "procedural_object"]

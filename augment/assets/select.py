@@ -15,6 +15,7 @@ import numpy as np
 from ..core import InputError
 from .asset import Asset
 from .categories import category_for_asset
+from .class_sizes import read_class_sizes
 from .classes import CLASS_CATEGORIES, ClassMix, procedural_object
 from .loader import list_assets, load_asset
 from .procedural import procedural_car
@@ -34,8 +35,8 @@ def _procedural(seed: int) -> Asset:
 
 
 @lru_cache(maxsize=256)
-def _procedural_of(detection_class: str, seed: int, still: bool = False) -> Asset:
-    return procedural_object(detection_class, seed, still=still)
+def _procedural_of(detection_class: str, seed: int, still: bool = False, sizes_path: str | None = None) -> Asset:
+    return procedural_object(detection_class, seed, read_class_sizes(sizes_path), still=still)
 
 
 CATEGORY_CLASS = {category: name for name, options in CLASS_CATEGORIES.items() for category, _, _ in options}
@@ -59,6 +60,7 @@ def select_assets(
     asset_length: float | None = None,
     class_mix: ClassMix | None = None,
     still: bool = False,
+    class_sizes: str | Path | None = None,
 ) -> list[Asset]:
     """``n_objects`` assets: the file ``asset`` repeated, random files of ``assets_dir``, or procedural objects.
 
@@ -71,6 +73,8 @@ def select_assets(
         class_mix: the classes to draw from (None: procedural cars, or any file of the folder). With a folder,
             only classes that have files can be drawn (an error names the classes without any).
         still: procedural objects for a whole track (standing pedestrians, riderless two-wheelers).
+        class_sizes: a class-sizes table (``streetaug class-sizes``) procedural objects are sized from (None:
+            the shipped one).
     """
     if n_objects < 1:
         raise ValueError(f"n_objects must be >= 1, got {n_objects}")
@@ -94,6 +98,7 @@ def select_assets(
         return [load_asset_options(files[int(i)], asset_front, asset_length) for i in picks]
     if class_mix is not None:
         names = class_mix.draw(rng, n_objects)
-        return [_procedural_of(name, int(s), still)
+        sizes_path = None if class_sizes is None else str(class_sizes)
+        return [_procedural_of(name, int(s), still, sizes_path)
                 for name, s in zip(names, rng.integers(0, _SEED_RANGE, size=n_objects))]
     return [_procedural(int(s)) for s in rng.integers(0, _SEED_RANGE, size=n_objects)]

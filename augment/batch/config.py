@@ -12,7 +12,8 @@ from ..core import InputError, write_json_atomic
 CONFIG_FILE = "batch_config.json"
 CONFIG_SCHEMA = "streetaug.batch/1"
 # Fields added after the schema's first release: a batch_config.json without them means their default.
-OPTIONAL_FIELDS = {"limit", "match_camera", "tracks", "sweeps", "classes", "class_weights", "class_rules"}
+OPTIONAL_FIELDS = {"limit", "match_camera", "tracks", "sweeps", "classes", "class_weights", "class_rules",
+                   "class_sizes"}
 # Fields that may change between runs into the same output folder (everything else must match to resume).
 _MAY_CHANGE = ("limit",)
 
@@ -41,6 +42,7 @@ class BatchConfig:
             interpolated at each sweep's time); a dataset without sweep files skips them with one reason.
         classes, class_weights: the class mix (``--classes``, ``--class-weights``; :class:`ClassMix`), None = cars.
         class_rules: absolute path of a class-rules file overriding the built-in placement rules, or None.
+        class_sizes: absolute path of a class-sizes table for procedural objects, or None (the shipped one).
     """
 
     dataroot: str
@@ -63,6 +65,7 @@ class BatchConfig:
     classes: str | None = None
     class_weights: str | None = None
     class_rules: str | None = None
+    class_sizes: str | None = None
 
     @property
     def class_mix(self):

@@ -71,7 +71,8 @@ def augment_sample(reader: NuScenesReader, config: BatchConfig, out_dir: Path, t
     views, failed = readable_views_and_failures(sample, token, cameras, fail_fast)
     mix = config.class_mix
     assets = {v.channel: select_assets(item_seed(config.seed, "asset", token, v.channel), config.n_objects,
-                                       config.asset, config.assets_dir, config.asset_front, config.asset_length, mix)
+                                       config.asset, config.assets_dir, config.asset_front, config.asset_length, mix,
+                                       class_sizes=config.class_sizes)
               for v in views}
     options = insert_options(config)
     load_s = time.perf_counter() - t0

@@ -116,6 +116,17 @@ def check_assets(config: BatchConfig) -> None:
 
     mix = config.class_mix
     read_class_rules(config.class_rules)
+    if config.class_sizes is not None:
+        from ..assets.class_sizes import read_class_sizes
+        from ..assets.classes import CLASS_CATEGORIES
+        from ..core import InputError
+
+        table = read_class_sizes(config.class_sizes)
+        for name in (mix.classes if mix is not None else ()):
+            missing = [c for c, _, _ in CLASS_CATEGORIES[name] if c not in table and name != "car"]
+            if missing:
+                raise InputError(f"{config.class_sizes}: no size entry for {', '.join(missing)} (class {name!r}); "
+                                 "add it or drop the class from --classes")
     if config.asset is None and config.assets_dir is None:
         return
     if mix is not None and config.assets_dir is not None:

@@ -43,7 +43,8 @@ def track_assets(config: BatchConfig, scene_token: str, n: int) -> list:
 
     mix = config.class_mix
     return [select_assets(track_rng(config.seed, "track-asset", scene_token, str(i)), 1, config.asset,
-                          config.assets_dir, config.asset_front, config.asset_length, mix, still=True)[0]
+                          config.assets_dir, config.asset_front, config.asset_length, mix, still=True,
+                          class_sizes=config.class_sizes)[0]
             for i in range(n)]
 
 
@@ -97,8 +98,9 @@ def plan_key(config: BatchConfig) -> dict:
     return {"dataroot": config.dataroot, "version": config.version, "seed": config.seed, "tracks": config.tracks,
             "asset": config.asset, "assets_dir": config.assets_dir, "asset_front": config.asset_front,
             "asset_length": config.asset_length,
-            **({"classes": config.classes, "class_weights": config.class_weights, "class_rules": config.class_rules}
-               if config.classes or config.class_weights or config.class_rules else {})}
+            **({"classes": config.classes, "class_weights": config.class_weights, "class_rules": config.class_rules,
+                "class_sizes": config.class_sizes}
+               if config.classes or config.class_weights or config.class_rules or config.class_sizes else {})}
 
 
 def read_scene_tracks(out_dir: Path, scene_token: str, config: BatchConfig,
