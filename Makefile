@@ -31,6 +31,8 @@ demo: setup
 	$(BIN)/streetaug insert --scene sample-sunny --debug --out $(OUT)/insert-sunny
 	$(BIN)/streetaug predict-light --scene sample-lowsun --out $(OUT)/light-lowsun
 	$(BIN)/streetaug batch --dataroot examples/nuscenes-sequence --version v1.0-sequence --tracks 3 --out $(OUT)/tracks
+	$(BIN)/streetaug batch --cameras CAM_FRONT --n-objects 3 --classes pedestrian,bicycle,traffic_cone,barrier,truck,bus \
+		--out $(OUT)/classes
 	@echo
 	@echo "Outputs:"
 	@echo "  $(OUT)/                            a nuScenes dataset: NuScenes(version='v1.0-samples', dataroot='$(OUT)')"
@@ -41,6 +43,7 @@ demo: setup
 	@echo "  $(OUT)/light-lowsun/               lighting.json, envmap_camera.exr, preview.png"
 	@echo "  $(OUT)/tracks/                     up to 3 tracks through the bundled sequence scene (5 keyframes): a nuScenes"
 	@echo "                                     dataset with linked instances and velocities; tracks_sheet.png"
+	@echo "  $(OUT)/classes/                    pedestrians, bicycles, cone lines, barriers, trucks and buses in CAM_FRONT"
 
 test: setup $(BIN)/.devkit
 	STREETAUG_REQUIRE_DEVKIT=1 $(BIN)/pytest -q

@@ -16,7 +16,7 @@ from streetaug.datasets.sample import CameraView
 
 from .class_rules import ClassRule
 from .config import PlacementConfig
-from .ground import GroundPlane
+from .ground import GroundPlane, ego_ground_plane
 from .rules import box_corners_object, box_footprint_rect, footprint_corners
 from .scene import PlacementScene
 
@@ -178,7 +178,9 @@ def stand_candidates(scene: PlacementScene, cands: Candidates, index: np.ndarray
     fitter = scene.ground_for(config)
     planes = [fitter.fit(p) for p in cands.xy[index]]
     if float(np.hypot(wlh[0], wlh[1])) < SUPPORT_MAX_SIZE_M:
-        planes = [support_plane(p, scene.obstacle_points, fp) for p, fp in zip(planes, cands.footprints_xy[index])]
+        T_ge = scene.view.T_global_from_ego
+        planes = [support_plane(p, scene.obstacle_points, fp, ego_ground_plane(T_ge, fp.mean(axis=0)))
+                  for p, fp in zip(planes, cands.footprints_xy[index])]
     g_point = np.array([p.point_global for p in planes]).reshape(-1, 3)
     g_normal = np.array([p.normal_global for p in planes]).reshape(-1, 3)
     T_go = object_transforms(cands.xy[index], cands.yaw_rad[index], g_point[:, 2], g_normal)
@@ -192,25 +194,47 @@ SUPPORT_MAX_SIZE_M = 3.0  # footprint diagonal below which an object reads the g
 SUPPORT_MARGIN_M = 0.4  # around the footprint
 SUPPORT_BAND_M = 0.25  # returns this close to the fitted plane count as the ground under the object
 SUPPORT_MIN_POINTS = 4
+UNSEEN_MAX_OFFSET_M = 0.3  # an unseen small object's ground kept this close to the ego's road (else the ego's)
 
 
-def support_plane(plane: GroundPlane, points_global: np.ndarray, footprint_xy: np.ndarray) -> GroundPlane:
-    """``plane`` moved along its normal onto the LiDAR returns (P, 3) under the footprint (4, 2) grown by
-    ``SUPPORT_MARGIN_M`` (their median height above it, when at least ``SUPPORT_MIN_POINTS`` lie within
-    ``SUPPORT_BAND_M``); unchanged otherwise."""
+def support_plane(plane: GroundPlane, points_global: np.ndarray, footprint_xy: np.ndarray,
+                  ego_plane: GroundPlane | None = None) -> GroundPlane:
+    """``plane`` moved along its normal onto the ground right under the footprint (4, 2) grown by
+    ``SUPPORT_MARGIN_M``, from the LiDAR returns (P, 3) there.
+
+    With fewer than ``SUPPORT_MIN_POINTS`` returns there the ground under the object is unseen: a plane fitted
+    farther away is kept only within ``UNSEEN_MAX_OFFSET_M`` of the ego's road (``ego_plane``, below the same
+    point), else the ego's plane is used (off the road, the surface rule then refuses it). The returned plane's
+    ``n_points`` is the number of returns it stands on (0: unseen).
+
+    The ground is the lowest surface: when returns lie more than ``SUPPORT_BAND_M`` below the plane (it was fitted
+    on a wall's top, a parapet, a hoarding), the plane drops to them (the median of those within
+    ``SUPPORT_BAND_M`` of their 10th-percentile height); otherwise it moves to the median height of the returns
+    within ``SUPPORT_BAND_M`` of it (a kerb step, a raised sidewalk).
+    """
+    def unseen() -> GroundPlane:  # n_points 0: nothing seen under the object
+        if ego_plane is None or abs(plane.point_global[2] - ego_plane.point_global[2]) <= UNSEEN_MAX_OFFSET_M:
+            return GroundPlane(plane.point_global, plane.normal_global, plane.source, 0)
+        return ego_plane
+
     if len(points_global) == 0:
-        return plane
+        return unseen()
     c = footprint_xy.mean(axis=0)
     r = float(np.max(np.linalg.norm(footprint_xy - c, axis=1))) + SUPPORT_MARGIN_M
     near = np.linalg.norm(points_global[:, :2] - c, axis=1) <= r
-    h = (points_global[near] - plane.point_global) @ plane.normal_global
-    h = h[np.abs(h) <= SUPPORT_BAND_M]
+    h_all = (points_global[near] - plane.point_global) @ plane.normal_global
+    below = h_all[h_all < -SUPPORT_BAND_M]
+    if len(below) >= SUPPORT_MIN_POINTS:
+        floor = float(np.percentile(below, 10))
+        h = below[below <= floor + SUPPORT_BAND_M]
+    else:
+        h = h_all[np.abs(h_all) <= SUPPORT_BAND_M]
     if len(h) < SUPPORT_MIN_POINTS:
-        return plane
+        return unseen()
     dz = float(np.median(h))
     # a plane moved by dz along its normal rises by dz / n_z at the same x/y
     return GroundPlane(plane.point_global + np.array([0.0, 0.0, dz / plane.normal_global[2]]), plane.normal_global,
-                       plane.source, plane.n_points)
+                       plane.source, len(h))
 
 
 __all__ = ["CameraAzimuthRange", "Candidates", "StoodCandidates", "camera_azimuth_range", "object_transforms",

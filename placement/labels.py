@@ -18,9 +18,9 @@ Conventions chosen here:
   [w, l, h], ``rotation`` = [w, x, y, z] box -> global. On tilted ground the rotation carries the
   ground's roll/pitch (the box is exactly the rendered object's box), so it is not yaw-only.
 * ``category`` comes from the asset (:mod:`streetaug.augment.assets.categories` maps file names).
-* ``attribute`` = the caller's choice; :func:`streetaug.placement.place.place_objects` records
-  ``vehicle.parked`` for footprints within ``kerb_distance_m`` of the drivable edge, else ``vehicle.moving``.
-  Default here: ``vehicle.moving``.
+* ``attribute`` = the caller's choice; :func:`streetaug.placement.place.place_objects` records it per class
+  rule: vehicles ``vehicle.parked`` within ``kerb_distance_m`` of the drivable edge, else ``vehicle.moving``;
+  cycles and pedestrians the asset's own (rider, pose); cones and barriers none (null).
 """
 
 from __future__ import annotations
@@ -54,7 +54,7 @@ def object_label(
     mask: np.ndarray,
     coverage: np.ndarray,
     T_global_from_cam: np.ndarray | None = None,
-    attribute: str | None = None,
+    attribute: str | None = VEHICLE_MOVING,
 ) -> dict:
     """The contract's object dict for one inserted object.
 
@@ -66,7 +66,7 @@ def object_label(
         mask: (H, W) float visible coverage of the object in [0, 1] (after occlusion).
         coverage: (H, W) float coverage of the object without occluders.
         T_global_from_cam: (4, 4) camera -> global; when given, ``box_global`` is added.
-        attribute: nuScenes attribute name (default ``vehicle.moving``).
+        attribute: nuScenes attribute name, or None for a class without one (cones, barriers).
 
     Returns:
         dict with ``category``, ``box_camera`` {center, size_wlh, yaw_deg}, ``bbox_2d``,
@@ -103,7 +103,7 @@ def object_label(
         "truncation": float(1.0 - inside),
         "num_lidar_pts": 0,
         "num_radar_pts": 0,
-        "attribute": attribute or VEHICLE_MOVING,
+        "attribute": attribute,
     }
     if T_global_from_cam is not None:
         T_gc = np.asarray(T_global_from_cam, dtype=np.float64)

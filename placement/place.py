@@ -224,8 +224,8 @@ def check_stood(scene: PlacementScene, stood: StoodCandidates, wlh: np.ndarray, 
     k = np.arange(len(idx))
     rect = stood.footprints_xy
     in_zone = scene.zones.footprints_in(zone, rect[k], rule, member=skip_mutual is not None)
-    if zone in OFF_ROAD_ZONES:  # off the road the ground must be measured, not assumed
-        in_zone &= np.array([p.source != "ego-plane" for p in stood.planes], dtype=bool)
+    if zone in OFF_ROAD_ZONES:  # off the road the ground must be measured under the object, not assumed
+        in_zone &= np.array([p.source != "ego-plane" and p.n_points > 0 for p in stood.planes], dtype=bool)
     k = tally.keep("surface", idx, k, in_zone)
     k = tally.keep("annotated_boxes", idx, k, rule_box_clearance(
         rect[k], scene.box_footprints_xy, scene.box_is_dynamic, cfg.dynamic_clearance_m, cfg.static_clearance_m))

@@ -7,6 +7,7 @@ from typing import Sequence
 
 import numpy as np
 
+from streetaug.datasets.nuscenes_format import VEHICLE_MOVING
 from streetaug.placement.labels import object_label
 
 from ..assets.asset import Asset
@@ -47,7 +48,10 @@ def insert_into_image(
                               item_seed(options.seed, "image"), timing)
     (obj,) = rendered.objects
     ins = obj.insertion
-    objects = [object_label(T_cam_from_object, asset.wlh, asset.category, camera, ins.mask, ins.coverage)]
+    attribute = asset.attribute if asset.attribute is not None else (
+        VEHICLE_MOVING if asset.category.startswith("vehicle.") else None)  # the pose says nothing more
+    objects = [object_label(T_cam_from_object, asset.wlh, asset.category, camera, ins.mask, ins.coverage,
+                            attribute=attribute)]
     timing["total"] = time.perf_counter() - t0
     return InsertResult(rendered.image, objects, rendered.mask, rendered.shadow_ratio, timing)
 

@@ -215,3 +215,25 @@ def test_cli_refuses_an_unknown_class_listing_the_valid_ones(tmp_path):
                                        "--out", str(tmp_path / "o")])
     assert result.exit_code == 2
     assert "unknown class 'lorry'" in result.output and "traffic_cone, barrier" in result.output
+
+
+def test_a_small_object_stands_on_the_lowest_surface_it_sees_and_not_on_an_unseen_far_plane():
+    from streetaug.placement.candidates import support_plane
+    from streetaug.placement.ground import GroundPlane
+
+    fp = np.array([[0.2, 0.2], [0.2, -0.2], [-0.2, -0.2], [-0.2, 0.2]])
+    up = np.array([0.0, 0.0, 1.0])
+    on_wall = GroundPlane(np.array([0.0, 0.0, 1.2]), up, "lidar-plane", 30)
+    xy = np.random.default_rng(0).uniform(-0.5, 0.5, (40, 2))
+    ground_and_wall = np.concatenate([np.c_[xy, np.full(40, 0.02)], np.c_[xy[:10], np.full(10, 1.2)]])
+    assert abs(support_plane(on_wall, ground_and_wall, fp).point_global[2] - 0.02) < 1e-9  # drops to the road
+    kerb = np.c_[xy, np.full(40, 0.15)]
+    road = GroundPlane(np.zeros(3), up, "lidar-plane", 30)
+    lifted = support_plane(road, kerb, fp)
+    assert abs(lifted.point_global[2] - 0.15) < 1e-9 and lifted.n_points == 40  # onto the kerb's top
+    ego = GroundPlane(np.zeros(3), up, "ego-plane", 0)
+    far = GroundPlane(np.array([0.0, 0.0, 2.5]), up, "lidar-plane", 12)
+    assert support_plane(far, np.zeros((0, 3)), fp, ego).source == "ego-plane"  # unseen and far off the road
+    near = GroundPlane(np.array([0.0, 0.0, 0.1]), up, "lidar-plane", 12)
+    kept = support_plane(near, np.zeros((0, 3)), fp, ego)
+    assert kept.source == "lidar-plane" and kept.n_points == 0  # unseen: kept, but marked as such
