@@ -230,7 +230,7 @@ def test_a_small_object_stands_on_the_lowest_surface_it_sees_and_not_on_an_unsee
     kerb = np.c_[xy, np.full(40, 0.15)]
     road = GroundPlane(np.zeros(3), up, "lidar-plane", 30)
     lifted = support_plane(road, kerb, fp)
-    assert abs(lifted.point_global[2] - 0.15) < 1e-9 and lifted.n_points == 40  # onto the kerb's top
+    assert abs(lifted.point_global[2] - 0.15) < 1e-9 and lifted.n_points >= 30  # onto the kerb top, seen
     ego = GroundPlane(np.zeros(3), up, "ego-plane", 0)
     far = GroundPlane(np.array([0.0, 0.0, 2.5]), up, "lidar-plane", 12)
     assert support_plane(far, np.zeros((0, 3)), fp, ego).source == "ego-plane"  # unseen and far off the road
