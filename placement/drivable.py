@@ -184,6 +184,13 @@ def drivable_from_map(polygons: list, center_xy: np.ndarray, roi_m: float,
     """
     if source not in MAP_SOURCES:
         raise ValueError(f"drivable_from_map: source must be one of {MAP_SOURCES}, got {source!r}")
+    region = polygons_near(polygons, center_xy, roi_m)
+    return None if region is None else DrivableArea(source=source, confidence="high", region=region)
+
+
+def polygons_near(polygons, center_xy: np.ndarray, roi_m: float) -> shapely.Geometry | None:
+    """The union of map polygons (global x/y) clipped to the disc of radius ``roi_m`` around ``center_xy``
+    (prepared for fast queries); None when nothing of positive area is left."""
     if not polygons:
         return None
     roi = shapely.Point(float(center_xy[0]), float(center_xy[1])).buffer(roi_m, quad_segs=16)
@@ -195,7 +202,7 @@ def drivable_from_map(polygons: list, center_xy: np.ndarray, roi_m: float,
     if region.is_empty or region.area <= 0:
         return None
     shapely.prepare(region)
-    return DrivableArea(source=source, confidence="high", region=region)
+    return region
 
 
 def _ray_fill_grid(

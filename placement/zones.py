@@ -32,7 +32,7 @@ from streetaug.datasets.sample import CameraView, Sample
 
 from .class_rules import ClassRule
 from .config import PlacementConfig
-from .drivable import DrivableArea
+from .drivable import DrivableArea, polygons_near
 
 ROAD_EDGE_BAND_M = (-0.6, 1.0)  # centre's signed distance to the road edge of the road_edge zone
 CLUSTER_TAPER_M = 2.0  # members of a line (a work zone's taper) may reach this much farther into the road
@@ -194,21 +194,6 @@ class SurfaceZones:
         raise ValueError(f"unknown zone {zone!r}")
 
 
-def _near(polygons, center_xy: np.ndarray, roi_m: float) -> shapely.Geometry | None:
-    if not polygons:
-        return None
-    roi = shapely.Point(float(center_xy[0]), float(center_xy[1])).buffer(roi_m, quad_segs=16)
-    geoms = np.asarray(polygons, dtype=object)
-    geoms = geoms[shapely.intersects(geoms, roi)]
-    if len(geoms) == 0:
-        return None
-    region = shapely.intersection(shapely.union_all(shapely.make_valid(geoms)), roi)
-    if region.is_empty or region.area <= 0:
-        return None
-    shapely.prepare(region)
-    return region
-
-
 SIDEWALK_REACH_M = 2.5  # a place is sidewalk when its nearest static lidarseg point is, within this distance
 
 
@@ -252,8 +237,8 @@ def _sidewalk_cells(sample: Sample, center_xy: np.ndarray, roi_m: float) -> Labe
 def surface_zones(sample: Sample, view: CameraView, drivable: DrivableArea, config: PlacementConfig) -> SurfaceZones:
     """The zones around ``view``'s camera: ``drivable`` with the map's walkways and crossings, lidarseg sidewalks."""
     cam_xy = view.T_global_from_cam[:2, 3]
-    return SurfaceZones(drivable, _near(list(sample.walkways_global), cam_xy, config.map_roi_m),
-                        _near(list(sample.ped_crossings_global), cam_xy, config.map_roi_m),
+    return SurfaceZones(drivable, polygons_near(list(sample.walkways_global), cam_xy, config.map_roi_m),
+                        polygons_near(list(sample.ped_crossings_global), cam_xy, config.map_roi_m),
                         _sidewalk_cells(sample, cam_xy, config.map_roi_m), config.kerb_distance_m)
 
 
