@@ -240,3 +240,18 @@ def test_a_small_object_stands_on_the_lowest_surface_it_sees_and_not_on_an_unsee
     near = GroundPlane(np.array([0.0, 0.0, 0.1]), up, "lidar-plane", 12)
     kept = support_plane(near, np.zeros((0, 3)), fp, ego)
     assert kept.source == "lidar-plane" and kept.n_points == 0  # unseen: kept, but marked as such
+
+
+def test_a_map_walkway_is_where_pedestrians_go_when_the_map_has_one():
+    """With a walkway polygon only on the left side, every pedestrian stands inside it (not the band)."""
+    import dataclasses
+
+    sample = _street(crossing=False)
+    walk = shapely.Polygon(ego_to_global_xy([[-20, 5.6], [90, 5.6], [90, 8.5], [-20, 8.5]]))
+    sample = dataclasses.replace(sample, walkways_global=(walk,)).with_lidar(sample.lidar)
+    n = 0
+    for r in _place_many(sample, "pedestrian", 6):
+        for p in r.placements:
+            assert p.zone == "sidewalk" and walk.contains(shapely.convex_hull(shapely.multipoints(p.box.corners()[:, :2])))
+            n += 1
+    assert n >= 3
