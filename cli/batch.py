@@ -89,6 +89,9 @@ def batch(dataroot, version, out, cameras, limit, n_objects, tracks, sweeps, yaw
         raise click.UsageError("give --scheduler ADDRESS or --dask-local N, not both")
     if dry_run and shard:
         raise click.UsageError("--dry-run plans the whole dataset; drop --shard")
+    if asset is not None and (classes or class_weights):
+        raise click.UsageError("--classes/--class-weights choose procedural objects or --assets files by class; "
+                               "--asset FILE is one object: give one or the other")
     root, version = _dataroot(dataroot, version)
     names = tuple(dict.fromkeys(c.strip() for c in cameras.split(",") if c.strip()))  # duplicates once
     config = BatchConfig(

@@ -159,6 +159,9 @@ def insert(dataroot, version, scene, sample_token, camera, asset, assets_dir, as
 
     from streetaug.augment.assets.classes import ClassMix
 
+    if asset is not None and (classes or class_weights):
+        raise click.UsageError("--classes/--class-weights choose procedural objects or --assets files by class; "
+                               "--asset FILE is one object: give one or the other")
     class_mix = ClassMix.parse(classes, class_weights)
     options = InsertOptions(quality=quality, level=level, seed=seed, n_objects=n_objects, yaw_sigma_deg=yaw_sigma, ev=ev,
                             match_camera=match_camera, class_rules=str(class_rules) if class_rules else None)

@@ -88,3 +88,26 @@ def test_the_shipped_table_is_what_the_real_annotations_give():
     shipped = json.loads(CLASS_SIZES_PATH.read_text())["categories"]
     assert class_sizes_document(measure_box_sizes(REAL_DIRS), [])["categories"] == shipped
     assert shipped["vehicle.car"]["n_instances"] >= 60 and shipped["vehicle.car"]["source"] == "nuscenes"
+
+
+CARS = SHARED_DATA / "cars"
+
+
+@pytest.mark.skipif(not CARS.is_dir(), reason=f"{CARS} (glTF cars) not present")
+def test_a_folder_without_files_of_a_class_is_refused_by_name():
+    from streetaug.augment.assets.classes import ClassMix
+    from streetaug.augment.assets.select import select_assets
+
+    mix = ClassMix.parse("car,pedestrian", None)
+    with pytest.raises(InputError, match=r"no asset file of class\(es\) pedestrian .*classes with files: car"):
+        select_assets(np.random.default_rng(0), 2, None, CARS, "-z", None, mix)
+    cars = select_assets(np.random.default_rng(0), 3, None, CARS, "-z", None, ClassMix.parse("car", None))
+    assert {a.category for a in cars} == {"vehicle.car"}
+
+
+def test_cli_refuses_classes_with_a_single_asset_file(tmp_path):
+    from streetaug.cli.main import main
+
+    r = CliRunner().invoke(main, ["insert", "--scene", "sample-sunny", "--asset", str(tmp_path / "x.glb"),
+                                  "--classes", "bus", "--out", str(tmp_path / "o")])
+    assert r.exit_code == 2 and "give one or the other" in r.output
