@@ -191,3 +191,27 @@ def test_tracks_stand_on_the_lidar_ground_not_on_roofs_or_canopies(seq_frames, s
         assert abs(t.T_global_from_object[i, 2, 3] - np.percentile(near[:, 2], 10)) < 0.3, (t.track_index, t.motion)
         checked += 1
     assert checked >= 2
+
+
+@needs_seq
+def test_other_classes_stand_still_in_their_zone_through_the_span(seq_frames):
+    """A cone and a pedestrian become still tracks: the zone of their class rule at every keyframe (the road's
+    edge or the kerb; the sidewalk), no vehicle attribute, never moving."""
+    from streetaug.placement.class_rules import read_class_rules
+
+    samples, frames = seq_frames
+    cone = ObjectBox(np.array([0.41, 0.38, 0.74]), "movable_object.trafficcone")
+    person = ObjectBox(np.array([0.7, 0.7, 1.75]), "human.pedestrian.adult")
+    plan = plan_tracks(frames, [cone, person, cone], np.random.default_rng(3), TrackConfig(), samples[0].location)
+    assert plan.tracks, plan.reason
+    rules = read_class_rules()
+    by_token = {f.token: f for f in frames}
+    for t in plan.tracks:
+        rule = rules.for_category(t.category)
+        assert t.motion == "parked" and t.zone in rule.zones and t.attribute is None
+        assert t.detection_class == rule.name
+        assert np.allclose(t.T_global_from_object, t.T_global_from_object[0], atol=0.2)  # still (heights may vary)
+        for i, token in enumerate(t.sample_tokens):
+            fp = box_footprint_rect(t.T_global_from_object[i][None], t.wlh)
+            assert by_token[token].scene().zones.footprints_in(t.zone, fp, rule)[0]
+        assert Track.from_json(t.to_json()).to_json() == t.to_json()
