@@ -177,7 +177,7 @@ def stand_candidates(scene: PlacementScene, cands: Candidates, index: np.ndarray
     config = config or scene.config
     fitter = scene.ground_for(config)
     planes = [fitter.fit(p) for p in cands.xy[index]]
-    if float(np.hypot(wlh[0], wlh[1])) < SUPPORT_MAX_SIZE_M:
+    if is_small(wlh):
         T_ge = scene.view.T_global_from_ego
         planes = [support_plane(p, scene.obstacle_points, fp, ego_ground_plane(T_ge, fp.mean(axis=0)))
                   for p, fp in zip(planes, cands.footprints_xy[index])]
@@ -191,6 +191,11 @@ def stand_candidates(scene: PlacementScene, cands: Candidates, index: np.ndarray
 
 
 SUPPORT_MAX_SIZE_M = 3.0  # footprint diagonal below which an object reads the ground right under it
+
+
+def is_small(wlh: np.ndarray) -> bool:
+    """Whether a box [w, l, h] is small enough to stand on the returns right under it (:func:`support_plane`)."""
+    return float(np.hypot(wlh[0], wlh[1])) < SUPPORT_MAX_SIZE_M
 SUPPORT_MARGIN_M = 0.4  # around the footprint
 SUPPORT_BAND_M = 0.25  # returns this close to the fitted plane count as the ground under the object
 SUPPORT_MIN_POINTS = 4
@@ -209,8 +214,9 @@ def support_plane(plane: GroundPlane, points_global: np.ndarray, footprint_xy: n
 
     The ground is the lowest surface: when returns lie more than ``SUPPORT_BAND_M`` below the plane (it was fitted
     on a wall's top, a parapet, a hoarding), the plane drops to them (the median of those within
-    ``SUPPORT_BAND_M`` of their 10th-percentile height); otherwise it moves to the median height of the returns
-    within ``SUPPORT_BAND_M`` of it (a kerb step, a raised sidewalk).
+    ``SUPPORT_BAND_M`` of their 10th-percentile height); otherwise it moves to the lower quartile height of the
+    returns within ``SUPPORT_BAND_M`` of it (a raised sidewalk; a footprint straddling a kerb step rests on the
+    road rather than hovering over it).
     """
     def unseen() -> GroundPlane:  # n_points 0: nothing seen under the object
         if ego_plane is None or abs(plane.point_global[2] - ego_plane.point_global[2]) <= UNSEEN_MAX_OFFSET_M:
@@ -224,18 +230,20 @@ def support_plane(plane: GroundPlane, points_global: np.ndarray, footprint_xy: n
     near = np.linalg.norm(points_global[:, :2] - c, axis=1) <= r
     h_all = (points_global[near] - plane.point_global) @ plane.normal_global
     below = h_all[h_all < -SUPPORT_BAND_M]
-    if len(below) >= SUPPORT_MIN_POINTS:
+    if len(below) >= SUPPORT_MIN_POINTS:  # the plane is above what is under the object: drop to the floor
         floor = float(np.percentile(below, 10))
         h = below[below <= floor + SUPPORT_BAND_M]
+        level = float(np.median(h))
     else:
         h = h_all[np.abs(h_all) <= SUPPORT_BAND_M]
+        level = float(np.percentile(h, 25)) if len(h) else 0.0  # straddling a kerb: the road, not above it
     if len(h) < SUPPORT_MIN_POINTS:
         return unseen()
-    dz = float(np.median(h))
+    dz = level
     # a plane moved by dz along its normal rises by dz / n_z at the same x/y
     return GroundPlane(plane.point_global + np.array([0.0, 0.0, dz / plane.normal_global[2]]), plane.normal_global,
                        plane.source, len(h))
 
 
 __all__ = ["CameraAzimuthRange", "Candidates", "StoodCandidates", "camera_azimuth_range", "object_transforms",
-           "sample_candidates", "stand_candidates", "support_plane"]
+           "is_small", "sample_candidates", "stand_candidates", "support_plane"]

@@ -29,12 +29,13 @@ from streetaug.augment.core import InputError, rotation_to_quat
 from streetaug.datasets.nuscenes_format import VEHICLE_MOVING, VEHICLE_PARKED
 from streetaug.datasets.sample import Box, CameraView, Sample
 
-from .candidates import Candidates, StoodCandidates, sample_candidates, stand_candidates
+from .candidates import Candidates, StoodCandidates, is_small, sample_candidates, stand_candidates
 from .class_rules import ClassRule, ClassRules, read_class_rules
 from .config import PlacementConfig
 from .drivable import DrivableArea, drivable_area_for_sample
 from .rules import (
     footprint_corners,
+    occlusion_tolerance_for,
     rule_box_clearance,
     rule_corners_unoccluded,
     rule_distance,
@@ -224,7 +225,8 @@ def check_stood(scene: PlacementScene, stood: StoodCandidates, wlh: np.ndarray, 
     k = np.arange(len(idx))
     rect = stood.footprints_xy
     in_zone = scene.zones.footprints_in(zone, rect[k], rule, member=skip_mutual is not None)
-    if zone in OFF_ROAD_ZONES:  # off the road the ground must be measured under the object, not assumed
+    if zone in OFF_ROAD_ZONES or is_small(wlh):  # off the road, and under small objects (whose contact shows),
+        # the ground must be measured under the object, not assumed
         in_zone &= np.array([p.source != "ego-plane" and p.n_points > 0 for p in stood.planes], dtype=bool)
     k = tally.keep("surface", idx, k, in_zone)
     k = tally.keep("annotated_boxes", idx, k, rule_box_clearance(
@@ -239,7 +241,7 @@ def check_stood(scene: PlacementScene, stood: StoodCandidates, wlh: np.ndarray, 
                                                      cfg.lidarseg_max_points))
     visible = np.zeros(len(idx))
     visible[k] = visible_fraction_estimate(stood.T_cam_from_object[k], wlh, camera, scene.depth_m,
-                                           cfg.occlusion_tolerance_m)
+                                           occlusion_tolerance_for(wlh, cfg.occlusion_tolerance_m))
     k = tally.keep("in_view", idx, k, rule_in_view(stood.corners_cam[k], camera, cfg.min_visible_fraction,
                                                    cfg.near_plane_m, visible[k]))
     if cfg.require_unoccluded_corners:

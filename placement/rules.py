@@ -311,6 +311,13 @@ def visible_fraction_estimate(
     return out
 
 
+def occlusion_tolerance_for(wlh: np.ndarray, tolerance_m: float) -> float:
+    """The occlusion tolerance (m) for a box of size ``wlh``: ``tolerance_m``, but no more than half its smaller
+    horizontal side (at least 0.3 m): a hedge 0.9 m in front of a pedestrian hides it, though not a car's
+    far half."""
+    return float(min(tolerance_m, max(0.3, 0.5 * min(float(wlh[0]), float(wlh[1])))))
+
+
 def rule_in_view(
     corners_cam: np.ndarray,
     camera: PinholeCamera,

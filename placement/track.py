@@ -46,8 +46,9 @@ from .config import PlacementConfig
 from .drivable import DrivableArea, drivable_area_for_sample
 from .ego_path import EgoPath, PathCoords, traffic_side
 from .place import OFF_ROAD_ZONES, Placeable, Placement, check_objects, zone_order
-from .rules import (box_corners_object, box_footprint_rect, footprint_corners, rule_box_clearance, rule_drivable,
-                    rule_in_view, rule_lidarseg, rule_mutual, rule_obstacles, visible_fraction_estimate)
+from .rules import (box_corners_object, box_footprint_rect, footprint_corners, occlusion_tolerance_for,
+                    rule_box_clearance, rule_drivable, rule_in_view, rule_lidarseg, rule_mutual, rule_obstacles,
+                    visible_fraction_estimate)
 from .scene import PlacementScene
 
 # The nuScenes data vehicle (Renault Zoe, 4.08 x 1.73 m) around its ego origin (rear axle, on the ground).
@@ -843,7 +844,7 @@ def _stand_and_check(frames, k: int, channel: str | None, c: int, xy_j: np.ndarr
         if not np.all(corners[:, 2] >= pc.near_plane_m):
             continue
         visible = visible_fraction_estimate(T_co[None], wlh, view_scene.camera, view_scene.depth_m,
-                                            pc.occlusion_tolerance_m)
+                                            occlusion_tolerance_for(wlh, pc.occlusion_tolerance_m))
         if rule_in_view(corners[None], view_scene.camera, pc.min_visible_fraction, pc.near_plane_m, visible)[0]:
             return np.array(T_all), tuple(sources), name
     tally.report["in_view"] += 1
