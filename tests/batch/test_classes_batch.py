@@ -2,7 +2,7 @@
 inside its box.
 
 Needs ``../shared/data`` (real scene-0916 and the scene-0061 keyframe; skips without them). The batch renders
-the real keyframe at draft quality (the labels and tables are tested here; the shading in tests/render).
+the real keyframe's CAM_FRONT at draft quality (the labels and tables are tested here; the shading in tests/render).
 """
 
 from __future__ import annotations
@@ -35,8 +35,8 @@ DETECTION_NAME = {"human.pedestrian.adult": "pedestrian", "human.pedestrian.chil
 @pytest.fixture(scope="module")
 def run(tmp_path_factory):
     out = tmp_path_factory.mktemp("classes") / "out"
-    config = BatchConfig(dataroot=str(REAL.resolve()), version="v1.0-mini", quality="draft", level="L1", seed=5,
-                         n_objects=6, classes=",".join(DETECTION_CLASSES))
+    config = BatchConfig(dataroot=str(REAL.resolve()), version="v1.0-mini", cameras=("CAM_FRONT",), quality="draft",
+                         level="L1", seed=5, n_objects=6, classes=",".join(DETECTION_CLASSES))
     summary = run_batch(config, out, RunOptions(workers=1, progress=False, contact_sheet=0))
     return out, summary
 
