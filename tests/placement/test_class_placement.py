@@ -96,7 +96,7 @@ def test_pedestrians_stand_on_sidewalks_or_crossings_never_in_a_lane():
     road = road_polygon_global()
     crossing = sample.ped_crossings_global[0]
     zones = set()
-    for r in _place_many(sample, "pedestrian", 16):
+    for r in _place_many(sample, "pedestrian", 10):
         for p in r.placements:
             zones.add(p.zone)
             hull = shapely.convex_hull(shapely.multipoints(p.box.corners()[:, :2]))
