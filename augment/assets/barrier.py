@@ -14,7 +14,7 @@ import numpy as np
 
 from .asset import Asset, Material
 from .class_sizes import read_class_sizes
-from .mesh_parts import MeshPart, merge_parts
+from .mesh_parts import MeshPart, merge_parts, target_wlh
 from .procedural import srgb_to_linear
 from .revolve import box, loft, revolve, tube, with_material
 from .validate import validate_asset
@@ -156,9 +156,7 @@ def procedural_barrier(seed: int, wlh=None, variant: str | None = None) -> Asset
         typical = {"concrete": (2.0, 0.62, 0.85), "water_filled": (1.9, 0.5, 1.0), "fence": (2.2, 0.6, 1.1)}[variant]
         target = np.clip(np.array(typical) * (0.92 + 0.16 * rng.random(3)), size.min_wlh, size.max_wlh)
     else:
-        target = np.asarray(wlh, dtype=np.float64).ravel()
-        if target.shape != (3,) or not np.all(np.isfinite(target)) or np.any(target <= 0):
-            raise ValueError(f"procedural_barrier: wlh must be 3 positive numbers [w, l, h] in metres, got {wlh!r}")
+        target = target_wlh(wlh, "procedural_barrier")
         rng.random(3)
     w, l, h = (float(x) for x in target)
     if variant == "concrete":

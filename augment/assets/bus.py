@@ -18,8 +18,9 @@ from numpy.typing import ArrayLike
 
 from .asset import Asset
 from .class_sizes import read_class_sizes
+from .mesh_parts import target_wlh
 from .vehicle_parts import (ACCENT, GLASS, HEADLIGHT, INDICATOR, PAINT, TAILLIGHT, TRIM, Region, arch_bottom,
-                            arch_stations, axle_wheels, box, check_wlh, choose_variant, finish_vehicle, light_pair,
+                            arch_stations, axle_wheels, box, choose_variant, finish_vehicle, light_pair,
                             loft_x, mirror_pair, pick_colour, vehicle_materials, wheel_well)
 
 _SEED_SALT = 0xB05
@@ -57,7 +58,7 @@ def procedural_bus(seed: int, wlh: ArrayLike | None = None, variant: str | None 
         ValueError: an unknown variant, or a wlh that is not 3 finite positive numbers.
     """
     rng = np.random.default_rng([int(seed) & 0xFFFFFFFF, _SEED_SALT])
-    given = None if wlh is None else check_wlh(wlh, np.zeros(3), "procedural_bus")
+    given = target_wlh(wlh, "procedural_bus")
     long_box = given is not None and given[1] > 15.0
     weights = {"rigid": 0.1 if long_box else 0.9, "bendy": 0.9 if long_box else 0.1}
     variant = choose_variant(rng, variant, weights, "procedural_bus")

@@ -19,8 +19,9 @@ from numpy.typing import ArrayLike
 
 from .asset import Asset
 from .class_sizes import read_class_sizes
+from .mesh_parts import target_wlh
 from .vehicle_parts import (CHROME, HEADLIGHT, METAL, PAINT, TAILLIGHT, TRIM, TYRE, CabSpec, axle_wheels, beam, box,
-                            cab_over, check_wlh, choose_variant, circle, finish_vehicle, glass_cabin, light_pair,
+                            cab_over, choose_variant, circle, finish_vehicle, glass_cabin, light_pair,
                             loft_x, pick_colour, prism, stadium, tube, vehicle_materials, wheel_well)
 
 CATEGORY = "vehicle.construction"
@@ -57,7 +58,7 @@ def procedural_construction_vehicle(seed: int, wlh: ArrayLike | None = None, var
         ValueError: an unknown variant, or a wlh that is not 3 finite positive numbers.
     """
     rng = np.random.default_rng([int(seed) & 0xFFFFFFFF, _SEED_SALT])
-    given = None if wlh is None else check_wlh(wlh, np.zeros(3), "procedural_construction_vehicle")
+    given = target_wlh(wlh, "procedural_construction_vehicle")
     long_box = given is None or given[1] > 7.5
     loader_fits = given is None or (given[1] < 8.5 and given[2] < 4.0)
     weights = {"excavator": 0.5, "loader": 0.35 if loader_fits else 0.05, "crane_truck": 0.3 if long_box else 0.02}

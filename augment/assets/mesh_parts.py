@@ -26,6 +26,20 @@ class MeshPart:
     normals: np.ndarray
 
 
+def target_wlh(wlh, where: str) -> np.ndarray | None:
+    """A generator's target box size (3,) float64 [w, l, h] metres, checked; None stays None (a typical size).
+
+    Raises:
+        ValueError: not 3 finite positive numbers (the message starts with ``where``).
+    """
+    if wlh is None:
+        return None
+    a = np.asarray(wlh, dtype=np.float64).ravel()
+    if a.shape != (3,) or not np.all(np.isfinite(a)) or np.any(a <= 0):
+        raise ValueError(f"{where}: wlh must be 3 finite positive numbers [w, l, h] in metres, got {wlh!r}")
+    return a
+
+
 def merge_parts(parts: list[MeshPart]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The parts as one mesh: vertices (V, 3), faces (F, 3) int64 and face materials (F,) int64."""
     offsets = np.cumsum([0] + [len(p.vertices) for p in parts[:-1]])
@@ -82,4 +96,5 @@ def box_mesh(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return V, F
 
 
-__all__ = ["MeshPart", "box_mesh", "grid_faces", "merge_parts", "orient_outward", "signed_volume", "weld_vertices"]
+__all__ = ["MeshPart", "box_mesh", "grid_faces", "merge_parts", "orient_outward", "signed_volume", "target_wlh",
+           "weld_vertices"]

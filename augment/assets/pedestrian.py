@@ -18,7 +18,7 @@ import numpy as np
 
 from .asset import Asset, Material
 from .class_sizes import read_class_sizes
-from .mesh_parts import MeshPart, merge_parts
+from .mesh_parts import MeshPart, merge_parts, target_wlh
 from .procedural import srgb_to_linear
 from .revolve import capsule, ellipse_rings, ellipsoid, loft, rot_y, with_material
 from .validate import validate_asset
@@ -489,9 +489,7 @@ def procedural_pedestrian(seed: int, wlh=None, variant: str | None = None, pose:
     if wlh is None:
         target_h = float(size.mean_wlh[2] * (0.94 + 0.12 * rng.random()))
     else:
-        target = np.asarray(wlh, dtype=np.float64).ravel()
-        if target.shape != (3,) or not np.all(np.isfinite(target)) or np.any(target <= 0):
-            raise ValueError(f"procedural_pedestrian: wlh must be 3 positive numbers [w, l, h] in metres, got {wlh!r}")
+        target = target_wlh(wlh, "procedural_pedestrian")
         rng.random()
         target_h = float(target[2])
     child = variant == "child"

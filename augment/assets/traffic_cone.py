@@ -13,7 +13,7 @@ import numpy as np
 
 from .asset import Asset, Material
 from .class_sizes import read_class_sizes
-from .mesh_parts import MeshPart, merge_parts
+from .mesh_parts import MeshPart, merge_parts, target_wlh
 from .procedural import srgb_to_linear
 from .revolve import box, revolve, torus, with_material
 from .validate import validate_asset
@@ -69,12 +69,7 @@ def procedural_traffic_cone(seed: int, wlh=None, variant: str | None = None) -> 
     """
     rng = np.random.default_rng([int(seed) & 0xFFFFFFFF, 0xC0E5])
     u = rng.random(10)
-    target = None
-    if wlh is not None:
-        target = np.asarray(wlh, dtype=np.float64).ravel()
-        if target.shape != (3,) or not np.all(np.isfinite(target)) or np.any(target <= 0):
-            raise ValueError(f"procedural_traffic_cone: wlh must be 3 positive numbers [w, l, h] in metres, "
-                             f"got {wlh!r}")
+    target = target_wlh(wlh, "procedural_traffic_cone")
     if variant is None:
         if target is None:
             variant = "cone" if u[0] < 0.75 else ("tall" if u[0] < 0.92 else "drum")

@@ -16,8 +16,9 @@ from numpy.typing import ArrayLike
 
 from .asset import Asset
 from .class_sizes import read_class_sizes
+from .mesh_parts import target_wlh
 from .vehicle_parts import (ACCENT, CARGO, CHROME, METAL, PAINT, TAILLIGHT, TRIM, Region, axle_wheels, box,
-                            check_wlh, choose_variant, finish_vehicle, light_pair, loft_x, pick_colour, rear_doors,
+                            choose_variant, finish_vehicle, light_pair, loft_x, pick_colour, rear_doors,
                             tube, vehicle_materials, wheel_well)
 
 CATEGORY = "vehicle.trailer"
@@ -59,7 +60,7 @@ def procedural_trailer(seed: int, wlh: ArrayLike | None = None, variant: str | N
         ValueError: an unknown variant, or a wlh that is not 3 finite positive numbers.
     """
     rng = np.random.default_rng([int(seed) & 0xFFFFFFFF, _SEED_SALT])
-    given = None if wlh is None else check_wlh(wlh, np.zeros(3), "procedural_trailer")
+    given = target_wlh(wlh, "procedural_trailer")
     small = given is not None and (given[1] < 6.0 or given[2] < 2.6)
     weights = {"box": 0.2 if small else 0.5, "container": 0.1 if small else 0.3, "flatbed": 0.7 if small else 0.2}
     variant = choose_variant(rng, variant, weights, "procedural_trailer")

@@ -16,8 +16,9 @@ from numpy.typing import ArrayLike
 
 from .asset import Asset
 from .class_sizes import read_class_sizes
+from .mesh_parts import target_wlh
 from .vehicle_parts import (ACCENT, CARGO, CHROME, GLASS, HEADLIGHT, INDICATOR, METAL, PAINT, TAILLIGHT, TRIM, CabSpec,
-                            Region, arch_bottom, arch_stations, axle_wheels, box, cab_over, check_wlh, choose_variant,
+                            Region, arch_bottom, arch_stations, axle_wheels, box, cab_over, choose_variant,
                             finish_vehicle, light_pair, loft_x, mirror_pair, pick_colour, prism, rear_doors, taper,
                             tube, vehicle_materials, wheel_well)
 
@@ -62,7 +63,7 @@ def procedural_truck(seed: int, wlh: ArrayLike | None = None, variant: str | Non
         ValueError: an unknown variant, or a wlh that is not 3 finite positive numbers.
     """
     rng = np.random.default_rng([int(seed) & 0xFFFFFFFF, _SEED_SALT])
-    given = None if wlh is None else check_wlh(wlh, np.zeros(3), "procedural_truck")
+    given = target_wlh(wlh, "procedural_truck")
     if given is None:
         weights = {"box": 0.5, "flatbed": 0.2, "pickup": 0.3}
     else:

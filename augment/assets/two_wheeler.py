@@ -17,7 +17,7 @@ import numpy as np
 
 from .asset import Asset, Material
 from .class_sizes import read_class_sizes
-from .mesh_parts import MeshPart, merge_parts
+from .mesh_parts import MeshPart, merge_parts, target_wlh
 from .pedestrian import rider_parts
 from .procedural import srgb_to_linear
 from .revolve import (
@@ -48,15 +48,6 @@ def procedural_motorcycle_variants() -> tuple[str, ...]:
 
 def _hex(h: str) -> np.ndarray:
     return srgb_to_linear(np.array([int(h[i:i + 2], 16) for i in (0, 2, 4)]) / 255.0)
-
-
-def _target(wlh, name: str) -> np.ndarray | None:
-    if wlh is None:
-        return None
-    t = np.asarray(wlh, dtype=np.float64).ravel()
-    if t.shape != (3,) or not np.all(np.isfinite(t)) or np.any(t <= 0):
-        raise ValueError(f"{name}: wlh must be 3 positive numbers [w, l, h] in metres, got {wlh!r}")
-    return t
 
 
 def _choose_variant(rng: np.random.Generator, variant: str | None, target: np.ndarray | None, name: str,
@@ -271,7 +262,7 @@ def procedural_bicycle(seed: int, wlh=None, variant: str | None = None) -> Asset
     """
     name = "procedural_bicycle"
     rng = np.random.default_rng([int(seed) & 0xFFFFFFFF, 0xB1C7])
-    target = _target(wlh, name)
+    target = target_wlh(wlh, name)
     variant = _choose_variant(rng, variant, target, name, 1.30)
     ridden = variant == "with_rider"
     u = rng.random(8)
@@ -501,7 +492,7 @@ def procedural_motorcycle(seed: int, wlh=None, variant: str | None = None) -> As
     """
     name = "procedural_motorcycle"
     rng = np.random.default_rng([int(seed) & 0xFFFFFFFF, 0x3070])
-    target = _target(wlh, name)
+    target = target_wlh(wlh, name)
     variant = _choose_variant(rng, variant, target, name, 1.32)
     ridden = variant == "with_rider"
     u = rng.random(10)

@@ -40,20 +40,6 @@ CARGO_PALETTE: tuple[tuple[str, str, float], ...] = (
 # ----------------------------------------------------------------------------- inputs
 
 
-def check_wlh(wlh, default: np.ndarray, where: str) -> np.ndarray:
-    """The target box size (3,) [w, l, h] metres: ``wlh`` checked, or ``default`` when None.
-
-    Raises:
-        ValueError: not 3 finite positive numbers.
-    """
-    if wlh is None:
-        return np.asarray(default, dtype=np.float64).copy()
-    a = np.asarray(wlh, dtype=np.float64).ravel()
-    if a.shape != (3,) or not np.all(np.isfinite(a)) or np.any(a <= 0):
-        raise ValueError(f"{where}: wlh must be 3 finite positive numbers [w, l, h] in metres, got {wlh!r}")
-    return a
-
-
 def choose_variant(rng: np.random.Generator, variant: str | None, weights: dict[str, float], where: str) -> str:
     """``variant`` checked against ``weights``' names, or one drawn with those weights when None.
 
@@ -635,7 +621,7 @@ def finish_vehicle(parts: list[MeshPart], materials: tuple[Material, ...], targe
 __all__ = [
     "ACCENT", "CARGO", "CARGO_PALETTE", "CHROME", "GLASS", "HEADLIGHT", "INDICATOR", "METAL", "PAINT", "RIM",
     "TAILLIGHT", "TRIM", "TYRE", "apply_regions", "arch_bottom", "arch_stations", "axle_wheels", "beam", "box",
-    "cab_over", "CabSpec", "check_wlh", "choose_variant", "circle", "finish_vehicle", "glass_cabin",
+    "cab_over", "CabSpec", "choose_variant", "circle", "finish_vehicle", "glass_cabin",
     "hex_to_linear", "light_pair", "loft_x", "make_part", "mirror_pair", "pick_colour", "prism", "rear_doors",
     "Region", "rounded_rect_ring", "shifted", "stadium", "taper", "tube", "vehicle_materials", "wheel",
     "wheel_well",
