@@ -19,7 +19,7 @@ from typing import Callable
 import click
 import numpy as np
 
-from streetaug.augment.core import intrinsics_from_fov
+from streetaug.augment.core import InputError, intrinsics_from_fov
 from streetaug.augment.core.limits import ResourceLimits
 from streetaug.datasets.bundled import BUNDLED_VERSION, bundled_dataroot
 from streetaug.datasets.nuscenes import NuScenesReader
@@ -181,17 +181,15 @@ def intrinsics_option(intrinsics: str | None, fov_deg: float | None, width: int,
 
 
 def _check_classes(ctx, param, value):
-    """--classes: comma-separated detection classes (clear error listing the valid ones)."""
+    """--classes: comma-separated detection classes, checked as the class mix checks them (exit 2 when bad)."""
     if value is None:
         return None
-    from streetaug.augment.assets.categories import DETECTION_CLASSES  # light: no meshes, no torch
+    from streetaug.augment.assets.classes import ClassMix  # deferred: the procedural generators
 
-    names = [n.strip() for n in value.split(",") if n.strip()]
-    bad = [n for n in names if n not in DETECTION_CLASSES]
-    if not names or bad:
-        raise click.BadParameter(f"unknown class {bad[0] if bad else value!r}; valid classes: "
-                                 f"{', '.join(DETECTION_CLASSES)}", ctx, param)
-    return ",".join(names)
+    try:
+        return ",".join(ClassMix.parse(value).classes)
+    except InputError as e:
+        raise click.BadParameter(str(e), ctx, param) from None
 
 
 def asset_options(func: Callable) -> Callable:

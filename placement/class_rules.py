@@ -235,19 +235,5 @@ def read_class_rules(path: str | Path | None = None) -> ClassRules:
     return _read_rules(str(p), p.stat().st_mtime_ns)
 
 
-def check_class_names(names, rules: ClassRules | None = None, where: str = "--classes") -> tuple[str, ...]:
-    """``names`` as a tuple of known detection classes.
-
-    Raises:
-        InputError: an unknown name (the message lists the valid ones).
-    """
-    valid = tuple((rules or read_class_rules()).classes)
-    out = tuple(str(n).strip() for n in names)
-    bad = [n for n in out if n not in valid]
-    if bad:
-        raise InputError(f"{where}: unknown class {bad[0]!r}; valid classes: {', '.join(valid)}")
-    return out
-
-
 __all__ = ["ATTRIBUTE_MODES", "CLASS_RULES_PATH", "ClassRule", "ClassRules", "ClusterRule", "DETECTION_CLASSES",
-           "HEADINGS", "ZONES", "check_class_names", "read_class_rules"]
+           "HEADINGS", "ZONES", "read_class_rules"]

@@ -29,7 +29,8 @@ from streetaug.augment.core import InputError, rotation_to_quat
 from streetaug.datasets.nuscenes_format import VEHICLE_MOVING, VEHICLE_PARKED
 from streetaug.datasets.sample import Box, CameraView, Sample
 
-from .candidates import Candidates, StoodCandidates, is_small, sample_candidates, stand_candidates
+from .candidates import (LANE_REACH_OFF_CENTRE_M, Candidates, StoodCandidates, is_small, sample_candidates,
+                         stand_candidates)
 from .class_rules import ClassRule, ClassRules, read_class_rules
 from .config import PlacementConfig
 from .drivable import DrivableArea, drivable_area_for_sample
@@ -375,7 +376,8 @@ def cluster_members(scene: PlacementScene, leader: Placement, leader_index: int,
     """The other members of ``leader``'s cluster: a line along the road, each checked by every rule.
 
     Draws the size, gap, taper and direction (forward or back along the road) from ``rng``; the line grows
-    that way until a member fails a rule, then the other way from the first member. Members use the leader's object (``asset_index``) and heading noise.
+    that way until a member fails a rule, then the other way from the first member. Members use the leader's
+    object (``asset_index``) and heading noise.
     """
     c = rule.cluster
     n = int(rng.integers(c.size[0], c.size[1] + 1))
@@ -387,19 +389,19 @@ def cluster_members(scene: PlacementScene, leader: Placement, leader_index: int,
         return []
     config = rule.config(scene.config)
     wlh = np.asarray(obj.wlh, dtype=np.float64)
-    lx = leader.T_global_from_object[:2, 0]
     road_dir = scene.zones.edge_tangent(leader.box.center[None, :2])[0]  # along the road's edge
     if scene.lanes is not None:
         lane_heading, on_lane = scene.lanes.heading_at(leader.box.center[None, :2],
-                                                       scene.config.lane_max_distance_m + 4.0)
+                                                       scene.config.lane_max_distance_m + LANE_REACH_OFF_CENTRE_M)
         if on_lane[0]:
             road_dir = np.array([np.cos(lane_heading[0]), np.sin(lane_heading[0])])
+    lx = leader.T_global_from_object[:2, 0]
     ux = lx / max(np.linalg.norm(lx), 1e-9)  # the leader's x (front) in x/y
     uy = np.array([-ux[1], ux[0]])
     extent = float(leader.wlh[1] * abs(ux @ road_dir) + leader.wlh[0] * abs(uy @ road_dir))  # footprint along the road
     step = extent + gap
     inward = scene.zones.road_normal(leader.box.center[None, :2])[0]
-    yaw0 = float(np.arctan2(lx[1], lx[0]))
+    yaw0 = float(np.arctan2(ux[1], ux[0]))
     members: list[Placement] = []
     mates = [leader_index]
     steps = [(sign, k) for k in range(1, n)] + [(-sign, k) for k in range(1, n)]  # forward, then back

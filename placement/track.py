@@ -481,7 +481,7 @@ def plan_tracks(
         moving = bool(rng.random() < config.moving_probability) and speed_range(obj.category)[1] > 0 \
             and rule.attribute == "vehicle"
         track = _plan_one(frames, usable, index, obj, moving, rng, config, path, votes, side, swept, tracks, report,
-                          None if rule.attribute in ("vehicle", "parked") else rule)
+                          rule, still_in_zone=rule.attribute not in ("vehicle", "parked"))
         if track is not None:
             tracks.append(track)
     reason = None
@@ -529,13 +529,13 @@ class LaneMotion:
 
 
 def _plan_one(frames, usable, index, obj, moving, rng, config: TrackConfig, path: EgoPath, votes: DirectionVotes,
-              side: str, swept: np.ndarray, placed: list[Track], report: dict[str, int],
-              rule: ClassRule | None = None) -> Track | None:
-    """One track of ``obj``; ``rule`` None: a vehicle (kerb or lane), else a still object in ``rule``'s zones."""
+              side: str, swept: np.ndarray, placed: list[Track], report: dict[str, int], class_rule: ClassRule,
+              still_in_zone: bool) -> Track | None:
+    """One track of ``obj`` (of ``class_rule``'s class): a vehicle by the kerb or in a lane, or with
+    ``still_in_zone`` a still object in one of the rule's zones, with its thresholds."""
+    rule = class_rule if still_in_zone else None  # the zone-rule path below; vehicles keep the kerb and lanes
     if rule is not None:
         config = dataclasses.replace(config, placement=rule.config(config.placement))
-    rules = read_class_rules()
-    vehicle_class = rules.class_of(obj.category) if obj.category in rules.categories else "car"
     pc = config.placement
     wlh = np.asarray(obj.wlh, dtype=np.float64)
     w, l, _ = wlh
@@ -663,7 +663,7 @@ def _plan_one(frames, usable, index, obj, moving, rng, config: TrackConfig, path
                          T_global_from_object=track[0], velocity_global=velocity, ground_source=track[1],
                          drivable_source=scene.drivable.source, drivable_confidence=scene.drivable.confidence,
                          anchor_sample_token=frame.token, anchor_camera=track[2],
-                         detection_class=rule.name if rule is not None else vehicle_class,
+                         detection_class=class_rule.name,
                          zone=zone if rule is not None else ("lane" if moving else "kerb"),
                          fixed_attribute="" if rule is None else
                          (getattr(obj, "attribute", None) if rule.attribute == "asset" else None))

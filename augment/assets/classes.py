@@ -138,7 +138,9 @@ class ClassMix:
         """
         if classes is None and weights is None:
             return None
-        names = tuple(n.strip() for n in classes.split(",") if n.strip()) if classes else DETECTION_CLASSES
+        names = tuple(n.strip() for n in classes.split(",") if n.strip()) if classes is not None else DETECTION_CLASSES
+        if not names:
+            raise InputError(f"--classes: no class given; valid classes: {', '.join(DETECTION_CLASSES)}")
         for n in names:
             check_detection_class(n)
         if weights is None:
