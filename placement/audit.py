@@ -116,8 +116,8 @@ def _surface_ok(p: Placement, hull, rule: ClassRule, road, area: DrivableArea, z
             far = float(-s.min())
         if zones.walkway is not None:
             return bool(zones.walkway.buffer(tol).contains(hull))
-        if zones.sidewalk_cells is not None:
-            return bool(zones.on_sidewalk_cells(np.asarray(hull.exterior.coords)[:, :2]).all())
+        if zones.lidarseg_sidewalks is not None:
+            return bool(zones.on_lidarseg_sidewalk(np.asarray(hull.exterior.coords)[:, :2]).all())
         return far <= rule.sidewalk_band_m[1] + 1e-3
     return False
 

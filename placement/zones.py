@@ -62,7 +62,7 @@ class SurfaceZones:
         drivable: the road.
         walkway: the map's walkway polygons near the camera, or None.
         crossings: the map's pedestrian crossings near the camera, or None.
-        sidewalk_cells: the lidarseg evidence of sidewalks, or None: a :class:`LabelledGround` whose
+        lidarseg_sidewalks: the lidarseg evidence of sidewalks, or None: a :class:`LabelledGround` whose
             nearest-label test says whether a place is sidewalk.
         kerb_distance_m: the kerb zone's width.
     """
@@ -70,7 +70,7 @@ class SurfaceZones:
     drivable: DrivableArea
     walkway: shapely.Geometry | None = None
     crossings: shapely.Geometry | None = None
-    sidewalk_cells: "LabelledGround | None" = None
+    lidarseg_sidewalks: "LabelledGround | None" = None
     kerb_distance_m: float = 1.0
 
     @property
@@ -83,7 +83,7 @@ class SurfaceZones:
         """``"map-walkway"``, ``"lidarseg"``, ``"kerb-band"`` or None (no real road edge)."""
         if self.walkway is not None:
             return "map-walkway"
-        if self.sidewalk_cells is not None:
+        if self.lidarseg_sidewalks is not None:
             return "lidarseg"
         return "kerb-band" if self.has_road_edge else None
 
@@ -118,9 +118,9 @@ class SurfaceZones:
         out[inside] = self._grid_sdf[iy[inside], ix[inside]]
         return out
 
-    def on_sidewalk_cells(self, xy: np.ndarray) -> np.ndarray:
+    def on_lidarseg_sidewalk(self, xy: np.ndarray) -> np.ndarray:
         """(N,) bool: global x/y points (N, 2) the lidarseg evidence calls sidewalk (:class:`LabelledGround`)."""
-        return self.sidewalk_cells.is_sidewalk(xy)
+        return self.lidarseg_sidewalks.is_sidewalk(xy)
 
     def road_normal(self, xy: np.ndarray, step_m: float = 0.5) -> np.ndarray:
         """(N, 2) unit direction in which the signed distance grows (towards the road's inside) at points (N, 2)."""
@@ -150,8 +150,8 @@ class SurfaceZones:
             off = s < -rule.sidewalk_band_m[0]
             if self.walkway is not None:
                 return off & shapely.contains_xy(self.walkway, xy[:, 0], xy[:, 1])
-            if self.sidewalk_cells is not None:
-                return off & self.on_sidewalk_cells(xy)
+            if self.lidarseg_sidewalks is not None:
+                return off & self.on_lidarseg_sidewalk(xy)
             return off & (s >= -(rule.sidewalk_band_m[1] - half_w))
         if zone == "crossing":
             return shapely.contains_xy(self.crossings, xy[:, 0], xy[:, 1])
@@ -185,8 +185,8 @@ class SurfaceZones:
                 ok &= shapely.distance(shapely.polygons(corners_xy), area.region) >= rule.sidewalk_band_m[0]
             if self.walkway is not None:
                 return ok & shapely.contains_xy(self.walkway, pts[:, 0], pts[:, 1]).reshape(N, 5).all(axis=1)
-            if self.sidewalk_cells is not None:
-                return ok & self.on_sidewalk_cells(pts).reshape(N, 5).all(axis=1)
+            if self.lidarseg_sidewalks is not None:
+                return ok & self.on_lidarseg_sidewalk(pts).reshape(N, 5).all(axis=1)
             return ok & np.all(s >= -rule.sidewalk_band_m[1], axis=1)
         if zone == "crossing":
             grown = shapely.buffer(self.crossings, 0.3)
@@ -221,7 +221,7 @@ class LabelledGround:
         return (d <= SIDEWALK_REACH_M) & self.is_sidewalk_point[np.minimum(i, len(self.xy) - 1)]
 
 
-def _sidewalk_cells(sample: Sample, center_xy: np.ndarray, roi_m: float) -> LabelledGround | None:
+def _lidarseg_sidewalks(sample: Sample, center_xy: np.ndarray, roi_m: float) -> LabelledGround | None:
     lidar = sample.lidar
     if lidar is None or lidar.labels is None:
         return None
@@ -239,7 +239,7 @@ def surface_zones(sample: Sample, view: CameraView, drivable: DrivableArea, conf
     cam_xy = view.T_global_from_cam[:2, 3]
     return SurfaceZones(drivable, polygons_near(list(sample.walkways_global), cam_xy, config.map_roi_m),
                         polygons_near(list(sample.ped_crossings_global), cam_xy, config.map_roi_m),
-                        _sidewalk_cells(sample, cam_xy, config.map_roi_m), config.kerb_distance_m)
+                        _lidarseg_sidewalks(sample, cam_xy, config.map_roi_m), config.kerb_distance_m)
 
 
 __all__ = ["CLUSTER_TAPER_M", "LabelledGround", "SIDEWALK_REACH_M", "ROAD_EDGE_BAND_M", "SurfaceZones", "grow_footprints", "surface_zones"]
