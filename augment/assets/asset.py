@@ -28,6 +28,8 @@ class Material:
         clearcoat: 0..1 strength of a smooth clear-coat lobe over the base (car paint).
         retroreflective: 0..1 strength of a retro-reflective lobe (light sent back towards where it came
             from: the reflective bands of cones and barriers, number plates).
+        flake: 0..1 share of the base layer that is metallic flakes (metallic car paint: a glossier,
+            base-coloured metallic lobe under the clear coat); 0 for plain paint and other materials.
         base_color_texture: optional (h, w, 3) float32 linear texture multiplied with ``base_color``.
         metallic_roughness_texture: optional (h, w, 3) float32 (glTF: G = roughness, B = metallic).
         normal_texture: optional (h, w, 3) float32 tangent-space normal map in [0, 1].
@@ -42,6 +44,7 @@ class Material:
     emission: np.ndarray = field(default_factory=lambda: np.zeros(3))
     clearcoat: float = 0.0
     retroreflective: float = 0.0
+    flake: float = 0.0
     base_color_texture: np.ndarray | None = None
     metallic_roughness_texture: np.ndarray | None = None
     normal_texture: np.ndarray | None = None
