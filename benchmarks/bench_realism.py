@@ -1,0 +1,339 @@
+"""Realism check: inserted cars against real annotated cars of the same size in the same real images.
+
+Usage::
+
+    nice python benchmarks/bench_realism.py --tag after                       # the code of this checkout
+    nice python benchmarks/bench_realism.py --tag before --code-root /tmp/realism_before   # another checkout
+
+Data: ``../shared/data/nuscenes-seq`` (scene-0916, 41 keyframes x 6 cameras). Every ``--stride``-th keyframe,
+all 6 cameras: ``--n-objects`` procedural cars per camera are inserted by the pipeline's library API (what
+``streetaug insert`` calls: ``insert_into_sample`` with the CLI's asset choice, default preset, seeded).
+
+Cars compared (:mod:`streetaug.augment.evaluation.realism`): real annotated ``vehicle.car`` boxes at 10-40 m,
+visibility token 4 (80-100 %), the projected box inside the image and not covered by a nearer box; inserted
+cars at 10-40 m, inside the image (truncation 0), visible fraction >= 0.8. Both sets are subsampled to the
+same distribution of projected box height (px bins), at most ``--max-per-class`` each. Crops are the
+projected 3D box plus a margin that includes the ground under it; real crops come from the original image,
+inserted ones from the augmented image of the same camera.
+
+Reports per-feature gaps (inserted median vs real median, standardised mean difference) and a real-vs-inserted
+logistic regression on HOG + Lab histogram + scalar features, 5-fold cross-validated grouped by keyframe
+(0.5 = indistinguishable). Writes ``benchmarks/results/realism_<tag>.json`` and crop sheets
+``/tmp/realism/sheet_<tag>_*.png`` (real images: never commit them).
+
+Another checkout (``--code-root``): the renders run in a subprocess that imports ``streetaug.*`` from that
+checkout through a shim folder (``<cache>/shim/streetaug/{augment,cli,placement,datasets}`` symlinks and an
+``__init__.py``) put first on ``sys.path``; a regular package on ``sys.path`` wins over the venv's editable
+finder (which is appended to ``sys.meta_path``), the worker prints the imported file to prove it. Renders
+are cached under ``--cache`` (default ``/tmp/realism/cache_<tag>``), one PNG + labels JSON per image.
+"""
+
+from __future__ import annotations
+
+import os
+
+for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
+
+import argparse  # noqa: E402
+import json  # noqa: E402
+import subprocess  # noqa: E402
+import sys  # noqa: E402
+import time  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import numpy as np  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+SEQ = (ROOT / ".." / "shared" / "data" / "nuscenes-seq").resolve()
+VERSION = "v1.0-mini"
+CAMERAS = ("CAM_FRONT", "CAM_FRONT_LEFT", "CAM_FRONT_RIGHT", "CAM_BACK", "CAM_BACK_LEFT", "CAM_BACK_RIGHT")
+PACKAGES = ("augment", "cli", "placement", "datasets")
+
+
+# ----------------------------------------------------------------------------- render worker (any checkout)
+
+def make_shim(code_root: Path, cache: Path) -> Path:
+    """A folder whose ``streetaug`` package is the checkout ``code_root`` (symlinks); returns the folder."""
+    shim = cache / "shim"
+    pkg = shim / "streetaug"
+    pkg.mkdir(parents=True, exist_ok=True)
+    (pkg / "__init__.py").write_text("")
+    for name in PACKAGES:
+        link = pkg / name
+        if link.is_symlink() or link.exists():
+            link.unlink()
+        link.symlink_to(code_root.resolve() / name)
+    return shim
+
+
+def keyframe_tokens(reader, stride: int) -> list[str]:
+    return reader.sample_tokens()[::stride]
+
+
+def render_worker(args) -> None:
+    """Insert cars into every camera of every ``stride``-th keyframe with the imported code; cache the results."""
+    if args.shim:
+        sys.path.insert(0, args.shim)
+    import cv2
+
+    import streetaug.augment.pipeline as pipeline
+    from streetaug.augment.assets.select import select_assets
+    from streetaug.datasets.nuscenes import NuScenesReader
+
+    print(f"render worker: streetaug.augment.pipeline from {Path(pipeline.__file__).parent}", flush=True)
+    cache = Path(args.cache)
+    reader = NuScenesReader(SEQ, VERSION)
+    options = pipeline.InsertOptions(quality=args.quality, seed=args.seed, n_objects=args.n_objects)
+    for i, token in enumerate(keyframe_tokens(reader, args.stride)):
+        done = cache / f"{token}.json"
+        if done.exists():
+            continue
+        t0 = time.perf_counter()
+        sample = reader.sample(token)
+        views = [sample.cameras[c] for c in CAMERAS]
+        assets = {c: select_assets(pipeline.item_seed(args.seed, "asset", token, c), args.n_objects)
+                  for c in CAMERAS}
+        result = pipeline.insert_into_sample(sample, views, assets, options)
+        doc = {}
+        for c in CAMERAS:
+            r = result.views[c]
+            cv2.imwrite(str(cache / f"{token}_{c}.png"), r.image[:, :, ::-1])
+            doc[c] = r.objects
+        done.write_text(json.dumps(doc, default=float))
+        print(f"  keyframe {i}: {sum(len(v) for v in doc.values())} labels, {time.perf_counter() - t0:.1f} s",
+              flush=True)
+
+
+def render(args, cache: Path) -> str:
+    """Run the render worker in a subprocess with the code of ``args.code_root``; returns its git commit."""
+    code_root = Path(args.code_root).resolve()
+    cmd = [sys.executable, str(Path(__file__).resolve()), "--render-worker", "--cache", str(cache),
+           "--stride", str(args.stride), "--n-objects", str(args.n_objects), "--seed", str(args.seed),
+           "--quality", args.quality]
+    if code_root != ROOT:
+        cmd += ["--shim", str(make_shim(code_root, cache))]
+    subprocess.run(cmd, check=True, cwd=str(cache))
+    return subprocess.run(["git", "-C", str(code_root), "rev-parse", "--short", "HEAD"], capture_output=True,
+                          text=True).stdout.strip()
+
+
+
+# ----------------------------------------------------------------------------- analysis (this checkout)
+
+MIN_DIST_M, MAX_DIST_M = 10.0, 40.0
+HEIGHT_BINS_PX = (30, 45, 60, 80, 110, 150, 220, 400)
+MIN_INSERTED_VISIBLE = 0.8
+MAX_COVER_BY_NEARER = 0.2
+
+
+def _rect_overlap(a: np.ndarray, b: np.ndarray) -> float:
+    """Area of the intersection of rectangles a and b (x0, y0, x1, y1) over the area of a."""
+    w = min(a[2], b[2]) - max(a[0], b[0])
+    h = min(a[3], b[3]) - max(a[1], b[1])
+    return max(w, 0.0) * max(h, 0.0) / max((a[2] - a[0]) * (a[3] - a[1]), 1e-9)
+
+
+def image_cars(reader, sample, view, objects: list[dict]):
+    """(real, inserted): lists of (T_cam_from_box, wlh) of the cars of one camera image that qualify, and
+    ``others_real`` / ``others_all``: every box in front of the camera (ground statistics exclusion)."""
+    from streetaug.augment.evaluation.realism import box_in_image, box_rect_px
+    from streetaug.datasets.sample import Box
+
+    K, W, H = view.K, view.width, view.height
+    T_cam_from_global = view.T_cam_from_global
+
+    def cam(box):
+        return T_cam_from_global @ box.T_global_from_box
+
+    real_all = [(cam(b), b.wlh, b) for b in sample.boxes]
+    real_all = [r for r in real_all if r[0][2, 3] > 1.0]
+    inserted_boxes = [Box(np.array(o["box_global"]["translation"]), np.array(o["box_global"]["size"]),
+                          np.array(o["box_global"]["rotation"]), o["category"]) for o in objects]
+    inserted_all = [(cam(b), b.wlh, o) for b, o in zip(inserted_boxes, objects)]
+    rects = [(box_rect_px(K, T, wlh), np.linalg.norm(T[:3, 3])) for T, wlh, _ in real_all
+             if np.all(np.asarray(T[:3, 3])[2] > 0)]
+
+    def in_range(T):
+        return MIN_DIST_M <= np.linalg.norm(T[:3, 3]) <= MAX_DIST_M
+
+    real = []
+    for T, wlh, b in real_all:
+        if b.category != "vehicle.car" or not in_range(T) or not box_in_image(K, T, wlh, W, H):
+            continue
+        if reader.get("sample_annotation", b.token)["visibility_token"] != "4":
+            continue
+        rect, dist = box_rect_px(K, T, wlh), np.linalg.norm(T[:3, 3])
+        if any(d < dist - 0.5 and _rect_overlap(rect, r) > MAX_COVER_BY_NEARER for r, d in rects):
+            continue
+        real.append((T, wlh))
+    inserted = [(T, wlh) for T, wlh, o in inserted_all
+                if o["category"] == "vehicle.car" and in_range(T) and box_in_image(K, T, wlh, W, H)
+                and o["visible_fraction"] >= MIN_INSERTED_VISIBLE]
+    others_real = [(T, wlh) for T, wlh, _ in real_all]
+    others_all = others_real + [(T, wlh) for T, wlh, _ in inserted_all]
+    return real, inserted, others_real, others_all
+
+
+def _without(boxes, T):
+    return [(T2, w2) for T2, w2 in boxes if not np.allclose(T2, T)]
+
+
+def collect_crops(cache: Path, stride: int):
+    """Crops of every qualifying car of the cached images: (crops, labels 0 real / 1 inserted, keyframe ids,
+    image ids)."""
+    import cv2
+
+    from streetaug.augment.evaluation.realism import extract_crop
+    from streetaug.datasets.nuscenes import NuScenesReader
+
+    reader = NuScenesReader(SEQ, VERSION)
+    crops, labels, keyframes, images = [], [], [], []
+    for token in keyframe_tokens(reader, stride):
+        doc = json.loads((cache / f"{token}.json").read_text())
+        sample = reader.sample(token)
+        for c in CAMERAS:
+            view = sample.cameras[c]
+            real, inserted, others_real, others_all = image_cars(reader, sample, view, doc[c])
+            original = view.image
+            augmented = cv2.imread(str(cache / f"{token}_{c}.png"))[:, :, ::-1] if inserted else None
+            for label, image, cars, others in ((0, original, real, others_real), (1, augmented, inserted, others_all)):
+                for T, wlh in cars:
+                    crops.append(extract_crop(image, view.K, T, wlh, _without(others, T)))
+                    labels.append(label)
+                    keyframes.append(token)
+                    images.append(f"{token}_{c}")
+    return crops, np.array(labels), np.array(keyframes), np.array(images)
+
+
+def crop_sheet(real, inserted, path: Path, row_h: int = 112, per_side: int = 4) -> None:
+    """A sheet: each row ``per_side`` real crops | ``per_side`` inserted crops (sorted by box height)."""
+    import cv2
+
+    def tile(crop):
+        h, w = crop.rgb.shape[:2]
+        s = row_h / h
+        img = cv2.resize(crop.rgb, (max(int(round(w * s)), 1), row_h), interpolation=cv2.INTER_AREA)
+        img = img[:, : int(1.6 * row_h)]
+        out = np.full((row_h, int(1.6 * row_h), 3), 40, np.uint8)
+        out[:, : img.shape[1]] = img
+        return out
+
+    blank = np.full((row_h, int(1.6 * row_h), 3), 40, np.uint8)
+    sep = np.full((row_h, 12, 3), (255, 0, 255), np.uint8)
+    rows = []
+    n_rows = int(np.ceil(max(len(real), len(inserted)) / per_side))
+    for r in range(n_rows):
+        left = [tile(c) for c in real[r * per_side:(r + 1) * per_side]]
+        right = [tile(c) for c in inserted[r * per_side:(r + 1) * per_side]]
+        left += [blank] * (per_side - len(left))
+        right += [blank] * (per_side - len(right))
+        rows.append(np.concatenate(left + [sep] + right, axis=1))
+    if rows:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        cv2.imwrite(str(path), np.concatenate(rows, axis=0)[:, :, ::-1])
+
+
+def analyse(args, cache: Path, commit: str, render_s: float) -> dict:
+    from streetaug.augment.core.io import write_json_atomic
+    from streetaug.augment.evaluation.realism import (FEATURE_NAMES, classifier_accuracy, crop_descriptor,
+                                                      crop_features, feature_gaps, size_matched)
+
+    t0 = time.perf_counter()
+    crops, labels, keyframes, images = collect_crops(cache, args.stride)
+    heights = np.array([c.box_height_px for c in crops])
+    real_idx, ins_idx = np.flatnonzero(labels == 0), np.flatnonzero(labels == 1)
+    rng = np.random.default_rng(args.seed)
+    pick_r, pick_i = size_matched(heights[real_idx], heights[ins_idx], HEIGHT_BINS_PX, rng, args.max_per_class)
+    chosen = np.concatenate([real_idx[pick_r], ins_idx[pick_i]])
+    feats = [crop_features(crops[i]) for i in chosen]
+    X = np.stack([crop_descriptor(crops[i], f) for i, f in zip(chosen, feats)])
+    y = labels[chosen]
+    n_hog = X.shape[1] - 24 - len(FEATURE_NAMES)
+    parts = {"all": slice(None), "hog": slice(0, n_hog), "lab_histogram": slice(n_hog, n_hog + 24),
+             "scalar_features": slice(n_hog + 24, None)}
+    classifier = {}
+    for name, cols in parts.items():
+        by_keyframe = classifier_accuracy(X[:, cols], y, keyframes[chosen], seed=args.seed)
+        seeds = [classifier_accuracy(X[:, cols], y, keyframes[chosen], seed=s)["accuracy_mean"] for s in range(5)]
+        by_image = classifier_accuracy(X[:, cols], y, images[chosen], seed=args.seed)
+        classifier[name] = {"grouped_by_keyframe": by_keyframe, "grouped_by_image": by_image,
+                            "mean_over_5_fold_seeds": float(np.mean(seeds)), "std_over_5_fold_seeds": float(np.std(seeds))}
+    n = len(pick_r)
+    gaps = feature_gaps(feats[n:], feats[:n])
+    bins = np.digitize(heights[chosen[:n]], HEIGHT_BINS_PX)
+    doc = {
+        "tag": args.tag, "commit": commit, "code_root": str(Path(args.code_root).resolve()),
+        "data": "nuscenes-seq scene-0916", "stride": args.stride, "n_objects_per_camera": args.n_objects,
+        "seed": args.seed, "quality": args.quality,
+        "selection": {"distance_m": [MIN_DIST_M, MAX_DIST_M], "real_visibility_token": "4",
+                      "inserted_min_visible_fraction": MIN_INSERTED_VISIBLE,
+                      "max_cover_by_nearer_box": MAX_COVER_BY_NEARER, "height_bins_px": list(HEIGHT_BINS_PX)},
+        "candidates": {"real": int(len(real_idx)), "inserted": int(len(ins_idx))},
+        "matched_per_class": int(n),
+        "matched_per_height_bin": {f"{HEIGHT_BINS_PX[k - 1]}-{HEIGHT_BINS_PX[k]}": int(np.sum(bins == k))
+                                   for k in range(1, len(HEIGHT_BINS_PX))},
+        "classifier": classifier,
+        "feature_gaps": gaps,
+        "timing_s": {"render": render_s, "analysis": time.perf_counter() - t0},
+    }
+    out = Path(args.out) / f"realism_{args.tag}.json"
+    write_json_atomic(out, doc)
+    order_r = chosen[:n][np.argsort(heights[chosen[:n]])]
+    order_i = chosen[n:][np.argsort(heights[chosen[n:]])]
+    sheets = Path(args.sheets)
+    for k in range(0, n, 24):
+        crop_sheet([crops[i] for i in order_r[k:k + 24]], [crops[i] for i in order_i[k:k + 24]],
+                   sheets / f"sheet_{args.tag}_{k // 24}.png")
+    acc = classifier["all"]["grouped_by_keyframe"]
+    print(f"{args.tag} ({commit}): {n} real vs {n} inserted cars (of {len(real_idx)} / {len(ins_idx)}); "
+          f"classifier accuracy {acc['accuracy_mean']:.3f} +- {acc['accuracy_std']:.3f} (grouped by keyframe; "
+          f"0.5 = indistinguishable)")
+    for name, c in classifier.items():
+        print(f"  {name:16s} keyframe-grouped {c['grouped_by_keyframe']['accuracy_mean']:.3f} +- "
+              f"{c['grouped_by_keyframe']['accuracy_std']:.3f}, 5 seeds {c['mean_over_5_fold_seeds']:.3f}, "
+              f"image-grouped {c['grouped_by_image']['accuracy_mean']:.3f}")
+    print(f"  {'feature':20s} {'inserted':>9s} {'real':>9s} {'d':>6s}")
+    for name, g in gaps.items():
+        print(f"  {name:20s} {g['inserted_median']:9.3f} {g['real_median']:9.3f} {g['standardised_gap']:6.2f}")
+    print(f"wrote {out}, sheets {sheets}/sheet_{args.tag}_*.png")
+    return doc
+
+
+# ----------------------------------------------------------------------------- main
+
+def parse_args(argv=None):
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("--tag", default="after", help="Name of this run (results/realism_<tag>.json).")
+    p.add_argument("--code-root", default=str(ROOT), help="Checkout whose code renders the inserted cars.")
+    p.add_argument("--cache", default=None, help="Render cache folder (default /tmp/realism/cache_<tag>).")
+    p.add_argument("--stride", type=int, default=3, help="Every stride-th keyframe.")
+    p.add_argument("--n-objects", type=int, default=3, help="Cars inserted per camera.")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--quality", default="default")
+    p.add_argument("--max-per-class", type=int, default=60)
+    p.add_argument("--render-only", action="store_true")
+    p.add_argument("--out", default=str(ROOT / "benchmarks" / "results"))
+    p.add_argument("--sheets", default="/tmp/realism")
+    p.add_argument("--render-worker", action="store_true", help=argparse.SUPPRESS)
+    p.add_argument("--shim", default=None, help=argparse.SUPPRESS)
+    return p.parse_args(argv)
+
+
+def main(argv=None) -> None:
+    args = parse_args(argv)
+    if args.render_worker:
+        render_worker(args)
+        return
+    cache = Path(args.cache or f"/tmp/realism/cache_{args.tag}")
+    cache.mkdir(parents=True, exist_ok=True)
+    t0 = time.perf_counter()
+    commit = render(args, cache)
+    render_s = time.perf_counter() - t0
+    if args.render_only:
+        return
+    analyse(args, cache, commit, render_s)
+
+
+if __name__ == "__main__":
+    main()
