@@ -50,7 +50,8 @@ class RenderedImage:
 def render_objects(image: np.ndarray, K: np.ndarray, depth_m: np.ndarray, lights: Sequence[DistantLight],
                    assets: Sequence[Asset], T_cam_from_objects: Sequence[np.ndarray],
                    ground_normals_cam: Sequence[np.ndarray], options: InsertOptions, rng: np.random.Generator,
-                   timing: dict[str, float]) -> RenderedImage:
+                   timing: dict[str, float], velocities_cam_mps: Sequence[np.ndarray | None] | None = None,
+                   jpeg_quality: int | None = None) -> RenderedImage:
     """Render objects one after the other (each with its light); each later one is occluded by the earlier ones.
 
     Args:
@@ -58,16 +59,22 @@ def render_objects(image: np.ndarray, K: np.ndarray, depth_m: np.ndarray, lights
         lights, assets, T_cam_from_objects, ground_normals_cam: one per object (camera frame).
         rng: draws one render seed per object, in order.
         timing: receives ``render`` and the renderer's stages summed over the objects (``render.<stage>``).
+        velocities_cam_mps: per object, its (3,) velocity relative to the camera (camera frame, m/s; the
+            renderer's motion blur), or None (no motion blur).
+        jpeg_quality: the source image file's JPEG quality (``render.camera_look.jpeg_quality_from_file``), or None.
     """
     mask_union = np.zeros(image.shape[:2], np.float32)
     shadow = np.ones(image.shape[:2], np.float32)
     rendered = []
     settings = render_settings(options)
     t = time.perf_counter()
-    for light, asset, T_cam_from_object, normal in zip(lights, assets, T_cam_from_objects, ground_normals_cam):
+    velocities = list(velocities_cam_mps) if velocities_cam_mps is not None else [None] * len(assets)
+    for light, asset, T_cam_from_object, normal, velocity in zip(lights, assets, T_cam_from_objects,
+                                                                 ground_normals_cam, velocities):
         ins = render_insertion(
             image, K, depth_m, light, asset, T_cam_from_object, ground_normal_cam=normal,
-            quality=settings, ev=options.ev, seed=int(rng.integers(2**31)),
+            quality=settings, ev=options.ev, seed=int(rng.integers(2**31)), velocity_cam_mps=velocity,
+            jpeg_quality=jpeg_quality,
         )
         for stage, seconds in ins.timing_s.items():
             if stage != "total":

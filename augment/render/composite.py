@@ -16,6 +16,7 @@ import numpy as np
 
 from ..core import PinholeCamera, hdr_to_ldr_uint8, ldr_uint8_to_hdr, luminance
 from .camera_effects import CameraEffects, add_object_noise, blur_object_layer, estimate_camera_effects
+from .camera_look import jpeg_round_trip, motion_kernel
 from .footprint import PixelBox
 from .foreground import Foreground
 from .shadow import ShadowMap
@@ -140,9 +141,12 @@ class Composited:
 
 
 def composite_layers(image_rgb: np.ndarray, layers: ObjectLayers, camera: PinholeCamera, match_camera: bool,
-                     ev: float, rng: np.random.Generator) -> Composited:
+                     ev: float, rng: np.random.Generator, motion_px: np.ndarray | None = None,
+                     jpeg_quality: int | None = None) -> Composited:
     """Composite the layers into ``image_rgb`` (H, W, 3) uint8 (with ``match_camera``, blurred and noised
-    like the image around the object, measured locally: blur and noise vary over an image)."""
+    like the image around the object, measured locally: blur and noise vary over an image; smeared along
+    ``motion_px`` (2,) pixels, the object's image motion during the exposure; its JPEG blocks re-encoded at
+    ``jpeg_quality``, the source file's)."""
     H, W = image_rgb.shape[:2]
     image = image_rgb.copy()
     obj_rad = np.zeros((H, W, 3), np.float32)
@@ -153,7 +157,8 @@ def composite_layers(image_rgb: np.ndarray, layers: ObjectLayers, camera: Pinhol
     if match_camera:
         g = CAMERA_EFFECTS_MARGIN_PX
         effects = estimate_camera_effects(image_rgb[max(box.y0 - g, 0) : box.y1 + g, max(box.x0 - g, 0) : box.x1 + g])
-        box = box.grown(int(np.ceil(3 * effects.blur_sigma_px)), camera)  # room for the blurred object's rim
+        kernel = motion_kernel(np.zeros(2) if motion_px is None else motion_px)
+        box = box.grown(int(np.ceil(3 * effects.blur_sigma_px)) + kernel.shape[0] // 2, camera)  # the blurred rim
     ub = box.slices
     L = layers
     if effects is None:
@@ -161,8 +166,16 @@ def composite_layers(image_rgb: np.ndarray, layers: ObjectLayers, camera: Pinhol
     else:  # blur the visible object layer like the image, composite, then add the image's noise
         obj_b, mask_b = blur_object_layer(L.radiance_premult[ub] * L.visibility[ub][..., None], L.mask[ub],
                                           effects.blur_sigma_px)
+        if kernel.size > 1:  # motion blur: a line kernel along the object's image motion
+            smear = lambda a: cv2.filter2D(np.ascontiguousarray(a, np.float32), -1, kernel,  # noqa: E731
+                                           borderType=cv2.BORDER_CONSTANT)
+            obj_b, mask_b = smear(obj_b), np.clip(smear(mask_b), 0.0, 1.0)
         image[ub] = composite(image_rgb[ub], obj_b, mask_b, np.ones_like(mask_b), L.ratio_rgb[ub], ev)
         image[ub] = add_object_noise(image[ub], mask_b, effects.noise_sigma, rng)
+        if jpeg_quality is not None:
+            touched = np.zeros((H, W), bool)
+            touched[ub] = mask_b > 1.0 / 255.0
+            image = jpeg_round_trip(image, touched, jpeg_quality)
     cov = L.coverage[ub][..., None]
     with np.errstate(divide="ignore", invalid="ignore"):
         obj_rad[ub] = np.where(cov > 0, L.radiance_premult[ub] / cov, 0.0)

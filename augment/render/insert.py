@@ -2,7 +2,7 @@
 
     prepare (BVH cached on the asset, bounce light) -> footprint (pixel boxes) -> render_shadow
       -> render_foreground (sees the shadow) -> object_layers (depth test) -> composite_layers
-      (optionally matching the image's blur and noise)
+      (matching the image's blur, noise, the object's motion blur and the JPEG quality; on by default)
 """
 
 from __future__ import annotations
@@ -17,6 +17,7 @@ from ..assets.asset import Asset
 from ..core import InputError, PinholeCamera, check_shape
 from ..lighting.light import DistantLight
 from .bounce import BounceLight
+from .camera_look import DAY_EXPOSURE_S, NIGHT_EXPOSURE_S, image_motion_px
 from .composite import Composited, composite_layers, object_layers
 from .footprint import Footprint, footprint
 from .foreground import Foreground, render_foreground
@@ -27,6 +28,7 @@ from .surface import PreparedAsset, prepare_asset
 
 __all__ = ["Insertion", "render_insertion"]
 
+NIGHT_MEDIAN_LEVEL = 40.0  # an image whose median 8-bit level is below this counts as night (exposure)
 INTERIOR_SKY_FRACTION = 0.1  # a car interior receives roughly a tenth of the sky through its windows
 
 
@@ -94,7 +96,9 @@ class _Prepared:
 
 def render_insertion(image_rgb: np.ndarray, K: np.ndarray, depth_m: np.ndarray, light: DistantLight,
                      asset: Asset, T_cam_from_object: np.ndarray, ground_normal_cam: np.ndarray | None = None,
-                     quality: str | RenderSettings = "default", ev: float = 0.0, seed: int = 0) -> Insertion:
+                     quality: str | RenderSettings = "default", ev: float = 0.0, seed: int = 0,
+                     velocity_cam_mps: np.ndarray | None = None, exposure_s: float | None = None,
+                     jpeg_quality: int | None = None) -> Insertion:
     """Render ``asset`` at ``T_cam_from_object`` into ``image_rgb`` with its shadow and occlusion.
 
     Args:
@@ -108,6 +112,12 @@ def render_insertion(image_rgb: np.ndarray, K: np.ndarray, depth_m: np.ndarray, 
         quality: a :data:`QUALITY_PRESETS` name or explicit :class:`RenderSettings`.
         ev: exposure of the camera response.
         seed: random seed (the result is deterministic for a seed).
+        velocity_cam_mps: (3,) the object's velocity relative to the camera (camera frame, m/s); with
+            ``settings.match_camera`` it is smeared along its image motion during the exposure (None: none).
+        exposure_s: exposure time (seconds); None: ``camera_look.DAY_EXPOSURE_S`` or ``NIGHT_EXPOSURE_S``
+            by the image's median brightness (an assumption: nuScenes does not record it).
+        jpeg_quality: the source file's JPEG quality (``camera_look.jpeg_quality_from_file``); with
+            ``settings.match_camera`` the object's blocks are re-encoded at it (None: not re-encoded).
     """
     t_start = time.perf_counter()
     x = _check_inputs(image_rgb, K, depth_m, T_cam_from_object)
@@ -129,12 +139,26 @@ def render_insertion(image_rgb: np.ndarray, K: np.ndarray, depth_m: np.ndarray, 
     timing["shade"] = timing["foreground"] - timing["raycast"]
     t0 = time.perf_counter()
     layers = object_layers(fg, sh, x.depth_m)
-    out = composite_layers(x.image_rgb, layers, x.camera, settings.match_camera, ev, rng)
+    motion = _image_motion(x, asset, velocity_cam_mps, exposure_s) if settings.match_camera else None
+    out = composite_layers(x.image_rgb, layers, x.camera, settings.match_camera, ev, rng, motion, jpeg_quality)
     timing["composite"] = time.perf_counter() - t0
     timing["total"] = time.perf_counter() - t_start
     return Insertion(image=out.image, mask=layers.mask, coverage=layers.coverage, shadow_ratio=out.shadow_ratio,
                      object_depth_m=layers.depth_m, timing_s=timing, stats=_stats(quality, fg, sh, prepared, out),
                      shadow_ratio_rgb=layers.ratio_rgb, object_radiance=out.object_radiance, footprint=where)
+
+
+def _image_motion(x: _Inputs, asset: Asset, velocity_cam_mps: np.ndarray | None,
+                  exposure_s: float | None) -> np.ndarray | None:
+    """(2,) image motion (pixels) of the object's centre during the exposure, or None without a velocity."""
+    if velocity_cam_mps is None:
+        return None
+    if exposure_s is None:
+        night = np.median(x.image_rgb[::8, ::8].mean(axis=2)) < NIGHT_MEDIAN_LEVEL
+        exposure_s = NIGHT_EXPOSURE_S if night else DAY_EXPOSURE_S
+    T = x.T_cam_from_object
+    centre = T[:3, 3] + 0.5 * float(asset.wlh[2]) * T[:3, 2]
+    return image_motion_px(x.camera.K, centre, np.asarray(velocity_cam_mps, np.float64), exposure_s)
 
 
 def _check_inputs(image_rgb: np.ndarray, K: np.ndarray, depth_m: np.ndarray, T_cam_from_object: np.ndarray) -> _Inputs:

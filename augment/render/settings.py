@@ -24,7 +24,7 @@ class RenderSettings:
         shadow_max_length_m: longest sun shadow considered (low suns), metres along the ground.
         denoise: smooth the object's Monte Carlo noise with a G-buffer-guided cross-bilateral filter.
         match_camera: blur the object and add noise like the input image's (estimated from it, see
-            :mod:`streetaug.augment.render.camera_effects`); off by default.
+            :mod:`streetaug.augment.render.camera_effects`); on by default (False turns it off).
     """
 
     aa_grid: int = 1
@@ -38,7 +38,7 @@ class RenderSettings:
     shadow_sun_dirs: int = 8
     shadow_max_length_m: float = 30.0
     denoise: bool = True
-    match_camera: bool = False
+    match_camera: bool = True
 
     def __post_init__(self) -> None:
         for name in ("aa_grid", "edge_grid", "shadow_factor", "shadow_sky_dirs", "shadow_sun_dirs", "max_glass_depth"):

@@ -1,0 +1,108 @@
+"""Parts of the camera's look beyond the measured blur and noise (:mod:`.camera_effects`): motion blur
+from the object's image motion during the exposure, and the source image's JPEG quality.
+
+* **Motion blur**: a point at ``P`` (camera frame, metres) moving at ``v`` (m/s, relative to the camera,
+  camera frame) moves in the image at ``du/dt = fx (vx / Z - X vz / Z^2)``, ``dv/dt = fy (vy / Z - Y vz / Z^2)``;
+  over an exposure ``t`` (seconds, centred on the timestamp) the object is smeared along a line of that
+  length (:func:`motion_kernel`).  nuScenes does not record the exposure: ``DAY_EXPOSURE_S`` /
+  ``NIGHT_EXPOSURE_S`` are documented assumptions, to be overridden when known.
+* **JPEG quality**: from the luminance quantisation table of the source file (IJG scaling, the table
+  libjpeg / OpenCV write), :func:`jpeg_quality_from_file`.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+DAY_EXPOSURE_S = 0.002  # assumption: sunny daylight auto exposure (not recorded by nuScenes)
+NIGHT_EXPOSURE_S = 0.020  # assumption: the usual 20 ms cap of automotive auto exposure
+MIN_MOTION_PX = 0.5  # shorter smears are below the measured blur's resolution and are not applied
+
+# IJG base luminance table (ITU T.81 Annex K), row-major (natural) order
+IJG_LUMA = np.array([
+    16, 11, 10, 16, 24, 40, 51, 61, 12, 12, 14, 19, 26, 58, 60, 55, 14, 13, 16, 24, 40, 57, 69, 56,
+    14, 17, 22, 29, 51, 87, 80, 62, 18, 22, 37, 56, 68, 109, 103, 77, 24, 35, 55, 64, 81, 104, 113, 92,
+    49, 64, 78, 87, 103, 121, 120, 101, 72, 92, 95, 98, 112, 100, 103, 99], np.float64)
+
+
+def image_motion_px(K: np.ndarray, point_cam: np.ndarray, velocity_cam_mps: np.ndarray, exposure_s: float) -> np.ndarray:
+    """(2,) image displacement (pixels, u right / v down) of ``point_cam`` (3,) moving at ``velocity_cam_mps``
+    (3,) relative to the camera during ``exposure_s`` seconds (zero behind the camera)."""
+    X, Y, Z = np.asarray(point_cam, np.float64)
+    vx, vy, vz = np.asarray(velocity_cam_mps, np.float64)
+    if Z <= 1e-6:
+        return np.zeros(2)
+    du = K[0, 0] * (vx / Z - X * vz / Z**2)
+    dv = K[1, 1] * (vy / Z - Y * vz / Z**2)
+    return np.array([du, dv]) * float(exposure_s)
+
+
+def motion_kernel(motion_px: np.ndarray, samples_per_px: int = 8) -> np.ndarray:
+    """(k, k) float32 normalised line kernel of a smear ``motion_px`` (2,) (u, v pixels) centred on the
+    pixel (the exposure is centred on the timestamp); a 1 x 1 identity below ``MIN_MOTION_PX``."""
+    m = np.asarray(motion_px, np.float64)
+    length = float(np.hypot(*m))
+    if length < MIN_MOTION_PX:
+        return np.ones((1, 1), np.float32)
+    r = int(np.ceil(length / 2.0)) + 1
+    k = np.zeros((2 * r + 1, 2 * r + 1), np.float64)
+    t = np.linspace(-0.5, 0.5, max(int(np.ceil(length * samples_per_px)), 2) + 1)
+    x, y = r + t * m[0], r + t * m[1]
+    x0, y0 = np.floor(x).astype(int), np.floor(y).astype(int)
+    fx, fy = x - x0, y - y0
+    for dx, dy, w in ((0, 0, (1 - fx) * (1 - fy)), (1, 0, fx * (1 - fy)), (0, 1, (1 - fx) * fy), (1, 1, fx * fy)):
+        np.add.at(k, (y0 + dy, x0 + dx), w)  # bilinear splat of the segment's samples
+    return (k / k.sum()).astype(np.float32)
+
+
+def ijg_table(quality: int) -> np.ndarray:
+    """(64,) the IJG luminance quantisation table at ``quality`` 1..100 (natural order)."""
+    q = int(np.clip(quality, 1, 100))
+    scale = 5000.0 / q if q < 50 else 200.0 - 2.0 * q
+    return np.clip(np.floor((IJG_LUMA * scale + 50.0) / 100.0), 1, 255)
+
+
+def jpeg_quality_from_table(luma_table: np.ndarray) -> int:
+    """The IJG quality 1..100 whose luminance table (64,) natural order is nearest (in log steps) to ``luma_table``."""
+    t = np.log(np.maximum(np.asarray(luma_table, np.float64).ravel(), 1.0))
+    errs = [float(np.abs(np.log(ijg_table(q)) - t).sum()) for q in range(1, 101)]
+    return int(np.argmin(errs)) + 1
+
+
+def jpeg_quality_from_file(path: str | Path) -> int | None:
+    """The JPEG quality of an image file from its luminance quantisation table (None: not a JPEG)."""
+    from PIL import Image
+
+    with Image.open(path) as im:
+        tables = getattr(im, "quantization", None)
+        if im.format != "JPEG" or not tables:
+            return None
+        return jpeg_quality_from_table(np.array(tables[0], np.float64))
+
+
+def jpeg_round_trip(image_rgb: np.ndarray, touched: np.ndarray, quality: int) -> np.ndarray:
+    """``image_rgb`` (H, W, 3) uint8 with the 16 x 16 JPEG blocks (4:2:0 MCUs, on the image's own grid) that
+    ``touched`` (H, W) bool reaches re-encoded at ``quality``, so an inserted object gets the compression
+    artefacts of the photo around it; every other pixel is unchanged."""
+    import cv2
+
+    if not touched.any():
+        return image_rgb
+    H, W = touched.shape
+    ys, xs = np.nonzero(touched)
+    y0, x0 = (ys.min() // 16) * 16, (xs.min() // 16) * 16
+    y1, x1 = min(-(-(ys.max() + 1) // 16) * 16, H), min(-(-(xs.max() + 1) // 16) * 16, W)
+    crop = np.ascontiguousarray(image_rgb[y0:y1, x0:x1, ::-1])
+    ok, buf = cv2.imencode(".jpg", crop, [cv2.IMWRITE_JPEG_QUALITY, int(quality)])
+    decoded = cv2.imdecode(buf, cv2.IMREAD_COLOR)[..., ::-1]
+    t = touched[y0:y1, x0:x1]
+    hb, wb = -(-t.shape[0] // 16), -(-t.shape[1] // 16)
+    padded = np.zeros((hb * 16, wb * 16), bool)
+    padded[: t.shape[0], : t.shape[1]] = t
+    blocks = padded.reshape(hb, 16, wb, 16).any(axis=(1, 3))
+    replace = np.repeat(np.repeat(blocks, 16, 0), 16, 1)[: t.shape[0], : t.shape[1]]
+    out = image_rgb.copy()
+    out[y0:y1, x0:x1][replace] = decoded[replace]
+    return out
