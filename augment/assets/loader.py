@@ -14,7 +14,8 @@ would cost is read from its headers (:mod:`.budget`): data URIs must be valid ba
 
 Materials: glTF PBR factors are read exactly from the file's JSON (baseColorFactor and
 emissiveFactor are linear; ``alphaMode: BLEND`` alpha and ``KHR_materials_transmission`` become
-opacity), textures are converted to float32 (base colour sRGB -> linear).  OBJ: Kd (taken as
+opacity; clear coat, IOR / specular and emissive strength are read too: :func:`gltf_extension_factors`),
+textures are converted to float32 (base colour sRGB -> linear).  OBJ: Kd (taken as
 linear, as Blender writes it), Ns -> roughness, d / Tr -> opacity, Ke -> emission, Pr / Pm when
 present.  PLY: vertex or face colours (sRGB) quantised into a few materials, else grey paint.
 UVs are stored in the glTF convention (origin top-left, v down).
@@ -262,6 +263,55 @@ def _texture(image, srgb: bool) -> np.ndarray | None:
     return _SRGB_TO_LINEAR_8BIT[rgb] if srgb else np.asarray(rgb, dtype=np.float32) / 255.0
 
 
+# UE4's specular 0.5 is a dielectric reflectance F0 of 4 % (F0 = 0.08 specular): glTF's default (IOR 1.5).
+UE4_F0_PER_SPECULAR = 0.08
+
+
+def gltf_extension_factors(material_json: dict) -> dict[str, float]:
+    """The PBR extensions of one glTF material entry that the renderer models, as factors.
+
+    Read: ``KHR_materials_transmission`` (transmissionFactor -> ``transmission``, the renderer's glass is
+    ``opacity = 1 - transmission``), ``KHR_materials_clearcoat`` (clearcoatFactor -> ``clearcoat``),
+    ``KHR_materials_ior`` and ``KHR_materials_specular`` (the dielectric reflectance
+    F0 = ((ior - 1) / (ior + 1))^2 x specularFactor x mean(specularColorFactor) -> UE4 ``specular`` = F0 / 0.08)
+    and ``KHR_materials_emissive_strength`` (multiplies emissiveFactor).  Missing extensions give the
+    glTF defaults (0, 0, IOR 1.5 -> specular 0.5, strength 1).  Their textures are not read (factors only).
+    A value of the wrong type or range raises :class:`InputError` naming the extension and field.
+    """
+    ext = material_json.get("extensions", {}) if isinstance(material_json, dict) else {}
+    if not isinstance(ext, dict):
+        raise InputError(f"material {material_json.get('name')!r}: 'extensions' must be an object")
+
+    def factor(name: str, field_name: str, default: float, lo: float, hi: float) -> float:
+        entry = ext.get(name, {})
+        value = entry.get(field_name, default) if isinstance(entry, dict) else default
+        try:
+            value = float(value)
+        except (TypeError, ValueError):
+            raise InputError(f"material {material_json.get('name')!r}: {name}.{field_name} must be a number, "
+                             f"got {value!r}") from None
+        if not (lo <= value <= hi):
+            raise InputError(f"material {material_json.get('name')!r}: {name}.{field_name} must be in "
+                             f"[{lo}, {hi}], got {value}")
+        return value
+
+    ior = factor("KHR_materials_ior", "ior", 1.5, 1.0, 10.0)
+    spec_factor = factor("KHR_materials_specular", "specularFactor", 1.0, 0.0, 1.0)
+    spec_colour = ext.get("KHR_materials_specular", {}).get("specularColorFactor", [1.0, 1.0, 1.0])
+    try:
+        spec_colour_mean = float(np.mean(np.asarray(spec_colour, dtype=np.float64)[:3]))
+    except (TypeError, ValueError):
+        raise InputError(f"material {material_json.get('name')!r}: KHR_materials_specular.specularColorFactor "
+                         f"must be 3 numbers, got {spec_colour!r}") from None
+    f0 = ((ior - 1.0) / (ior + 1.0)) ** 2 * spec_factor * spec_colour_mean
+    return {
+        "transmission": factor("KHR_materials_transmission", "transmissionFactor", 0.0, 0.0, 1.0),
+        "clearcoat": factor("KHR_materials_clearcoat", "clearcoatFactor", 0.0, 0.0, 1.0),
+        "specular": float(np.clip(f0 / UE4_F0_PER_SPECULAR, 0.0, 1.0)),
+        "emissive_strength": factor("KHR_materials_emissive_strength", "emissiveStrength", 1.0, 0.0, 1e6),
+    }
+
+
 def _material_from_trimesh(mat, exact: dict[str, dict], index: int) -> Material:
     """Material of a trimesh visual: exact glTF factors when the JSON has them, else trimesh's."""
     from trimesh.visual.material import PBRMaterial, SimpleMaterial  # heavy: deferred until a mesh file is read
@@ -282,13 +332,13 @@ def _material_from_trimesh(mat, exact: dict[str, dict], index: int) -> Material:
                                     else np.zeros(3)), dtype=np.float64)
         alpha_mode = j.get("alphaMode", mat.alphaMode or "OPAQUE")
         opacity = float(rgba[3]) if len(rgba) > 3 and alpha_mode == "BLEND" else 1.0
-        transmission = j.get("extensions", {}).get("KHR_materials_transmission", {}).get("transmissionFactor")
-        if transmission is not None:
-            opacity = min(opacity, 1.0 - float(transmission))
+        ext = gltf_extension_factors(j)
+        opacity = min(opacity, 1.0 - ext["transmission"])
         return Material(
             name=name, base_color=np.clip(rgba[:3], 0, 1), metallic=float(np.clip(metallic, 0, 1)),
             roughness=float(np.clip(roughness, 0.02, 1)), opacity=float(np.clip(opacity, 0.02, 1)),
-            emission=np.clip(emission[:3], 0, None),
+            emission=np.clip(emission[:3], 0, None) * ext["emissive_strength"],
+            specular=ext["specular"], clearcoat=ext["clearcoat"],
             base_color_texture=_texture(mat.baseColorTexture, srgb=True),
             metallic_roughness_texture=_texture(mat.metallicRoughnessTexture, srgb=False),
             normal_texture=_texture(mat.normalTexture, srgb=False),
