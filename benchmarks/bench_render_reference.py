@@ -73,6 +73,21 @@ SUN_AZIMUTH_CAM_DEG = {"sky": 120.0, "sunrise": -45.0, "forest": 60.0, "dawn": 3
 POSES = {"sedan": (0.5, 1.5, 13.0, 40.0), "suv": (-1.0, 1.5, 15.0, 160.0), "hatchbackSports": (1.0, 1.5, 12.0, 280.0),
          "taxi": (0.0, 1.5, 14.0, 100.0), "police": (-0.5, 1.5, 13.0, 220.0)}
 CURVE_SPP = (4, 8, 16, 32, 64, 128, 256)
+# index.json "sun" descriptions of panoramas without a visible sun disc (overcast, night, below the horizon, occluded).
+NO_SUN_PREFIXES = ("none", "below horizon", "partly occluded")
+
+
+def sunny_hdris() -> list[str]:
+    """Names of the shared panoramas whose index.json entry describes a visible sun (sorted)."""
+    index = json.loads((SHARED / "hdri" / "index.json").read_text())["files"]
+    return sorted(name for name, e in index.items() if not str(e["sun"]).lower().startswith(NO_SUN_PREFIXES))
+
+
+def sun_azimuth_cam_deg(hdri: str) -> float:
+    """Camera azimuth of the panorama's sun: fixed for the original three, else a stable per-name value."""
+    if hdri in SUN_AZIMUTH_CAM_DEG:
+        return SUN_AZIMUTH_CAM_DEG[hdri]
+    return float(int(hashlib.sha256(hdri.encode()).hexdigest()[:8], 16) % 300 - 150)
 PRESETS = ("draft", "default", "high")
 
 
@@ -83,7 +98,7 @@ def camera_envmap(hdri: str) -> np.ndarray:
     lum = luminance(env)
     _, u = np.unravel_index(np.argmax(lum), lum.shape)
     az = (u + 0.5) / env.shape[1] * 360.0 - 180.0  # = camera longitude for a level camera facing azimuth 0
-    shift = int(round((SUN_AZIMUTH_CAM_DEG.get(hdri, 0.0) - az) / 360.0 * env.shape[1]))
+    shift = int(round((sun_azimuth_cam_deg(hdri) - az) / 360.0 * env.shape[1]))
     env = np.roll(env, shift, axis=1)  # whole pixels: an exact rotation about the vertical
     return ref.with_ground_below_horizon(env, UP, ALBEDO)
 
@@ -138,7 +153,7 @@ def run_scene(hdri: str, car: str, args, cache: Cache, log, curve: bool = True, 
     crop = crop_box(asset, T, env)
     x0, y0, x1, y1 = crop
     base_key = {"hdri": hdri, "car": car, "pose": pose, "W": W, "H": H, "K": K.tolist(), "albedo": ALBEDO.tolist(),
-                "sun_az": SUN_AZIMUTH_CAM_DEG.get(hdri, 0.0), "v": 1}
+                "sun_az": sun_azimuth_cam_deg(hdri), "v": 1}
 
     def mitsuba(with_car: bool, spp: int, seed: int, crop_: tuple | None, threads: int):
         key = dict(base_key, with_car=with_car, spp=spp, seed=seed, crop=crop_, threads=threads)
@@ -179,7 +194,7 @@ def run_scene(hdri: str, car: str, args, cache: Cache, log, curve: bool = True, 
     out = {"hdri": hdri, "car": car, "pose_camera": list(pose), "ev": ev, "crop": list(crop),
            "region_pixels": int(region.sum()), "car_pixels": int(car_px.sum()), "presets": {}, "mitsuba": []}
     images = {}
-    for preset in PRESETS:
+    for preset in args.presets:
         runs, cpus = [], []
         for seed in range(args.runs):
             c0 = time.process_time()
@@ -204,7 +219,8 @@ def run_scene(hdri: str, car: str, args, cache: Cache, log, curve: bool = True, 
             f"whole {out['presets'][preset]['psnr_whole']:.2f} dB")
 
     # Bias vs noise: our default against our own high preset (mostly default's noise: same model).
-    out["psnr_region_default_vs_high"] = psnr_db(images["default"], images["high"], region)
+    if "default" in images and "high" in images:
+        out["psnr_region_default_vs_high"] = psnr_db(images["default"], images["high"], region)
     if args.ref_check_spp and check:  # is the reference converged? the same crop at more spp
         hi_crop, _ = mitsuba(True, args.ref_check_spp, 5, crop, args.threads)
         ref_hi = reference.copy()
@@ -212,7 +228,7 @@ def run_scene(hdri: str, car: str, args, cache: Cache, log, curve: bool = True, 
         ref_hi_ldr = hdr_to_ldr_uint8(ref_hi, ev)
         out["ref_check"] = {"spp": args.ref_check_spp,
                             "psnr_region_reference_vs_check": psnr_db(ref_ldr, ref_hi_ldr, region),
-                            **{f"psnr_region_{p}_vs_check": psnr_db(images[p], ref_hi_ldr, region) for p in PRESETS}}
+                            **{f"psnr_region_{p}_vs_check": psnr_db(images[p], ref_hi_ldr, region) for p in args.presets}}
         log(f"  check against {args.ref_check_spp} spp: " + ", ".join(f"{k} {v:.2f}" for k, v in out["ref_check"].items()))
     if not curve:
         return out
@@ -311,7 +327,7 @@ def plot(results: list[dict], curved: list[dict], path: Path) -> None:
     for spp, t, p in zip(CURVE_SPP, med_t, med_p):
         ax.annotate(f"{spp}", (t, p), textcoords="offset points", xytext=(4, -10), fontsize=7)
     colors = {"draft": "tab:orange", "default": "tab:red", "high": "tab:purple"}
-    for preset in PRESETS:
+    for preset in [p for p in PRESETS if p in results[0]["presets"]]:
         ts = [r["presets"][preset]["total_s_median"] for r in results]
         ps = [r["presets"][preset]["psnr_region"] for r in results]
         ax.scatter(ts, ps, color=colors[preset], s=14, alpha=0.6, zorder=3)
@@ -330,10 +346,12 @@ def plot(results: list[dict], curved: list[dict], path: Path) -> None:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--hdris", default="sky,sunrise,forest")
+    ap.add_argument("--hdris", default="sky,sunrise,forest",
+                    help="comma-separated panorama names, or 'sunny' for every panorama index.json gives a visible sun")
     ap.add_argument("--cars", default="sedan,suv,hatchbackSports")
     ap.add_argument("--ref-spp", type=int, default=256, help="reference samples per pixel (crop renders)")
     ap.add_argument("--full-spp", type=int, default=32, help="spp of the full-frame background outside the crop")
+    ap.add_argument("--presets", default=",".join(PRESETS), help="comma-separated quality presets to run")
     ap.add_argument("--runs", type=int, default=3, help="streetaug runs per preset (median time; seeds 0..)")
     ap.add_argument("--curve-points", type=int, default=len(CURVE_SPP))
     ap.add_argument("--threads", type=int, default=2, help="Mitsuba threads for the untimed renders")
@@ -345,6 +363,7 @@ def main() -> None:
     ap.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "results" / "render_reference")
     ap.add_argument("--quick", action="store_true", help="one scene, 128 spp reference, short curve (smoke run)")
     args = ap.parse_args()
+    args.presets = tuple(args.presets.split(","))
     ok, why = ref.mitsuba_available()
     if not ok:
         sys.exit(f"bench_render_reference: {why}")
@@ -363,7 +382,8 @@ def main() -> None:
         print(msg, flush=True)
 
     cars = args.cars.split(",")
-    for hdri in args.hdris.split(","):
+    hdris = sunny_hdris() if args.hdris == "sunny" else args.hdris.split(",")
+    for hdri in hdris:
         for i, car in enumerate(cars):
             curve = (i == 0 or args.curve_all) and not args.no_curve  # Mitsuba's curve: first car per panorama
             log(f"{hdri} / {car}")
@@ -371,7 +391,7 @@ def main() -> None:
     curved = [r for r in results if r["mitsuba"]]
 
     summary = {}
-    for preset in PRESETS:
+    for preset in args.presets:
         pr = [r["presets"][preset]["psnr_region"] for r in results]
         summary[preset] = {"psnr_region_min": float(np.min(pr)), "psnr_region_median": float(np.median(pr)),
                            "psnr_whole_min": float(np.min([r["presets"][preset]["psnr_whole"] for r in results])),
@@ -395,7 +415,7 @@ def main() -> None:
         w = csv.writer(f)
         w.writerow(["hdri", "car", "method", "spp_or_preset", "seconds", "psnr_region_db", "psnr_whole_db"])
         for r in results:
-            for preset in PRESETS:
+            for preset in args.presets:
                 p = r["presets"][preset]
                 w.writerow([r["hdri"], r["car"], "streetaug", preset, f"{p['total_s_median']:.4f}",
                             f"{p['psnr_region']:.3f}", f"{p['psnr_whole']:.3f}"])
