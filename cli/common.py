@@ -229,8 +229,9 @@ def render_options(func: Callable) -> Callable:
         click.option("--seed", type=int, default=0, show_default=True, help="Random seed (placement, asset, sampling)."),
         click.option("--ev", type=EV_RANGE, default=0.0, show_default=True,
                      help="Exposure of the camera response (stops, -20 to 20)."),
-        click.option("--match-camera", is_flag=True,
-                     help="Blur the car and add noise like the photo around it (estimated there; +20-60 ms)."),
+        click.option("--match-camera/--no-match-camera", default=True, show_default=True,
+                     help="Give the object the photo's look: its blur, motion blur, noise and JPEG quality "
+                          "(estimated around the object)."),
     ]
     for option in reversed(options):
         func = option(func)

@@ -53,7 +53,7 @@ class BatchConfig:
     quality: str = "default"
     level: str = "auto"
     ev: float = 0.0
-    match_camera: bool = False
+    match_camera: bool = True
     n_objects: int = 1
     yaw_sigma_deg: float = 15.0
     asset: str | None = None

@@ -35,7 +35,7 @@ class InsertOptions:
     n_objects: int = 1
     yaw_sigma_deg: float = 3.0
     ev: float = 0.0
-    match_camera: bool = False
+    match_camera: bool = True
     class_rules: str | None = None
 
 

@@ -109,17 +109,17 @@ class TestInsertDatasetForm:
     @pytest.mark.skipif(not REAL.is_dir(), reason=f"real nuScenes excerpt not found at {REAL}")
     def test_real_sample(self, tmp_path):
         result = run("insert", "--scene", "scene-0061", "--dataroot", REAL, "--version", "v1.0-mini",
-                     "--camera", "CAM_FRONT", "--quality", "draft", "--out", tmp_path)
+                     "--camera", "CAM_FRONT", "--quality", "draft", "--no-match-camera", "--out", tmp_path)
         assert result.exit_code == 0, result.output
         labels = json.loads((tmp_path / "labels.json").read_text())
         assert labels["lighting"]["sun_source"] == "ephemeris"
         assert labels["objects"] and labels["objects"][0]["box_global"]["translation"][2] == pytest.approx(0.9, abs=1.5)
 
-        # --match-camera: the same car and labels, blurred and noised like the photo (which has both), so only
+        # The camera look (on by default): the same car and labels, blurred and noised like the photo (which has both), so only
         # pixels at the car (its box plus the blur's and the anti-aliasing's reach) change.
         matched = tmp_path / "matched"
         result = run("insert", "--scene", "scene-0061", "--dataroot", REAL, "--version", "v1.0-mini",
-                     "--camera", "CAM_FRONT", "--quality", "draft", "--match-camera", "--out", matched)
+                     "--camera", "CAM_FRONT", "--quality", "draft", "--out", matched)
         assert result.exit_code == 0, result.output
         assert json.loads((matched / "labels.json").read_text())["objects"] == labels["objects"]
         changed = np.abs(cv2.imread(str(matched / "image.jpg")).astype(int)

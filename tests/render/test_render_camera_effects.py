@@ -97,9 +97,9 @@ def test_match_camera_in_render_insertion():
     T = pose_camera_to_transform(0.0, 1.0, 10.0, 60.0)
     light = sunny_light()
     car = primitive_car()
-    on = dataclasses.replace(QUALITY_PRESETS["draft"], match_camera=True)
-    a = render_insertion(image, K, depth, light, car, T, quality="draft", seed=0)
-    b = render_insertion(image, K, depth, light, car, T, quality=on, seed=0)
+    off = dataclasses.replace(QUALITY_PRESETS["draft"], match_camera=False)
+    a = render_insertion(image, K, depth, light, car, T, quality=off, seed=0)
+    b = render_insertion(image, K, depth, light, car, T, quality="draft", seed=0)  # on by default
     inner = cv2.erode((a.coverage > 0.99).astype(np.uint8), np.ones((7, 7), np.uint8)) > 0
     assert inner.sum() > 300
     assert 255 * estimate_noise_sigma(a.image, inner) < 2.0
