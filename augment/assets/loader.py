@@ -282,9 +282,14 @@ def gltf_extension_factors(material_json: dict) -> dict[str, float]:
     if not isinstance(ext, dict):
         raise InputError(f"material {material_json.get('name')!r}: 'extensions' must be an object")
 
+    def entry(name: str) -> dict:
+        value = ext.get(name, {})
+        if not isinstance(value, dict):
+            raise InputError(f"material {material_json.get('name')!r}: {name} must be an object, got {value!r}")
+        return value
+
     def factor(name: str, field_name: str, default: float, lo: float, hi: float) -> float:
-        entry = ext.get(name, {})
-        value = entry.get(field_name, default) if isinstance(entry, dict) else default
+        value = entry(name).get(field_name, default)
         try:
             value = float(value)
         except (TypeError, ValueError):
@@ -297,7 +302,7 @@ def gltf_extension_factors(material_json: dict) -> dict[str, float]:
 
     ior = factor("KHR_materials_ior", "ior", 1.5, 1.0, 10.0)
     spec_factor = factor("KHR_materials_specular", "specularFactor", 1.0, 0.0, 1.0)
-    spec_colour = ext.get("KHR_materials_specular", {}).get("specularColorFactor", [1.0, 1.0, 1.0])
+    spec_colour = entry("KHR_materials_specular").get("specularColorFactor", [1.0, 1.0, 1.0])
     try:
         spec_colour_mean = float(np.mean(np.asarray(spec_colour, dtype=np.float64)[:3]))
     except (TypeError, ValueError):

@@ -59,6 +59,7 @@ def test_clearcoat_transmission_ior_and_emissive_strength_reach_the_material(tmp
     ({"KHR_materials_clearcoat": {"clearcoatFactor": "shiny"}}, "clearcoatFactor must be a number"),
     ({"KHR_materials_transmission": {"transmissionFactor": 1.5}}, r"transmissionFactor must be in \[0.0, 1.0\]"),
     ({"KHR_materials_specular": {"specularColorFactor": "red"}}, "specularColorFactor must be 3 numbers"),
+    ({"KHR_materials_specular": 0.5}, "KHR_materials_specular must be an object"),
 ])
 def test_bad_extension_values_are_refused_by_name(tmp_path, ext, message):
     material = {"name": "bad", "pbrMetallicRoughness": {"baseColorFactor": [1, 1, 1, 1]}, "extensions": ext}
