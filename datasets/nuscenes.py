@@ -321,6 +321,44 @@ class NuScenesReader:
         pose = self.get("ego_pose", self._field(sample_data, "sample_data", "ego_pose_token"))
         return self._transform(pose, "ego_pose")
 
+    def ego_poses_around(self, sample_data: dict) -> tuple[tuple[float, np.ndarray], tuple[float, np.ndarray]] | None:
+        """The ego poses just before and after a ``sample_data`` row: ``((dt_s, T_global_from_ego), (dt_s, T))``.
+
+        From the row's ``prev`` / ``next`` sample_data (sweeps) when the table holds them, else from the
+        same channel's keyframe in the sample's ``prev`` / ``next`` sample; a missing side is the row
+        itself (dt 0).  None when neither side exists (a single frame): no motion is known.
+        """
+        index = self._token_index("sample_data")
+        channel = None
+
+        def neighbour(direction: str) -> dict | None:
+            nonlocal channel
+            token = sample_data.get(direction) or ""
+            if token in index:
+                return self.table("sample_data")[index[token]]
+            sample_token = sample_data.get("sample_token") or ""
+            if sample_token not in self._token_index("sample"):
+                return None
+            other = self.get("sample", sample_token).get(direction) or ""
+            if other not in self._token_index("sample"):
+                return None
+            if channel is None:
+                channel = self.sensor_of(sample_data).get("channel")
+            modality = self.sensor_of(sample_data).get("modality", "camera")
+            return self.keyframe_sample_data(other, modality).get(channel)
+
+        before, after = neighbour("prev"), neighbour("next")
+        if before is None and after is None:
+            return None
+        t0 = self._timestamp(sample_data, "sample_data")
+        sides = []
+        for row in (before, after):
+            row = sample_data if row is None else row
+            sides.append(((self._timestamp(row, "sample_data") - t0) * 1e-6, self.T_global_from_ego(row)))
+        if sides[1][0] - sides[0][0] <= 0:
+            return None
+        return sides[0], sides[1]
+
     # ------------------------------------------------------------------ sensors
 
     def camera_view(self, sample_data_token: str) -> CameraView:
@@ -351,6 +389,7 @@ class NuScenesReader:
             T_global_from_ego=self.T_global_from_ego(sd),
             timestamp_us=self._timestamp(sd, "sample_data"),
             _load_image=lambda: self.camera_image(sd),
+            ego_poses_around=self.ego_poses_around(sd),
         )
 
     def camera_image(self, sample_data: dict) -> np.ndarray:

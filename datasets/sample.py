@@ -89,6 +89,11 @@ class CameraView:
         T_ego_from_cam: (4, 4) camera (OpenCV) -> ego frame at this camera's timestamp.
         T_global_from_ego: (4, 4) ego -> global at this camera's timestamp.
         timestamp_us: capture time, microseconds since the Unix epoch (UTC).
+        ego_poses_around: the ego's poses just before and just after this capture, as
+            ``((dt_s, T_global_from_ego), (dt_s, T_global_from_ego))`` with ``dt_s`` relative to
+            ``timestamp_us`` (before <= 0 <= after; one of them may be this capture's own pose), from
+            the camera's neighbouring ``sample_data`` rows, else its keyframe neighbours; None when the
+            dataset has neither (a single frame). It gives the camera's motion (motion blur).
     """
 
     channel: str
@@ -101,6 +106,8 @@ class CameraView:
     T_global_from_ego: np.ndarray
     timestamp_us: int
     _load_image: Callable[[], np.ndarray] = field(repr=False, compare=False, default=None)
+    ego_poses_around: tuple[tuple[float, np.ndarray], tuple[float, np.ndarray]] | None = field(
+        repr=False, compare=False, default=None)
 
     @functools.cached_property
     def image(self) -> np.ndarray:
