@@ -24,6 +24,8 @@ from typing import Sequence
 import cv2
 import numpy as np
 
+from ..core import project_points
+
 FEATURE_NAMES = ("L_mean", "L_std", "a_mean", "b_mean", "chroma_mean", "rms_contrast", "laplacian_sharpness",
                  "edge_sharpness", "noise_sigma", "shadow_darkness", "saturated_fraction")
 
@@ -65,26 +67,23 @@ def box_corners_cam(T_cam_from_box: np.ndarray, wlh: np.ndarray) -> np.ndarray:
     return corners_box @ T_cam_from_box[:3, :3].T + T_cam_from_box[:3, 3]
 
 
-def project(K: np.ndarray, points_cam: np.ndarray) -> np.ndarray:
-    """(N, 2) pixel coordinates of (N, 3) camera-frame points (z > 0)."""
-    uvw = points_cam @ K.T
-    return uvw[:, :2] / uvw[:, 2:3]
-
-
 def box_in_image(K: np.ndarray, T_cam_from_box: np.ndarray, wlh: np.ndarray, width: int, height: int,
                  min_depth_m: float = 0.5) -> bool:
     """True when all 8 corners are in front of the camera and project inside the image."""
     corners = box_corners_cam(T_cam_from_box, wlh)
     if np.any(corners[:, 2] < min_depth_m):
         return False
-    uv = project(K, corners)
+    uv, _ = project_points(K, corners)
     return bool(np.all((uv[:, 0] >= 0) & (uv[:, 0] <= width - 1) & (uv[:, 1] >= 0) & (uv[:, 1] <= height - 1)))
 
 
 def box_rect_px(K: np.ndarray, T_cam_from_box: np.ndarray, wlh: np.ndarray) -> np.ndarray:
-    """(4,) x0, y0, x1, y1: the 2D bounding rectangle of the projected box (corners in front of the camera)."""
-    uv = project(K, box_corners_cam(T_cam_from_box, wlh))
-    return np.array([uv[:, 0].min(), uv[:, 1].min(), uv[:, 0].max(), uv[:, 1].max()])
+    """(4,) x0, y0, x1, y1: the 2D bounding rectangle of the box's corners in front of the camera (NaN when
+    none is; a box across the camera plane gets the rectangle of its front corners only)."""
+    uv, _ = project_points(K, box_corners_cam(T_cam_from_box, wlh))
+    if np.isnan(uv).all():
+        return np.full(4, np.nan)
+    return np.array([np.nanmin(uv[:, 0]), np.nanmin(uv[:, 1]), np.nanmax(uv[:, 0]), np.nanmax(uv[:, 1])])
 
 
 def crop_window(rect_px: np.ndarray, width: int, height: int, side_margin: float = 0.15,
@@ -141,12 +140,12 @@ def extract_crop(image: np.ndarray, K: np.ndarray, T_cam_from_box: np.ndarray, w
     rect = box_rect_px(K, T_cam_from_box, wlh)
     window = crop_window(rect, W, H)
     x0, y0, x1, y1 = window
-    corners_px = project(K, box_corners_cam(T_cam_from_box, wlh))
+    corners_px, _ = project_points(K, box_corners_cam(T_cam_from_box, wlh))
     exclude = np.zeros((y1 - y0, x1 - x0), bool)
     for T_other, wlh_other in other_boxes:
         corners = box_corners_cam(T_other, wlh_other)
         if np.all(corners[:, 2] > 0.5):
-            exclude |= hull_mask(project(K, corners), window)
+            exclude |= hull_mask(project_points(K, corners)[0], window)
     return CarCrop(image[y0:y1, x0:x1].copy(), hull_mask(corners_px, window),
                    ground_distance_map(K, T_cam_from_box, wlh, window), exclude, window,
                    float(rect[3] - rect[1]), float(np.linalg.norm(T_cam_from_box[:3, 3])))

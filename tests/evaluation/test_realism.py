@@ -6,10 +6,11 @@ import cv2
 import numpy as np
 import pytest
 
+from streetaug.augment.core import project_points
 from streetaug.augment.evaluation.realism import (
     FEATURE_NAMES, CarCrop, box_corners_cam, box_in_image, classifier_accuracy, crop_descriptor, crop_features,
     edge_sharpness, extract_crop, feature_gaps, ground_distance_map, grouped_folds, laplacian_sharpness, luma,
-    noise_sigma, project, shadow_darkness, size_matched, srgb_to_lab,
+    noise_sigma, shadow_darkness, size_matched, srgb_to_lab,
 )
 
 W, H = 240, 160
@@ -35,7 +36,7 @@ def scene():
     T = T_cam_from_box()
     img = np.full((H, W, 3), 120, np.float32) + rng.normal(0, 1.0, (H, W, 1))
     hull = np.zeros((H, W), np.uint8)
-    cv2.fillConvexPoly(hull, cv2.convexHull(np.round(project(K, box_corners_cam(T, WLH))).astype(np.int32)), 1)
+    cv2.fillConvexPoly(hull, cv2.convexHull(np.round(project_points(K, box_corners_cam(T, WLH))[0]).astype(np.int32)), 1)
     stripes = (np.arange(W)[None, :] // 6 % 2) * 120 + 40
     img = np.where(hull[..., None].astype(bool), np.stack([stripes * 1.0, stripes * 0.4, stripes * 0.3], -1)
                    * np.ones((H, 1, 1)), img)
@@ -55,7 +56,7 @@ def test_box_geometry(scene):
     window = (0, 0, W, H)
     d = ground_distance_map(K, T, WLH, window)
     assert np.all(np.isnan(d[:70]))  # above the horizon (row 79.5)
-    bottom_centre = project(K, (T @ np.array([0, 0, -WLH[2] / 2, 1]))[None, :3])[0]
+    bottom_centre = project_points(K, (T @ np.array([0, 0, -WLH[2] / 2, 1]))[None, :3])[0][0]
     assert d[int(round(bottom_centre[1])), int(round(bottom_centre[0]))] == 0.0
     assert np.nanmax(d[-1]) > 3.0  # the bottom row is metres in front of the car
 
@@ -161,3 +162,17 @@ def test_feature_gaps_and_size_matching():
                           np.bincount(np.digitize(hb[ib], [30, 60, 100, 200]), minlength=4))
     ia, ib = size_matched(ha, hb, [30, 60, 100, 200], rng, max_each=10)
     assert len(ia) == len(ib) <= 10
+
+
+def test_box_rect_keeps_only_the_corners_in_front_of_the_camera():
+    from streetaug.augment.evaluation.realism import box_rect_px
+
+    T = np.eye(4)
+    T[:3, 3] = [0.0, 0.0, 1.0]  # a box around the camera plane: half its corners behind the camera
+    rect = box_rect_px(K, T, np.array([1.0, 1.0, 4.0]))
+    assert np.all(np.isfinite(rect)) and rect[0] < rect[2] and rect[1] < rect[3]
+    front = box_corners_cam(T, np.array([1.0, 1.0, 4.0]))
+    uv = project_points(K, front[front[:, 2] > 0])[0]
+    np.testing.assert_allclose(rect, [uv[:, 0].min(), uv[:, 1].min(), uv[:, 0].max(), uv[:, 1].max()])
+    T[:3, 3] = [0.0, 0.0, -10.0]  # wholly behind
+    assert np.isnan(box_rect_px(K, T, np.array([1.0, 1.0, 4.0]))).all()
