@@ -21,7 +21,27 @@ from .settings import RenderSettings
 from .surface import box_corners_object
 
 SKY_RADIUS_PER_HEIGHT = 2.0  # sky occlusion beyond ~2 object heights is below a few per cent
+SKY_RADIUS_PAD_M = 0.3
+SKY_FADE_START = 0.6  # the sky occlusion fades out from this fraction of the sky radius to the radius
+SUN_FADE_START = 0.6  # sun shadows fade out from this fraction of ``shadow_max_length_m`` to all of it
 OBJECT_BOX_PAD_PX = 2
+
+
+def sky_radius_m(height_m: float) -> float:
+    """How far (metres, along the ground from the object's footprint box) the sky occlusion of an object
+    ``height_m`` tall is computed; it fades to exactly 0 there (:func:`fade_weight`, :data:`SKY_FADE_START`)."""
+    return SKY_RADIUS_PER_HEIGHT * max(float(height_m), 0.0) + SKY_RADIUS_PAD_M
+
+
+def fade_weight(dist_m: np.ndarray, end_m: float, start_fraction: float) -> np.ndarray:
+    """Smooth cut-off (N,): 1 up to ``start_fraction x end_m``, a smoothstep down to exactly 0 at ``end_m`` and beyond.
+
+    The shadow's sun and sky parts are truncated with it (at the shadow's longest length and at the sky
+    radius), so the ratio map reaches 1 smoothly inside :func:`shadow_pixel_box` instead of being cut at its edge.
+    """
+    start = start_fraction * end_m
+    x = np.clip((np.asarray(dist_m, dtype=np.float64) - start) / max(end_m - start, 1e-9), 0.0, 1.0)
+    return 1.0 - x * x * (3.0 - 2.0 * x)
 
 
 @dataclass(frozen=True)
@@ -108,14 +128,15 @@ def shadow_pixel_box(camera: PinholeCamera, T_cam_from_object: np.ndarray, asset
                      settings: RenderSettings) -> PixelBox | None:
     """The pixel box where the shadow ratio map can differ from 1, or None.
 
-    The object's footprint grown by a sky-occlusion radius (:data:`SKY_RADIUS_PER_HEIGHT` object
-    heights) plus its top corners projected along the sun onto the ground (clamped to
-    ``settings.shadow_max_length_m``); the ground plane z = 0 of the object frame.
+    The object's footprint grown by the sky-occlusion radius (:func:`sky_radius_m`) plus its top corners
+    projected along the sun onto the ground, clamped to ``settings.shadow_max_length_m`` (the renderer fades
+    the sun shadow out before that length and the sky occlusion before that radius, :func:`fade_weight`, so
+    the map is 1 on the box's edges), grown by the sun disc's penumbra; the ground plane z = 0 of the object frame.
     """
     V = asset.vertices
     lo, hi = V.min(axis=0), V.max(axis=0)
     h_obj = float(max(hi[2], 0.0))
-    r = SKY_RADIUS_PER_HEIGHT * h_obj + 0.3
+    r = sky_radius_m(h_obj)
     ground = np.array([[x, y, 0.0] for x in (lo[0] - r, hi[0] + r) for y in (lo[1] - r, hi[1] + r)])
     pts = [ground]
     if light.sun is not None:
@@ -125,7 +146,7 @@ def shadow_pixel_box(camera: PinholeCamera, T_cam_from_object: np.ndarray, asset
             length = np.linalg.norm(horiz)
             if length > settings.shadow_max_length_m:
                 horiz *= settings.shadow_max_length_m / length
-            m = 0.3 + h_obj * np.tan(light.sun.half_angle_rad) * length / max(h_obj, 1e-6)
+            m = 0.3 + np.tan(light.sun.half_angle_rad) * length  # penumbra (uncapped length: >= the capped one's)
             pts.append(np.array([[x + horiz[0] + dx, y + horiz[1] + dy, 0.0]
                                  for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for dx in (-m, m) for dy in (-m, m)]))
     pts = np.concatenate(pts)

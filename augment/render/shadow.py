@@ -40,13 +40,14 @@ from ..core import PinholeCamera, camera_dir_to_lonlat, luminance, sample_equire
 from ..lighting.light import DistantLight
 from .bounce import BounceLight
 from .brdf import row_norm, to_world
-from .footprint import PixelBox, edge_pixels
+from .footprint import SKY_FADE_START, SUN_FADE_START, PixelBox, edge_pixels, fade_weight, sky_radius_m
 from .environment import EnvironmentTables
 from .sampling import GOLDEN_ANGLE, sample_cone
 from .settings import RenderSettings
 from .surface import PreparedAsset
 
 RAY_EPS_M = 0.01
+RATIO_SNAP = 5e-4  # ratios this close to 1 are 1 (an eighth of an 8-bit level; the faded tails end there)
 SHADOW_CHUNK_RAYS = 1_000_000  # rays per batch: bounds memory
 
 
@@ -158,7 +159,7 @@ def render_shadow(camera: PinholeCamera, box: PixelBox | None, depth_m: np.ndarr
     s_foot = _foot_ratio(geo, box, prep, sky, sun_def, E_safe)
     stats["foot_ratio"] = s_foot.tolist()
     ratio = np.clip(1.0 - sky.deficit - sun_def + sky.bounce_gain * s_foot.astype(np.float32)[None, None], 0.0, 1.0)
-    ratio = np.where(ratio > 1.0 - 1e-4, 1.0, ratio).astype(np.float32)
+    ratio = np.where(ratio > 1.0 - RATIO_SNAP, 1.0, ratio).astype(np.float32)
     return ShadowMap(box=box, ratio_rgb=ratio, stats=stats, foot_ratio=s_foot)
 
 
@@ -353,7 +354,8 @@ def _sky_deficit(p_obj: np.ndarray, n_obj: np.ndarray, light: DistantLight, prep
     Only directions towards the object can be blocked: each point samples ``n_dirs`` directions
     uniformly (a randomly rotated Fibonacci spiral) in the cone around the object's bounding sphere,
     or in the whole upper hemisphere when it is inside the sphere; a direction stands for
-    ``cone solid angle / n_dirs`` and counts with its cosine to the ground normal.
+    ``cone solid angle / n_dirs`` and counts with its cosine to the ground normal.  The deficit fades
+    to 0 at the sky radius (:func:`~.footprint.sky_radius_m`) from the footprint box, where the pixel box ends.
     """
     P = len(p_obj)
     org = p_obj + RAY_EPS_M * n_obj
@@ -395,7 +397,10 @@ def _sky_deficit(p_obj: np.ndarray, n_obj: np.ndarray, light: DistantLight, prep
     for k in range(3):
         D0[:, k] = np.bincount(pix, weights=(L[:, k] - A[:, k]) * wgt, minlength=P)
         C[:, k] = np.bincount(pix, weights=B[:, k] * wgt, minlength=P)
-    return D0, C
+    # Truncated at the sky radius of the shadow's pixel box, smoothly (no step at the box's edge).
+    gap = np.maximum(np.maximum(lo[None, :2] - p_obj[:, :2], p_obj[:, :2] - hi[None, :2]), 0.0)
+    fade = fade_weight(np.sqrt((gap * gap).sum(axis=1)), sky_radius_m(hi[2]), SKY_FADE_START)[:, None]
+    return D0 * fade, C * fade
 
 
 def _sun_polygon_mask(geo: _Ground, box: PixelBox, light: DistantLight, prep: PreparedAsset) -> np.ndarray | None:
@@ -437,7 +442,10 @@ def _sun_blocked(geo: _Ground, box: PixelBox, light: DistantLight, prep: Prepare
 
     One ray per pixel towards the sun's centre where the object can cast its shadow, then
     ``shadow_sun_dirs`` jittered rays (sub-pixel position x disc direction) in the pixels at the
-    shadow's edge (the penumbra and the anti-aliased boundary).
+    shadow's edge (the penumbra and the anti-aliased boundary).  When the shadow can be longer than
+    :data:`~.footprint.SUN_FADE_START` x ``settings.shadow_max_length_m`` (a low sun), a blocked ray counts
+    with :func:`~.footprint.fade_weight` of the horizontal distance to what blocks it: the shadow fades
+    out smoothly and ends within that length, inside the pixel box.
     """
     x0, y0, h, w = box.x0, box.y0, box.height, box.width
     sun = light.sun
@@ -453,13 +461,14 @@ def _sun_blocked(geo: _Ground, box: PixelBox, light: DistantLight, prep: Prepare
         return blocked
     ys, xs, p = ys[valid], xs[valid], p[valid]
     org = p + RAY_EPS_M * geo.n_obj
-    hit0 = prep.scene.occluded(org, np.broadcast_to(s_obj, org.shape))
+    fade_m = _sun_fade_length(geo, prep, s_obj, sun.half_angle_rad, settings)
+    hit0 = _sun_block_weight(prep, org, np.broadcast_to(s_obj, org.shape), geo.n_obj, fade_m)
     stats["rays"]["shadow_sun"] = stats["rays"].get("shadow_sun", 0) + int(len(org))
     blocked[ys, xs] = hit0
     # Edge pixels: the 3 x 3 neighbourhood is not uniform, or the edge of a triangle's shadow crosses
     # the pixel without the pixel being deep inside the shadow (thin parts: their shadow is thinner
     # than a pixel and the centre rays miss most of it).
-    b8 = blocked.astype(np.uint8)
+    b8 = (blocked > 0).astype(np.uint8)
     k3 = np.ones((3, 3), np.uint8)
     core = cv2.erode(b8, k3, borderType=cv2.BORDER_REPLICATE)
     edge = (cv2.dilate(b8, k3) != core) & mask
@@ -479,11 +488,33 @@ def _sun_blocked(geo: _Ground, box: PixelBox, light: DistantLight, prep: Prepare
         sp, svalid = geo.points_obj(sub_uv, depth_uv)
         dirs = sample_cone(s_obj, sun.half_angle_rad, rng.random(len(sub_uv)), rng.random(len(sub_uv)))
         dirs = np.where((dirs @ geo.n_obj > 0)[:, None], dirs, s_obj)
-        hit = prep.scene.occluded(sp + RAY_EPS_M * geo.n_obj, dirs) & svalid
+        hit = _sun_block_weight(prep, sp + RAY_EPS_M * geo.n_obj, dirs, geo.n_obj, fade_m) * svalid
         stats["rays"]["shadow_sun"] += int(len(sub_uv))
         blocked[ey, ex] = hit.reshape(E_n, len(offs)).mean(axis=1)
     stats["sun_edge_pixels"] = int(len(ey))
     return blocked
+
+
+def _sun_fade_length(geo: _Ground, prep: PreparedAsset, s_obj: np.ndarray, half_angle_rad: float,
+                     settings: RenderSettings) -> float | None:
+    """``settings.shadow_max_length_m`` if the object's sun shadow (disc included) can reach beyond the
+    fade's start (:data:`~.footprint.SUN_FADE_START` of it), else None (no fade: plain occlusion rays)."""
+    sin_e = float(np.clip(s_obj @ geo.n_obj, -1.0, 1.0))
+    elev = np.arcsin(sin_e) - half_angle_rad
+    top = float(max((prep.asset.vertices @ geo.n_obj).max(), 0.0))
+    reach = np.inf if elev <= 1e-6 else top / np.tan(elev)
+    return settings.shadow_max_length_m if reach > SUN_FADE_START * settings.shadow_max_length_m else None
+
+
+def _sun_block_weight(prep: PreparedAsset, org: np.ndarray, dirs: np.ndarray, n_obj: np.ndarray,
+                      fade_m: float | None) -> np.ndarray:
+    """(N,) float64 how much each ray towards the sun is blocked: 0/1, or with ``fade_m`` the
+    :func:`~.footprint.fade_weight` of the horizontal distance (along the ground) to the nearest hit."""
+    if fade_m is None:
+        return prep.scene.occluded(org, dirs).astype(np.float64)
+    hits = prep.scene.intersect(org, dirs)
+    horiz = hits.t * np.sqrt(np.clip(1.0 - (dirs @ n_obj) ** 2, 0.0, 1.0))
+    return np.where(hits.hit, fade_weight(np.where(hits.hit, horiz, 0.0), fade_m, SUN_FADE_START), 0.0)
 
 
 def _cell_filtered_env(envmap: np.ndarray, n_dirs: int) -> np.ndarray:
