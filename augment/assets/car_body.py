@@ -18,8 +18,15 @@ from scipy.interpolate import PchipInterpolator
 from .mesh_parts import MeshPart, grid_faces, signed_volume, weld_vertices
 from .validate import face_normals, smooth_vertex_normals
 
-# Material slots of a procedural car (indices into its material table).
+# Material slots of a procedural car (indices into its material table).  The first seven are the
+# original body / wheel slots; the rest are the details (:mod:`.car_details`, :mod:`.car_interior`,
+# :mod:`.number_plates`): rear (privacy) glass, panel gaps, the lower (dirtier) paint, plates, the
+# interior, chrome, lamp reflectors and brake discs.
 PAINT, GLASS, TRIM, TYRE, RIM, HEADLIGHT, TAILLIGHT = range(7)
+(GLASS_REAR, GAP, PAINT_LOWER, PLATE_FRONT, PLATE_REAR, PLATE_INK, PLATE_BAND, INTERIOR, DASH, CHROME, REFLECTOR,
+ BRAKE) = range(7, 19)
+N_SLOTS = 19
+GAP_HALF_M = 0.006  # half width of a panel gap (a 12 mm dark line: about a pixel at 15 m)
 
 
 @dataclass(frozen=True)
@@ -146,7 +153,30 @@ def loft_stations(spec: BodySpec) -> np.ndarray:
     keep = np.concatenate([[True], np.diff(d) > 0.02])
     d = d[keep]
     d[-1] = L
+    # Panel gaps: a pair of stations 2 GAP_HALF_M apart around each cut line (nothing else close by,
+    # except the window edges, which stay).
+    gaps = np.array([g for g, _ in panel_gaps(spec)])
+    near = np.min(np.abs(d[:, None] - gaps[None, :]), axis=1) < 0.025
+    protected = np.min(np.abs(d[:, None] - np.array(edges)[None, :]), axis=1) < 1e-9
+    d = d[~near | protected | (d == 0.0) | (d == L)]
+    d = np.unique(np.concatenate([d, gaps - GAP_HALF_M, gaps + GAP_HALF_M]))
     return d
+
+
+def panel_gaps(spec: BodySpec) -> list[tuple[float, str]]:
+    """Cut lines across the body (distance from the nose d, where): ``"side"`` (door shut lines, below
+    the belt line) or ``"top"`` (bonnet front and rear edge, boot lid front edge)."""
+    d_front, d_rear_axle = axle_distances(spec)
+    ra = spec.wheel_radius + 0.05
+    door_front = max(spec.d_ws + 0.05, d_front + ra + 0.06)
+    cuts = [(door_front, "side"), (spec.pillars[0] - 0.03, "side")]
+    rear_door_end = spec.pillars[1] - 0.03 if len(spec.pillars) > 1 else min(spec.d_roof_back, d_rear_axle - 0.3 * ra)
+    if rear_door_end > spec.pillars[0] + 0.5:
+        cuts.append((rear_door_end, "side"))
+    top = [0.12 * spec.front_overhang + 0.08, spec.d_ws - 0.07]
+    if spec.length - spec.d_rear > 0.35:  # a boot lid (sedans)
+        top.append(spec.d_rear + 0.05)
+    return cuts + [(t, "top") for t in top]
 
 
 def side_window_edges(spec: BodySpec) -> list[float]:
@@ -298,7 +328,19 @@ def body_materials(spec: BodySpec, V: np.ndarray, tri_a: np.ndarray, tri_b: np.n
                   & (d > spec.d_ws - 0.02) & (d < spec.d_roof_front + 0.02))
     rear = (above_belt & (n[:, 0] < -0.3) & (ay < full_hw - 0.16) & (d > spec.d_roof_back - 0.02)
             & (z > belt + 0.04))
-    mat[side | windscreen | rear] = GLASS
+    mat[side | windscreen] = GLASS
+    # Behind the B pillar (rear doors, rear quarter) and the rear window: the (often tinted) rear glass.
+    mat[(side & (d > spec.pillars[0])) | rear] = GLASS_REAR
+
+    # Panel gaps: thin dark strips at the cut lines (door shut lines on the sides below the belt line,
+    # bonnet and boot edges on top).
+    for dg, where in panel_gaps(spec):
+        strip = np.abs(d - dg) < GAP_HALF_M + 1e-6
+        if where == "side":
+            strip &= (kind >= 1) & (kind <= 2) & (np.abs(n[:, 1]) > 0.5) & (z < belt - 0.01)
+        else:
+            strip &= (n[:, 2] > 0.3) & (ay < 0.46 * spec.width) & (kind >= 2)
+        mat[strip & (mat == PAINT)] = GAP
 
     # Trim: underbody (and inner arches), bumpers below the bumper line, grille.
     d_front, d_rear_axle = axle_distances(spec)
@@ -312,15 +354,34 @@ def body_materials(spec: BodySpec, V: np.ndarray, tri_a: np.ndarray, tri_b: np.n
     # Lights: head lights in the lowest rows above the bumper line at the front corners,
     # tail lights just under the belt line at the rear corners.
     head = front & (kind == 2) & (row <= 1) & (ay > 0.25 * spec.width) & (ay < 0.47 * spec.width)
-    tail = ((d > spec.length - 0.40) & (n[:, 0] < -0.35) & (kind == 2) & (row >= 3) & (row <= 4)
-            & (ay > 0.30 * spec.width))
+    # Tail lights: a cluster on the rear face just under the belt line.  Only faces that look backwards
+    # (not the rounded rear quarters: they made red streaks along the sides) in a band of fixed height.
+    belt_r = spec.belt_rear
+    tail = ((d > spec.length - 0.35) & (n[:, 0] < -0.3) & (np.abs(n[:, 1]) < 0.8) & (kind >= 2)
+            & (z > belt_r - 0.26) & (z < belt_r - 0.02) & (ay > 0.25 * spec.width))
     mat[head & ~under] = HEADLIGHT
     mat[tail & ~under] = TAILLIGHT
+    # Lower body paint (sills, lower doors and wings): the slightly dirtier, rougher paint.
+    mat[(mat == PAINT) & (kind <= 1)] = PAINT_LOWER
     return mat
 
 
+def section_half_width(spec: BodySpec, d: np.ndarray, z: np.ndarray) -> np.ndarray:
+    """Half width (m) of the body's outer surface at distance from the nose ``d`` and height ``z``
+    (same shapes, broadcast); 0 above the roof or below the underbody."""
+    d, z = np.broadcast_arrays(np.asarray(d, dtype=np.float64), np.asarray(z, dtype=np.float64))
+    top, bot, half_w, belt = body_profiles(spec, d.ravel())
+    zc, hz = (top + bot) / 2, (top - bot) / 2
+    f = (z.ravel() - zc) / hz
+    n = np.where(f > 0, _N_UP, _N_LOW)
+    ys = np.where(np.abs(f) < 1.0, np.clip(1.0 - np.abs(np.clip(f, -1, 1)) ** n, 0.0, 1.0) ** (1.0 / n), 0.0)
+    return (half_w * ys * tumblehome_taper(spec, z.ravel(), belt)).reshape(d.shape)
+
+
 __all__ = [
-    "BODY_SPECS", "BODY_WEIGHTS", "BodySpec", "GLASS", "HEADLIGHT", "PAINT", "RIM", "TAILLIGHT", "TRIM", "TYRE",
-    "axle_distances", "body_materials", "body_part", "body_profiles", "hatchback_spec", "jitter_spec",
-    "loft_stations", "sedan_spec", "side_window_edges", "suv_spec", "tumblehome_taper", "van_spec",
+    "BODY_SPECS", "BODY_WEIGHTS", "BRAKE", "BodySpec", "CHROME", "DASH", "GAP", "GAP_HALF_M", "GLASS", "GLASS_REAR",
+    "HEADLIGHT", "INTERIOR", "N_SLOTS", "PAINT", "PAINT_LOWER", "PLATE_BAND", "PLATE_FRONT", "PLATE_INK",
+    "PLATE_REAR", "REFLECTOR", "RIM", "TAILLIGHT", "TRIM", "TYRE", "axle_distances", "body_materials", "body_part",
+    "body_profiles", "hatchback_spec", "jitter_spec", "loft_stations", "panel_gaps", "section_half_width",
+    "sedan_spec", "side_window_edges", "suv_spec", "tumblehome_taper", "van_spec",
 ]

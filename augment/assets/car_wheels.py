@@ -1,11 +1,13 @@
-"""The wheels of a procedural car: revolved tyre profiles with a spoked rim cap, and dark wheel wells."""
+"""The wheels of a procedural car: revolved tyre profiles (tread, shoulders, sidewalls) with a spoked rim
+cap whose windows are open onto a brake disc and caliper, and dark wheel wells."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from .car_body import RIM, TRIM, TYRE, BodySpec, axle_distances
+from .car_body import BRAKE, RIM, TRIM, TYRE, BodySpec, axle_distances
 from .mesh_parts import MeshPart, box_mesh, grid_faces, orient_outward, weld_vertices
+from .revolve import revolve
 from .validate import face_normals, smooth_vertex_normals
 
 
@@ -23,8 +25,12 @@ def wheel_parts(spec: BodySpec) -> list[MeshPart]:
     return parts
 
 
-def wheel(centre: np.ndarray, side: float, r: float, width: float) -> list[MeshPart]:
-    """Tyre (revolved rounded profile) plus a spoked rim cap on the outer face; axis along y."""
+def wheel(centre: np.ndarray, side: float, r: float, width: float, brake: bool = True) -> list[MeshPart]:
+    """Tyre (revolved rounded profile) plus a spoked rim cap on the outer face; axis along y.
+
+    With ``brake`` the outer cap's windows between the spokes are open and a brake disc (with its
+    caliper towards the rear) sits behind them, in front of a dark inner cap.
+    """
     n_around = 32
     theta = np.linspace(0.0, 2 * np.pi, n_around, endpoint=False) - np.pi / 2  # includes the bottom point
     r_rim = 0.66 * r
@@ -78,10 +84,27 @@ def wheel(centre: np.ndarray, side: float, r: float, width: float) -> list[MeshP
         cen = Vc[Fc].mean(axis=1) - centre
         ang = np.arctan2(cen[:, 2], cen[:, 0])
         rr = np.hypot(cen[:, 0], cen[:, 2])
-        spoke = (np.cos(5 * ang) > -0.25) | (rr < 0.3 * r_rim) | (rr > 0.86 * r_rim) | (face_side < 0)
-        fm = np.where(spoke, RIM, TRIM)
+        if face_side < 0:
+            fm = np.full(len(Fc), TRIM if brake else RIM)
+        else:
+            spoke = (np.cos(5 * ang) > -0.25) | (rr < 0.3 * r_rim) | (rr > 0.86 * r_rim)
+            fm = np.where(spoke, RIM, TRIM)
+            if brake:  # open windows between the spokes
+                Fc, fm = Fc[spoke], fm[spoke]
         caps.append(MeshPart(Vc, Fc, fm, smooth_vertex_normals(Vc, Fc)))
-    return [tyre, *caps]
+    if not brake:
+        return [tyre, *caps]
+    # Brake disc (a flat cylinder) behind the spokes and a caliper box gripping its rear edge.
+    axis = np.array([0.0, side, 0.0])
+    disc_face = hw - 0.065
+    disc = revolve(np.array([disc_face - 0.025, disc_face]), np.full(2, 0.8 * r_rim), centre, axis, BRAKE,
+                   n_around=24, caps="flat")
+    lo = centre + np.array([-0.86 * r_rim, 0.0, -0.22 * r_rim])
+    hi = centre + np.array([-0.58 * r_rim, 0.0, 0.22 * r_rim])
+    lo[1], hi[1] = sorted((centre[1] + side * (disc_face - 0.045), centre[1] + side * (disc_face + 0.012)))
+    Vb, Fb = box_mesh(lo, hi)
+    caliper = MeshPart(Vb, Fb, np.full(len(Fb), TRIM), smooth_vertex_normals(Vb, Fb))
+    return [tyre, *caps, disc, caliper]
 
 
 def orient_about(V: np.ndarray, F: np.ndarray, centre: np.ndarray) -> np.ndarray:

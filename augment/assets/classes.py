@@ -75,7 +75,7 @@ def _variant_wlh(variant: str | None, wlh: np.ndarray, size: CategorySize) -> np
 
 
 def procedural_object(detection_class: str, seed: int, sizes: dict[str, CategorySize] | None = None,
-                      still: bool = False) -> Asset:
+                      still: bool = False, plate_style: str = "eu") -> Asset:
     """One procedural object of ``detection_class``, deterministic in ``seed``.
 
     Args:
@@ -83,6 +83,8 @@ def procedural_object(detection_class: str, seed: int, sizes: dict[str, Category
         seed: draws the category within the class, the variant, the size and the generator's own choices.
         sizes: the class-sizes table (default the shipped one, :func:`read_class_sizes`).
         still: an object that stays put for a whole track: pedestrians stand, two-wheelers have no rider.
+        plate_style: cars' number plates and driving side (``sg``, ``us``, ``eu``; see
+            :func:`~.number_plates.plate_style_for_location`); other classes ignore it.
 
     Raises:
         InputError: unknown class, or the table lacks the drawn category.
@@ -95,7 +97,7 @@ def procedural_object(detection_class: str, seed: int, sizes: dict[str, Category
     if still and variant == "with_rider":
         variant = "without_rider"
     if detection_class == "car":
-        return procedural_car(int(rng.integers(2**31)))
+        return procedural_car(int(rng.integers(2**31)), plate_style=plate_style)
     table = sizes if sizes is not None else read_class_sizes()
     if category not in table:
         raise InputError(f"class sizes table: no entry for {category!r} (needed for class {detection_class!r})")

@@ -1,4 +1,6 @@
-"""Procedural cars: a lofted, curved body with a glass greenhouse, wheels in arches, lights and trim.
+"""Procedural cars: a lofted, curved body with a glass greenhouse, wheels in arches, lights and trim,
+the details a camera sees at 10-40 m (panel gaps, mirrors, handles, wipers, a slatted grille, recessed
+lamps, brake discs, number plates) and an interior behind glass that lets it be seen.
 
 The body is a loft along x of rounded cross-sections (superellipses in y-z whose width narrows
 above the belt line: the "tumblehome"), between a side-profile roof curve ``z_top(x)`` and an
@@ -7,17 +9,29 @@ ends, closing the surface.  Materials are assigned per face from its position an
 (windscreen / side windows / rear window with pillars in between, bumpers, grille, head and tail
 lights).  Wheels are revolved tyre profiles with a spoked rim cap.  Output is an :class:`Asset` in
 the object frame (x front, y left, z up, metres, origin at the bottom centre, tyres touching z = 0).
+
+Random draws: the body, its dimensions and the paint come from the stream ``[seed, 0x5CA4]`` (as before
+the details existed, so a seed keeps its body and paint); every detail draw (glass tint, interior
+colour, chrome, plate characters, dirt) from its own stream ``[seed, 0xDE7A]``.
 """
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
 from .asset import Asset, Material
-from .car_body import BODY_SPECS, BODY_WEIGHTS, body_part, jitter_spec
+from .car_body import BODY_SPECS, BODY_WEIGHTS, N_SLOTS, body_part, jitter_spec
+from .car_details import (BodySurface, door_handle_parts, grille_slats, mirror_parts, plate_parts,
+                          recess_lamps_and_grille, wiper_parts)
+from .car_interior import interior_parts
 from .car_wheels import wheel_parts, wheel_well_parts
 from .mesh_parts import merge_parts
+from .number_plates import PlateStyle, check_plate_style, plate_style_for_location
 from .validate import validate_asset
+
+MIRROR_OUT_M = 0.04  # how far the mirrors reach beyond the body's widest point (both inside the box)
 
 
 def procedural_car_variants() -> tuple[str, ...]:
@@ -85,18 +99,23 @@ def paint_palette() -> list[tuple[str, np.ndarray, float, float]]:
 # ----------------------------------------------------------------------------- public entry point
 
 
-def procedural_car(seed: int, body: str | None = None, paint: tuple | None = None) -> Asset:
+def procedural_car(seed: int, body: str | None = None, paint: tuple | None = None, plate_style: str = "eu") -> Asset:
     """A plausible car mesh, deterministic for ``seed``.
 
     Args:
-        seed: random seed (body choice when ``body`` is None, dimension jitter, paint, glass tint).
+        seed: random seed (body choice when ``body`` is None, dimension jitter, paint; the details draw
+            from their own stream, see the module docstring).
         body: one of :func:`procedural_car_variants` (``sedan``, ``hatchback``, ``suv``, ``van``) or None.
         paint: optional linear RGB (3,) paint colour in [0, 1], or (r, g, b, metallic).
+        plate_style: number plates and driving side: ``sg`` (right-hand drive), ``us`` or ``eu``
+            (:func:`~.number_plates.plate_style_for_location` maps a nuScenes location to one).
 
     Returns:
         An :class:`Asset` (category ``vehicle.car``), object frame (x front, y left, z up, metres),
-        origin at the bottom centre; the tyres touch z = 0.  About 8-10 k triangles.
+        origin at the bottom centre; the tyres touch z = 0; the mirrors reach the box's sides.
+        About 15-17 k triangles.
     """
+    style = check_plate_style(plate_style)
     rng = np.random.default_rng([int(seed) & 0xFFFFFFFF, 0x5CA4])
     names = list(BODY_SPECS)
     if body is None:
@@ -107,11 +126,10 @@ def procedural_car(seed: int, body: str | None = None, paint: tuple | None = Non
     if body not in BODY_SPECS:
         raise ValueError(f"procedural_car: unknown body {body!r}; expected one of {', '.join(names)}")
     spec = jitter_spec(BODY_SPECS[body](), rng)
-    materials, paint_name = _materials(rng, paint)
+    detail_rng = np.random.default_rng([int(seed) & 0xFFFFFFFF, 0xDE7A])
+    materials, paint_name, looks = _materials(rng, detail_rng, paint, body, style)
 
-    parts = [body_part(spec)]
-    parts += wheel_parts(spec)
-    parts += wheel_well_parts(spec)
+    parts = _car_parts(spec, style, looks, detail_rng)
     vertices, faces, face_material = merge_parts(parts)
 
     # Origin at the bottom centre of the box, tyres on z = 0.
@@ -126,10 +144,34 @@ def procedural_car(seed: int, body: str | None = None, paint: tuple | None = Non
     return validate_asset(asset)
 
 
+def _car_parts(spec, style: PlateStyle, looks: dict, rng: np.random.Generator) -> list:
+    """Every mesh part of the car: the body (a little narrower than ``spec.width`` so the mirrors fit in
+    the box), wheels, wells, exterior details, plates and the interior."""
+    shell = dataclasses.replace(spec, width=spec.width - 2 * MIRROR_OUT_M)
+    body, lenses = recess_lamps_and_grille(body_part(shell), shell)
+    surface = BodySurface(body)
+    parts = [body, *lenses]
+    parts += wheel_parts(shell)
+    parts += wheel_well_parts(shell)
+    parts += grille_slats(surface, shell, looks["chrome"])
+    parts += mirror_parts(shell, 0.5 * spec.width, looks["mirror_paint"])
+    parts += door_handle_parts(shell, looks["chrome"])
+    parts += wiper_parts(surface, shell, style.right_hand_drive)
+    parts += plate_parts(surface, shell, style, rng)
+    parts += interior_parts(shell, style.right_hand_drive)
+    return parts
+
+
 # ----------------------------------------------------------------------------- materials
 
 
-def _materials(rng: np.random.Generator, paint: tuple | None) -> tuple[tuple[Material, ...], str]:
+def _materials(rng: np.random.Generator, detail_rng: np.random.Generator, paint: tuple | None, body: str,
+               style: PlateStyle | None = None) -> tuple[tuple[Material, ...], str, dict]:
+    """The material table in slot order (:mod:`.car_body`), the paint's name and the detail choices.
+
+    ``rng`` draws exactly what it drew before the details existed (paint, roughness, glass opacity and
+    tint, dark rims: the last two are no longer used but keep the stream); ``detail_rng`` the rest.
+    """
     palette = paint_palette()
     weights = np.array([p[3] for p in palette])
     idx = int(rng.choice(len(palette), p=weights / weights.sum()))
@@ -142,21 +184,54 @@ def _materials(rng: np.random.Generator, paint: tuple | None) -> tuple[tuple[Mat
         color, name = p[:3].copy(), "custom"
         metallic = float(p[3]) if p.size == 4 else 0.3
     paint_rough = float(rng.uniform(0.30, 0.45))
-    glass_opacity = float(rng.uniform(0.30, 0.50))
-    tint = np.array([0.015, 0.020, 0.022]) * rng.uniform(0.8, 1.2)
+    rng.uniform(0.30, 0.50)  # the old glass opacity draw (stream kept)
+    rng.uniform(0.8, 1.2)  # the old glass tint draw
     rim_dark = rng.random() < 0.25
-    mats = (
-        Material("paint", base_color=color, metallic=metallic, roughness=paint_rough, clearcoat=1.0),
-        Material("glass", base_color=tint, metallic=0.0, roughness=0.05, specular=0.5, opacity=glass_opacity),
+
+    # Detail stream.  Glass: transmission through it is (1 - opacity)(1 - F) sqrt(base_color) in the
+    # renderer; the windscreen and front side windows pass ~60-65 % at normal incidence, the rear
+    # glass of many SUVs / vans (and some cars) is privacy-tinted (~15-30 %).  The glass's own diffuse,
+    # base_color x opacity, stays ~0.02-0.03.
+    d = detail_rng
+    front_tint = np.array([0.40, 0.47, 0.45]) * d.uniform(0.92, 1.08)
+    privacy = d.random() < (0.6 if body in ("suv", "van") else 0.2)
+    rear_tint = np.array([0.055, 0.065, 0.065]) * d.uniform(0.8, 1.3) if privacy else front_tint
+    flake = float(np.clip(1.3 * metallic, 0.0, 1.0)) if metallic >= 0.2 else 0.0
+    dirt = float(d.uniform(0.0, 1.0)) ** 2
+    lower = np.clip(color * (1.0 - 0.18 * dirt) + dirt * 0.02 * np.array([0.9, 0.8, 0.6]), 0.0, 1.0)
+    chrome = bool(d.random() < 0.3)
+    mirror_paint = bool(d.random() < 0.75)
+    beige = d.random() < 0.2
+    seat_rgb = (np.array([0.20, 0.16, 0.11]) if beige else np.array([0.035, 0.035, 0.038])) * d.uniform(0.8, 1.2)
+    brake_rgb = np.array([0.30, 0.29, 0.28]) * d.uniform(0.8, 1.1)
+    st = style or check_plate_style("eu")
+    mats = [
+        Material("paint", base_color=color, metallic=metallic, roughness=paint_rough, clearcoat=1.0, flake=flake),
+        Material("glass", base_color=front_tint, metallic=0.0, roughness=0.05, specular=0.5, opacity=0.06),
         Material("trim", base_color=np.array([0.025, 0.025, 0.027]), metallic=0.0, roughness=0.75),
         Material("tyre", base_color=np.array([0.02, 0.02, 0.02]), metallic=0.0, roughness=0.9, specular=0.3),
         Material("rim", base_color=np.array([0.12, 0.12, 0.13]) if rim_dark else np.array([0.62, 0.62, 0.64]),
                  metallic=1.0, roughness=0.3),
-        Material("headlight", base_color=np.array([0.85, 0.85, 0.85]), metallic=0.0, roughness=0.06,
-                 emission=np.array([0.05, 0.05, 0.05])),
-        Material("taillight", base_color=np.array([0.45, 0.015, 0.02]), metallic=0.0, roughness=0.12),
-    )
-    return mats, name
+        Material("headlight", base_color=np.array([0.80, 0.82, 0.84]), metallic=0.0, roughness=0.04, opacity=0.2,
+                 emission=np.array([0.03, 0.03, 0.03])),
+        Material("taillight", base_color=np.array([0.50, 0.010, 0.015]), metallic=0.0, roughness=0.06, opacity=0.6),
+        Material("glass_rear", base_color=rear_tint, metallic=0.0, roughness=0.05, specular=0.5,
+                 opacity=0.35 if privacy else 0.06),
+        Material("gap", base_color=np.array([0.006, 0.006, 0.006]), metallic=0.0, roughness=0.9, specular=0.2),
+        Material("paint_lower", base_color=lower, metallic=metallic, roughness=min(paint_rough + 0.12 * dirt, 0.6),
+                 clearcoat=1.0 - 0.4 * dirt, flake=flake),
+        Material("plate_front", base_color=np.array(st.front_rgb), roughness=0.45, retroreflective=0.3),
+        Material("plate_rear", base_color=np.array(st.rear_rgb), roughness=0.45, retroreflective=0.3),
+        Material("plate_ink", base_color=np.array(st.ink_rgb), roughness=0.5),
+        Material("plate_band", base_color=np.array(st.band_rgb or st.ink_rgb), roughness=0.5),
+        Material("interior", base_color=seat_rgb, roughness=0.85, specular=0.3),
+        Material("dashboard", base_color=np.array([0.022, 0.022, 0.024]), roughness=0.7, specular=0.35),
+        Material("chrome", base_color=np.array([0.80, 0.80, 0.82]), metallic=1.0, roughness=0.15),
+        Material("lamp_reflector", base_color=np.array([0.85, 0.85, 0.86]), metallic=1.0, roughness=0.18),
+        Material("brake_disc", base_color=brake_rgb, metallic=1.0, roughness=0.45),
+    ]
+    assert len(mats) == N_SLOTS
+    return tuple(mats), name, {"chrome": chrome, "mirror_paint": mirror_paint}
 
 
-__all__ = ["paint_palette", "procedural_car", "procedural_car_variants", "srgb_to_linear"]
+__all__ = ["paint_palette", "plate_style_for_location", "procedural_car", "procedural_car_variants", "srgb_to_linear"]
