@@ -242,9 +242,31 @@ def _refine_sky_edges(geo: "_Ground", box: PixelBox, low: np.ndarray, light: Dis
         d0, c = _sky_deficit(p_f[part], geo.n_obj, light, prep, bounce, per_cell, geo.R, rng, stats)
         sky_def[ys[part], xs[part]] = d0 / E_safe
         bounce_gain[ys[part], xs[part]] = c / E_safe
-    for a in (sky_def, bounce_gain):  # per-pixel noise -> a light blur inside the refined band
-        a[sharp] = cv2.GaussianBlur(a, (5, 5), 1.2, borderType=cv2.BORDER_REPLICATE)[sharp]
+    _smooth_refined(sky_def, bounce_gain, ys, xs)
     stats["sky_refined_pixels"] = int(len(sel))
+
+
+def _smooth_refined(sky_def: np.ndarray, bounce_gain: np.ndarray, ys: np.ndarray, xs: np.ndarray) -> None:
+    """Per-pixel noise of the refined pixels (rows ``ys``, columns ``xs``) -> a light 5 x 5 blur, in place,
+    edge-aware: cross-bilateral on the deficit's luminance (range sigma :data:`REFINE_RANGE_SIGMA`), so the
+    step at a tyre's or a sill's edge (ground fully occluded next to ground half open) stays a step and the
+    darkness under the object does not bleed out as a band beside it."""
+    h, w = sky_def.shape[:2]
+    guide = luminance(sky_def).astype(np.float32)
+    g0 = guide[ys, xs]
+    acc_d = np.zeros((len(ys), 3), np.float64)
+    acc_c = np.zeros((len(ys), 3), np.float64)
+    wsum = np.zeros(len(ys), np.float64)
+    for dy in range(-2, 3):
+        yy = np.clip(ys + dy, 0, h - 1)
+        for dx in range(-2, 3):
+            xx = np.clip(xs + dx, 0, w - 1)
+            wgt = np.exp(-(dy * dy + dx * dx) / (2 * 1.2**2) - 0.5 * ((guide[yy, xx] - g0) / REFINE_RANGE_SIGMA) ** 2)
+            acc_d += wgt[:, None] * sky_def[yy, xx]
+            acc_c += wgt[:, None] * bounce_gain[yy, xx]
+            wsum += wgt
+    sky_def[ys, xs] = acc_d / wsum[:, None]
+    bounce_gain[ys, xs] = acc_c / wsum[:, None]
 
 
 def _contact_pixels(geo: "_Ground", box: PixelBox, prep: PreparedAsset) -> np.ndarray | None:
@@ -294,11 +316,15 @@ FOOT_RATIO_FALLBACK = 0.15  # mean shadow ratio under a car when its footprint i
 CONTACT_HEIGHT_M = 0.03  # vertices this close to the ground plane touch it
 CONTACT_BAND_M = 0.1  # ground this close to a contact gets full-resolution sky occlusion
 CONTACT_MAX_POINTS = 256
+GROUND_SNAP_M = 0.25  # depth-map points this close to the object's ground plane are taken on it ...
+GROUND_SNAP_END_M = 0.5  # ... and from this far on as the depth map says (smoothstep between)
+REFINE_RANGE_SIGMA = 0.06  # deficit difference (fraction of E) the refined band's smoothing does not cross
 SKY_REFINE_JUMP = 0.08  # sky-occlusion change (fraction of E) between neighbouring cells that asks for full resolution
 
 
 class _Ground:
-    """Ground points seen by pixels: from the depth map where known, else on the ground plane through the object."""
+    """Ground points seen by pixels: on the ground plane through the object where the depth is unknown or
+    within :data:`GROUND_SNAP_M` of that plane, from the depth map where it is far from it (blended between)."""
 
     def __init__(self, camera: PinholeCamera, depth_m: np.ndarray, n_cam: np.ndarray, T_cam_from_object: np.ndarray) -> None:
         self.camera = camera
@@ -334,6 +360,14 @@ class _Ground:
                 z_tan = h0 / denom
             d = np.where(known & (denom < -1e-9) & (z_tan > 0) & (z_tan < 2.0 * d), z_tan, d)
         z = np.where(known, d, z_plane)
+        # Depth within GROUND_SNAP_M of the object's ground plane is that plane (densified LiDAR depth is off
+        # by +-0.2 m in bands between rings: ground points inside the tyres gave a black band, points below
+        # them a floating car); blended back to the depth up to GROUND_SNAP_END_M (kerbs, walls, other objects).
+        on_plane = known & np.isfinite(z_plane)
+        if np.any(on_plane):
+            height = np.abs(denom * (z - np.where(on_plane, z_plane, 0.0)))
+            snap = fade_weight(np.where(on_plane, height, np.inf), GROUND_SNAP_END_M, GROUND_SNAP_M / GROUND_SNAP_END_M)
+            z = np.where(on_plane, z + snap * (np.where(on_plane, z_plane, 0.0) - z), z)
         valid = np.isfinite(z)
         p_cam = rays * np.where(valid, z, 0.0)[:, None]
         return (p_cam - self.t) @ self.R, valid
