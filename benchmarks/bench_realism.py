@@ -36,6 +36,7 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
 
 import argparse  # noqa: E402
+import inspect  # noqa: E402
 import json  # noqa: E402
 import subprocess  # noqa: E402
 import sys  # noqa: E402
@@ -92,7 +93,9 @@ def render_worker(args) -> None:
         t0 = time.perf_counter()
         sample = reader.sample(token)
         views = [sample.cameras[c] for c in CAMERAS]
-        assets = {c: select_assets(pipeline.item_seed(args.seed, "asset", token, c), args.n_objects)
+        # Older checkouts (--code-root) have no location argument: their cars have no plates.
+        where = {"location": sample.location} if "location" in inspect.signature(select_assets).parameters else {}
+        assets = {c: select_assets(pipeline.item_seed(args.seed, "asset", token, c), args.n_objects, **where)
                   for c in CAMERAS}
         result = pipeline.insert_into_sample(sample, views, assets, options)
         doc = {}

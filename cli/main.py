@@ -184,7 +184,8 @@ def insert(dataroot, version, scene, sample_token, camera, asset, assets_dir, as
         sample = reader.sample(resolve_sample(reader, scene, sample_token))
         view = camera_view(sample, camera)
         assets = select_assets(item_seed(seed, "asset", sample.token, camera), n_objects, asset, assets_dir,
-                               asset_front, asset_length, class_mix, class_sizes=class_sizes)
+                               asset_front, asset_length, class_mix, class_sizes=class_sizes,
+                               location=sample.location)
         result, path = insert_view_to_files(sample, view, assets, options, out, debug, explain)
     if result.skipped_reason:
         click.echo(f"no object inserted: {result.skipped_reason} (image copied unchanged to {path})")

@@ -40,7 +40,7 @@ def stability(dataroot, version, scene, sample_token, camera, families, failure_
     reader = open_dataset(dataroot, version)
     sample = reader.sample(resolve_sample(reader, scene, sample_token))
     view = camera_view(sample, camera)
-    assets = select_assets(item_seed(seed, "asset", sample.token, camera), 1)
+    assets = select_assets(item_seed(seed, "asset", sample.token, camera), 1, location=sample.location)
     options = InsertOptions(quality=quality, seed=seed)
     if failure_modes:
         for row in write_failure_modes(sample, view, assets, options, out):

@@ -18,6 +18,7 @@ from .categories import category_for_asset
 from .class_sizes import read_class_sizes
 from .classes import CLASS_CATEGORIES, ClassMix, procedural_object
 from .loader import list_assets, load_asset
+from .number_plates import plate_style_for_location
 from .procedural import procedural_car
 
 # Procedural seeds are drawn from [0, _SEED_RANGE); keeping it moderate lets the cache hit across a batch.
@@ -30,13 +31,14 @@ def load_asset_options(asset: str | Path, asset_front: str = "+z", asset_length:
 
 
 @lru_cache(maxsize=64)
-def _procedural(seed: int) -> Asset:
-    return procedural_car(seed)
+def _procedural(seed: int, plate_style: str = "eu") -> Asset:
+    return procedural_car(seed, plate_style=plate_style)
 
 
 @lru_cache(maxsize=256)
-def _procedural_of(detection_class: str, seed: int, still: bool = False, sizes_path: str | None = None) -> Asset:
-    return procedural_object(detection_class, seed, read_class_sizes(sizes_path), still=still)
+def _procedural_of(detection_class: str, seed: int, still: bool = False, sizes_path: str | None = None,
+                   plate_style: str = "eu") -> Asset:
+    return procedural_object(detection_class, seed, read_class_sizes(sizes_path), still=still, plate_style=plate_style)
 
 
 CATEGORY_CLASS = {category: name for name, options in CLASS_CATEGORIES.items() for category, _, _ in options}
@@ -61,6 +63,7 @@ def select_assets(
     class_mix: ClassMix | None = None,
     still: bool = False,
     class_sizes: str | Path | None = None,
+    location: str | None = None,
 ) -> list[Asset]:
     """``n_objects`` assets: the file ``asset`` repeated, random files of ``assets_dir``, or procedural objects.
 
@@ -75,9 +78,12 @@ def select_assets(
         still: procedural objects for a whole track (standing pedestrians, riderless two-wheelers).
         class_sizes: a class-sizes table (``streetaug class-sizes``) procedural objects are sized from (None:
             the shipped one).
+        location: the scene's ``log.location`` (its map name): procedural cars get its country's number
+            plates and driving side (:func:`~.number_plates.plate_style_for_location`; None: ``eu``).
     """
     if n_objects < 1:
         raise ValueError(f"n_objects must be >= 1, got {n_objects}")
+    plate_style = "eu" if location is None else plate_style_for_location(location)
     if asset is not None:
         return [load_asset_options(asset, asset_front, asset_length)] * n_objects
     if assets_dir is not None and class_mix is not None:
@@ -99,6 +105,6 @@ def select_assets(
     if class_mix is not None:
         names = class_mix.draw(rng, n_objects)
         sizes_path = None if class_sizes is None else str(class_sizes)
-        return [_procedural_of(name, int(s), still, sizes_path)
+        return [_procedural_of(name, int(s), still, sizes_path, plate_style)
                 for name, s in zip(names, rng.integers(0, _SEED_RANGE, size=n_objects))]
-    return [_procedural(int(s)) for s in rng.integers(0, _SEED_RANGE, size=n_objects)]
+    return [_procedural(int(s), plate_style) for s in rng.integers(0, _SEED_RANGE, size=n_objects)]

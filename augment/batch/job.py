@@ -72,7 +72,7 @@ def augment_sample(reader: NuScenesReader, config: BatchConfig, out_dir: Path, t
     mix = config.class_mix
     assets = {v.channel: select_assets(item_seed(config.seed, "asset", token, v.channel), config.n_objects,
                                        config.asset, config.assets_dir, config.asset_front, config.asset_length, mix,
-                                       class_sizes=config.class_sizes)
+                                       class_sizes=config.class_sizes, location=sample.location)
               for v in views}
     options = insert_options(config)
     load_s = time.perf_counter() - t0
@@ -128,7 +128,8 @@ def augment_track_sample(reader: NuScenesReader, config: BatchConfig, out_dir: P
                                  for c in cameras if c not in failed and c in sample.cameras]
                        + [LogRow(token, c, "skipped", f"camera {c} not in this sample") for c in cameras
                           if c not in sample.cameras], failed)
-    assets_by_track = track_assets(config, scene.scene_token, max(t.track_index for t in scene.tracks) + 1)
+    assets_by_track = track_assets(config, scene.scene_token, max(t.track_index for t in scene.tracks) + 1,
+                                   sample.location)
     cam_xy = views[0].T_global_from_cam[:2, 3]
     placements = [t.placement_at(token, i, cam_xy) for i, t in enumerate(here)]
     assets = [assets_by_track[t.track_index] for t in here]

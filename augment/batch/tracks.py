@@ -36,15 +36,16 @@ def track_rng(seed: int, *keys: str) -> np.random.Generator:
     return item_seed(seed, *keys)
 
 
-def track_assets(config: BatchConfig, scene_token: str, n: int) -> list:
+def track_assets(config: BatchConfig, scene_token: str, n: int, location: str | None = None) -> list:
     """The asset of each of the scene's ``n`` tracks (one draw per track: the same in every task); with a class
-    mix, procedural pedestrians stand and two-wheelers have no rider (only vehicles move in tracks)."""
+    mix, procedural pedestrians stand and two-wheelers have no rider (only vehicles move in tracks); procedural
+    cars carry the plates of the scene's ``location``."""
     from ..assets.select import select_assets  # deferred: trimesh, procedural meshes
 
     mix = config.class_mix
     return [select_assets(track_rng(config.seed, "track-asset", scene_token, str(i)), 1, config.asset,
                           config.assets_dir, config.asset_front, config.asset_length, mix, still=True,
-                          class_sizes=config.class_sizes)[0]
+                          class_sizes=config.class_sizes, location=location)[0]
             for i in range(n)]
 
 

@@ -149,7 +149,7 @@ def plan_scene(config: BatchConfig, scene_token: str, scene_name: str, sample_to
         reader = dataset_reader(config).with_tables(tables)
         samples = [reader.sample(t) for t in sample_tokens]
         frames = track_frames(samples)
-        assets = track_assets(config, scene_token, config.tracks)
+        assets = track_assets(config, scene_token, config.tracks, samples[0].location)
         plan = plan_tracks(frames, assets, track_rng(config.seed, "tracks", scene_token),
                            TrackConfig(), samples[0].location, read_class_rules(config.class_rules))
     except Exception as e:  # noqa: BLE001 - one inconsistent scene is skipped, the batch goes on

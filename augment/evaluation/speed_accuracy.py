@@ -120,7 +120,7 @@ def make_cases(dataroot, scenes: Sequence[str], seeds: Sequence[int], camera: st
         # Warm-up outside the timings: first-use imports (torch for the volume levels) and the JPEG decode.
         estimate_lighting(view, sample.location, "L2", lidar=sample.lidar, boxes=sample.boxes)
         for seed in seeds:
-            (asset,) = select_assets(item_seed(seed, "asset", sample.token, camera), 1)
+            (asset,) = select_assets(item_seed(seed, "asset", sample.token, camera), 1, location=sample.location)
             placed = place_in_view(sample, view, [asset], [], InsertOptions(seed=seed))
             if not placed.placements:
                 continue
