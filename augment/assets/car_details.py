@@ -154,8 +154,8 @@ def wiper_parts(surface: BodySurface, spec: BodySpec, right_hand_drive: bool) ->
 
 
 def plate_parts(surface: BodySurface, spec: BodySpec, style: PlateStyle, rng: np.random.Generator) -> list[MeshPart]:
-    """Front plate under the bumper line, rear plate just over it; each flat against the body (its back
-    at the deepest surface point behind it, its face 6 mm proud of the furthest one)."""
+    """Front plate under the bumper line, rear plate just over it: 2 cm thick boxes whose face is 6 mm
+    proud of the body's outermost point behind them (on a curved bumper their edges stand off it)."""
     w, h = style.size_m
     zb = _bumper_line(spec)
     parts = []
@@ -167,10 +167,8 @@ def plate_parts(surface: BodySurface, spec: BodySpec, style: PlateStyle, rng: np
         c = surface.hit(pts, u, reach_m=0.0)
         if np.isnan(c).any():
             continue
-        if rear:
-            x_face, x_back = float(c.min()) - 0.006, float(c.max()) + 0.005
-        else:
-            x_face, x_back = float(c.max()) + 0.006, float(c.min()) - 0.005
+        x_face = float(c.min()) - 0.006 if rear else float(c.max()) + 0.006
+        x_back = x_face + (0.02 if rear else -0.02)
         parts.append(plate_part(style, x_face, x_back, zc, rear, rng))
     return parts
 

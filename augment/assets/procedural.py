@@ -22,12 +22,12 @@ import dataclasses
 import numpy as np
 
 from .asset import Asset, Material
-from .car_body import BODY_SPECS, BODY_WEIGHTS, N_SLOTS, body_part, jitter_spec
+from .car_body import BODY_SPECS, BODY_WEIGHTS, N_SLOTS, BodySpec, body_part, jitter_spec
 from .car_details import (BodySurface, door_handle_parts, grille_slats, mirror_parts, plate_parts,
                           recess_lamps_and_grille, wiper_parts)
 from .car_interior import interior_parts
 from .car_wheels import wheel_parts, wheel_well_parts
-from .mesh_parts import merge_parts
+from .mesh_parts import MeshPart, merge_parts
 from .number_plates import PlateStyle, check_plate_style, plate_style_for_location
 from .validate import validate_asset
 
@@ -113,8 +113,34 @@ def procedural_car(seed: int, body: str | None = None, paint: tuple | None = Non
     Returns:
         An :class:`Asset` (category ``vehicle.car``), object frame (x front, y left, z up, metres),
         origin at the bottom centre; the tyres touch z = 0; the mirrors reach the box's sides.
-        About 15-17 k triangles.
+        About 14-15 k triangles.
     """
+    groups, materials, name = _build(seed, body, paint, plate_style)
+    parts = [p for group in groups.values() for p in group]
+    vertices, faces, face_material = merge_parts(parts)
+
+    # Origin at the bottom centre of the box, tyres on z = 0.
+    lo, hi = vertices.min(axis=0), vertices.max(axis=0)
+    vertices = vertices - np.array([(lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, lo[2]])
+    normals = np.concatenate([p.normals for p in parts])
+    asset = Asset(
+        name=name, vertices=vertices, faces=faces, face_material=face_material, materials=materials,
+        vertex_normals=normals, uv=None, category="vehicle.car",
+    )
+    return validate_asset(asset)
+
+
+def procedural_car_parts(seed: int, body: str | None = None, paint: tuple | None = None,
+                         plate_style: str = "eu") -> dict[str, list[MeshPart]]:
+    """The parts of :func:`procedural_car` (same arguments) by group, before centring: ``body`` (the
+    shell), ``lenses``, ``wheels``, ``exterior`` (grille slats, mirrors, handles, wipers), ``plates``
+    and ``interior``; the car's vertices are their union shifted to the box's bottom centre."""
+    return _build(seed, body, paint, plate_style)[0]
+
+
+def _build(seed: int, body: str | None, paint: tuple | None, plate_style: str
+           ) -> tuple[dict[str, list[MeshPart]], tuple[Material, ...], str]:
+    """(parts by group, material table, asset name) of :func:`procedural_car`."""
     style = check_plate_style(plate_style)
     rng = np.random.default_rng([int(seed) & 0xFFFFFFFF, 0x5CA4])
     names = list(BODY_SPECS)
@@ -128,38 +154,22 @@ def procedural_car(seed: int, body: str | None = None, paint: tuple | None = Non
     spec = jitter_spec(BODY_SPECS[body](), rng)
     detail_rng = np.random.default_rng([int(seed) & 0xFFFFFFFF, 0xDE7A])
     materials, paint_name, looks = _materials(rng, detail_rng, paint, body, style)
-
-    parts = _car_parts(spec, style, looks, detail_rng)
-    vertices, faces, face_material = merge_parts(parts)
-
-    # Origin at the bottom centre of the box, tyres on z = 0.
-    lo, hi = vertices.min(axis=0), vertices.max(axis=0)
-    vertices = vertices - np.array([(lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, lo[2]])
-    normals = np.concatenate([p.normals for p in parts])
-    asset = Asset(
-        name=f"procedural-{body}-{seed}-{paint_name.replace(' ', '_')}",
-        vertices=vertices, faces=faces, face_material=face_material, materials=materials,
-        vertex_normals=normals, uv=None, category="vehicle.car",
-    )
-    return validate_asset(asset)
+    groups = _car_parts(spec, style, looks, detail_rng)
+    return groups, materials, f"procedural-{body}-{seed}-{paint_name.replace(' ', '_')}"
 
 
-def _car_parts(spec, style: PlateStyle, looks: dict, rng: np.random.Generator) -> list:
-    """Every mesh part of the car: the body (a little narrower than ``spec.width`` so the mirrors fit in
-    the box), wheels, wells, exterior details, plates and the interior."""
+def _car_parts(spec: BodySpec, style: PlateStyle, looks: dict, rng: np.random.Generator) -> dict[str, list[MeshPart]]:
+    """Every mesh part of the car by group: the body (a little narrower than ``spec.width`` so the
+    mirrors fit in the box), lamp lenses, wheels and wells, exterior details, plates and the interior."""
     shell = dataclasses.replace(spec, width=spec.width - 2 * MIRROR_OUT_M)
     body, lenses = recess_lamps_and_grille(body_part(shell), shell)
     surface = BodySurface(body)
-    parts = [body, *lenses]
-    parts += wheel_parts(shell)
-    parts += wheel_well_parts(shell)
-    parts += grille_slats(surface, shell, looks["chrome"])
-    parts += mirror_parts(shell, 0.5 * spec.width, looks["mirror_paint"])
-    parts += door_handle_parts(shell, looks["chrome"])
-    parts += wiper_parts(surface, shell, style.right_hand_drive)
-    parts += plate_parts(surface, shell, style, rng)
-    parts += interior_parts(shell, style.right_hand_drive)
-    return parts
+    exterior = (grille_slats(surface, shell, looks["chrome"]) + mirror_parts(shell, 0.5 * spec.width, looks["mirror_paint"])
+                + door_handle_parts(shell, looks["chrome"]) + wiper_parts(surface, shell, style.right_hand_drive))
+    return {
+        "body": [body], "lenses": lenses, "wheels": wheel_parts(shell) + wheel_well_parts(shell), "exterior": exterior,
+        "plates": plate_parts(surface, shell, style, rng), "interior": interior_parts(shell, style.right_hand_drive),
+    }
 
 
 # ----------------------------------------------------------------------------- materials
@@ -230,8 +240,10 @@ def _materials(rng: np.random.Generator, detail_rng: np.random.Generator, paint:
         Material("lamp_reflector", base_color=np.array([0.85, 0.85, 0.86]), metallic=1.0, roughness=0.18),
         Material("brake_disc", base_color=brake_rgb, metallic=1.0, roughness=0.45),
     ]
-    assert len(mats) == N_SLOTS
+    if len(mats) != N_SLOTS:
+        raise RuntimeError(f"procedural_car: {len(mats)} materials for {N_SLOTS} slots")
     return tuple(mats), name, {"chrome": chrome, "mirror_paint": mirror_paint}
 
 
-__all__ = ["paint_palette", "plate_style_for_location", "procedural_car", "procedural_car_variants", "srgb_to_linear"]
+__all__ = ["paint_palette", "plate_style_for_location", "procedural_car", "procedural_car_parts", "procedural_car_variants",
+           "srgb_to_linear"]
