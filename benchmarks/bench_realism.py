@@ -84,7 +84,8 @@ def render_worker(args) -> None:
 
     print(f"render worker: streetaug.augment.pipeline from {Path(pipeline.__file__).parent}", flush=True)
     cache = Path(args.cache)
-    reader = NuScenesReader(SEQ, VERSION)
+    reader = NuScenesReader(args.dataroot, args.version)
+    cameras = args.cameras.split(",")
     options = pipeline.InsertOptions(quality=args.quality, seed=args.seed, n_objects=args.n_objects)
     for i, token in enumerate(keyframe_tokens(reader, args.stride)):
         done = cache / f"{token}.json"
@@ -92,19 +93,19 @@ def render_worker(args) -> None:
             continue
         t0 = time.perf_counter()
         sample = reader.sample(token)
-        views = [sample.cameras[c] for c in CAMERAS]
+        views = [sample.cameras[c] for c in cameras]
         # Older checkouts (--code-root) have no location argument: their cars have no plates.
         where = {"location": sample.location} if "location" in inspect.signature(select_assets).parameters else {}
         assets = {c: select_assets(pipeline.item_seed(args.seed, "asset", token, c), args.n_objects, **where)
-                  for c in CAMERAS}
+                  for c in cameras}
         result = pipeline.insert_into_sample(sample, views, assets, options)
         doc = {}
-        for c in CAMERAS:
+        for c in cameras:
             r = result.views[c]
             cv2.imwrite(str(cache / f"{token}_{c}.png"), r.image[:, :, ::-1])
             doc[c] = r.objects
         done.write_text(json.dumps(doc, default=float))
-        print(f"  keyframe {i}: {sum(len(v) for v in doc.values())} labels, {time.perf_counter() - t0:.1f} s",
+        print(f"  keyframe {i * args.stride}: {sum(len(v) for v in doc.values())} labels, {time.perf_counter() - t0:.1f} s",
               flush=True)
 
 
@@ -113,7 +114,8 @@ def render(args, cache: Path) -> str:
     code_root = Path(args.code_root).resolve()
     cmd = [sys.executable, str(Path(__file__).resolve()), "--render-worker", "--cache", str(cache),
            "--stride", str(args.stride), "--n-objects", str(args.n_objects), "--seed", str(args.seed),
-           "--quality", args.quality]
+           "--quality", args.quality, "--dataroot", str(Path(args.dataroot).resolve()), "--version", args.version,
+           "--cameras", args.cameras]
     if code_root != ROOT:
         cmd += ["--shim", str(make_shim(code_root, cache))]
     subprocess.run(cmd, check=True, cwd=str(cache))
@@ -182,7 +184,7 @@ def _without(boxes, T):
     return [(T2, w2) for T2, w2 in boxes if not np.allclose(T2, T)]
 
 
-def collect_crops(cache: Path, stride: int):
+def collect_crops(cache: Path, args):
     """Crops of every qualifying car of the cached images: (crops, labels 0 real / 1 inserted, keyframe ids,
     image ids)."""
     import cv2
@@ -190,12 +192,12 @@ def collect_crops(cache: Path, stride: int):
     from streetaug.augment.evaluation.realism import extract_crop
     from streetaug.datasets.nuscenes import NuScenesReader
 
-    reader = NuScenesReader(SEQ, VERSION)
+    reader = NuScenesReader(args.dataroot, args.version)
     crops, labels, keyframes, images = [], [], [], []
-    for token in keyframe_tokens(reader, stride):
+    for token in keyframe_tokens(reader, args.stride):
         doc = json.loads((cache / f"{token}.json").read_text())
         sample = reader.sample(token)
-        for c in CAMERAS:
+        for c in args.cameras.split(","):
             view = sample.cameras[c]
             real, inserted, others_real, others_all = image_cars(reader, sample, view, doc[c])
             original = view.image
@@ -243,7 +245,7 @@ def analyse(args, cache: Path, commit: str, render_s: float) -> dict:
                                                       crop_features, feature_gaps, size_matched)
 
     t0 = time.perf_counter()
-    crops, labels, keyframes, images = collect_crops(cache, args.stride)
+    crops, labels, keyframes, images = collect_crops(cache, args)
     heights = np.array([c.box_height_px for c in crops])
     real_idx, ins_idx = np.flatnonzero(labels == 0), np.flatnonzero(labels == 1)
     rng = np.random.default_rng(args.seed)
@@ -267,7 +269,7 @@ def analyse(args, cache: Path, commit: str, render_s: float) -> dict:
     bins = np.digitize(heights[chosen[:n]], HEIGHT_BINS_PX)
     doc = {
         "tag": args.tag, "commit": commit, "code_root": str(Path(args.code_root).resolve()),
-        "data": "nuscenes-seq scene-0916", "stride": args.stride, "n_objects_per_camera": args.n_objects,
+        "data": f"{Path(args.dataroot).name} {args.version} ({args.cameras})", "stride": args.stride, "n_objects_per_camera": args.n_objects,
         "seed": args.seed, "quality": args.quality,
         "selection": {"distance_m": [MIN_DIST_M, MAX_DIST_M], "real_visibility_token": "4",
                       "inserted_min_visible_fraction": MIN_INSERTED_VISIBLE,
@@ -288,6 +290,9 @@ def analyse(args, cache: Path, commit: str, render_s: float) -> dict:
     for k in range(0, n, 24):
         crop_sheet([crops[i] for i in order_r[k:k + 24]], [crops[i] for i in order_i[k:k + 24]],
                    sheets / f"sheet_{args.tag}_{k // 24}.png")
+    if args.figure:
+        crop_sheet([crops[i] for i in order_r[::max(n // 8, 1)][:8]], [crops[i] for i in order_i[::max(n // 8, 1)][:8]],
+                   Path(args.figure), row_h=120, per_side=4)
     acc = classifier["all"]["grouped_by_keyframe"]
     print(f"{args.tag} ({commit}): {n} real vs {n} inserted cars (of {len(real_idx)} / {len(ins_idx)}); "
           f"classifier accuracy {acc['accuracy_mean']:.3f} +- {acc['accuracy_std']:.3f} (grouped by keyframe; "
@@ -318,6 +323,13 @@ def parse_args(argv=None):
     p.add_argument("--render-only", action="store_true")
     p.add_argument("--out", default=str(ROOT / "benchmarks" / "results"))
     p.add_argument("--sheets", default="/tmp/realism")
+    p.add_argument("--dataroot", default=str(SEQ), help="nuScenes dataroot (default the real dev scene).")
+    p.add_argument("--version", default=VERSION)
+    p.add_argument("--cameras", default=",".join(CAMERAS), help="Comma-separated camera channels.")
+    p.add_argument("--figure", default=None,
+                   help="Also write one sheet (8 scene cars | 8 inserted, spread over the sizes) to this path; into "
+                        "the repository only from data inside it (the bundled scenes): pictures of other data are "
+                        "never committed.")
     p.add_argument("--render-worker", action="store_true", help=argparse.SUPPRESS)
     p.add_argument("--shim", default=None, help=argparse.SUPPRESS)
     return p.parse_args(argv)
@@ -325,6 +337,10 @@ def parse_args(argv=None):
 
 def main(argv=None) -> None:
     args = parse_args(argv)
+    if args.figure and Path(args.figure).resolve().is_relative_to(ROOT) \
+            and not Path(args.dataroot).resolve().is_relative_to(ROOT):
+        raise SystemExit(f"--figure {args.figure}: a picture of {args.dataroot} (outside the repository) would be "
+                         f"committed; write it outside the repository, or use the bundled scenes")
     if args.render_worker:
         render_worker(args)
         return
