@@ -28,7 +28,12 @@ Convention checks (tested in ``tests/test_render_reference.py``):
   4 % in both) and clear coat.  Where they differ: Mitsuba's diffuse lobe is Burley's (retro-reflection)
   rather than Lambert's, its geometry term is the exact Smith GGX rather than Schlick with
   k = (r + 1)^2 / 8 (identical at r = 1), its dielectric Fresnel is exact rather than Schlick, and its
-  clear coat is GTR1.  Metals are nearly exact (Schlick F from the base colour in both).  Opacity < 1
+  clear coat is GTR1.  Metals are nearly exact (Schlick F from the base colour in both).  Metallic flakes
+  (``flake`` k > 0) -> ``blendbsdf`` of weight k between that principled BSDF and a principled metal of the
+  diffuse colour at :data:`~streetaug.augment.render.brdf.FLAKE_ROUGHNESS` with the same clear coat: the
+  diffuse share and the flake lobe are the renderer's, but the blend also scales the dielectric specular
+  by 1 - k (kept whole in the renderer) and Mitsuba's metal has a Fresnel rim towards white (the renderer's
+  flakes have none); there is no flake lobe in Mitsuba's principled BSDF to map to exactly.  Opacity < 1
   (glass) -> ``mask`` (straight transmission of 1 - opacity), which only approximates the renderer's
   thin glass.  Textures are not mapped (the constant factors are used).
 """
@@ -42,7 +47,7 @@ import numpy as np
 
 from ..assets.asset import Asset, Material
 from ..core import camera_envmap_directions, check_shape, equirect_solid_angles
-from ..render.brdf import MIN_ROUGHNESS
+from ..render.brdf import FLAKE_ROUGHNESS, MIN_ROUGHNESS
 
 FLIP = np.diag([-1.0, -1.0, 1.0, 1.0])  # Mitsuba local (x left, y up) <-> OpenCV (x right, y down)
 GROUND_HALF_SIZE_M = 20_000.0
@@ -129,6 +134,12 @@ def mitsuba_bsdf(material: Material) -> dict:
                 "roughness": float(max(material.roughness, MIN_ROUGHNESS)),
                 "specular": float(material.specular), "clearcoat": float(material.clearcoat),
                 "clearcoat_gloss": 0.95}
+    flake = float(np.clip(getattr(material, "flake", 0.0), 0.0, 1.0))
+    if flake > 0 and bsdf["type"] == "principled":
+        c_diff = (1.0 - float(material.metallic)) * base
+        flakes = {"type": "principled", "base_color": {"type": "rgb", "value": c_diff.tolist()}, "metallic": 1.0,
+                  "roughness": FLAKE_ROUGHNESS, "clearcoat": float(material.clearcoat), "clearcoat_gloss": 0.95}
+        bsdf = {"type": "blendbsdf", "weight": flake, "bsdf_0": bsdf, "bsdf_1": flakes}
     if material.opacity < 1.0:
         bsdf = {"type": "mask", "opacity": float(material.opacity), "material": bsdf}
     return bsdf

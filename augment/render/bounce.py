@@ -7,7 +7,8 @@ the ray's origin is approximated as a diffuse-like reflection of the light it re
     L_hit = rho / pi x [ E_env(n) - t (1 - S_foot) E_low(n) + E_sun max(0, n.s) V_sun ] + emission
 
 * ``rho``: the material's directional albedo (diffuse colour + the GGX lobe's albedo from
-  :func:`streetaug.augment.render.brdf.specular_albedo`, at ``n.v = 0.6``), textures included.
+  :func:`streetaug.augment.render.brdf.specular_albedo`, at ``n.v = 0.6``; metallic flakes keep the diffuse
+  colour's albedo, :func:`streetaug.augment.render.brdf.flake_lobe`), textures included.
 * ``E_env(n)``: irradiance from the unoccluded environment (sky above, ground radiance below).
 * The ground a downward-facing surface sees is the object's own shadow, not the unshadowed ground
   of the environment map: with ``t = max(0, -n.up)`` the ground part ``E_low(n) = pi L_g (1 - n.up) / 2``

@@ -11,6 +11,15 @@ spherical-Gaussian exponent ``2^((-5.55473 v.h - 6.98316) v.h)`` and, as in UE4'
 lobe (roughness :data:`CLEARCOAT_ROUGHNESS`, F0 = 0.04) weighted by ``clearcoat``; the layer below
 is attenuated by the light the coat reflects, ``1 - clearcoat F_c(v.h)``.
 
+Metallic flakes (``flake`` k, car paint): a share k of the diffuse lobe is a rougher GGX lobe
+(:data:`FLAKE_ROUGHNESS`, the spread of the flakes' orientations) of the diffuse colour,
+``(1 - k) c_diff / pi + k c_diff [D_f G_f / (4 n.l n.v) + f_ms]``, without a Fresnel rim (the flakes are
+seen through the coat, whose Fresnel already takes the grazing light).  ``f_ms = (1 - E(n.v)) (1 - E(n.l))
+/ (pi (1 - E_avg))`` returns the light single scattering loses (Kulla & Conty 2017; ``E`` the lobe's
+directional albedo, ``E_avg`` its cosine-weighted mean), so the flakes' albedo is exactly their share
+of ``c_diff``: they move diffuse light towards the mirror direction (brighter near the highlight, darker
+off it: the "flop" of metallic paint) and neither add nor lose energy.
+
 Retro-reflection (cone and barrier bands, plates, signs) is a separate, narrow lobe around the
 direction back to the light (:func:`retro_lobe`): ``f_r = c_r G(angle(v, l))`` with ``G`` a unit-integral
 Gaussian of width :data:`RETRO_LOBE_RAD` and ``c_r = retro x min(RETRO_ALBEDO c_base, cap - c_diff)``
@@ -36,6 +45,7 @@ MIN_ROUGHNESS = 0.03  # below this GGX is a delta lobe that a few samples cannot
 RETRO_ALBEDO = 0.08  # fraction of the light a full-strength retro-reflector returns into its narrow cone
 RETRO_LOBE_RAD = np.radians(0.4)  # angular sigma of the returned cone (sheeting: R_A halves by ~0.5 deg)
 RETRO_ENERGY_CAP = 0.96  # the diffuse colour plus the retro lobe's albedo stays below this (+ ~4 % specular)
+FLAKE_ROUGHNESS = 0.45  # the flake lobe's GGX roughness (alpha 0.2: flake normals spread by ~10-15 deg)
 
 
 @dataclass(frozen=True)
@@ -49,6 +59,7 @@ class BRDFParams:
         specular: (N,) UE4 specular, 0.5 = 4 % reflectance.
         clearcoat: (N,) clear-coat strength in [0, 1].
         retroreflective: (N,) retro-reflective strength in [0, 1], or None (none anywhere: no retro lobe).
+        flake: (N,) metallic-flake share of the diffuse lobe in [0, 1], or None (none anywhere: no flake lobe).
     """
 
     base_color: np.ndarray
@@ -57,10 +68,11 @@ class BRDFParams:
     specular: np.ndarray
     clearcoat: np.ndarray
     retroreflective: np.ndarray | None = None
+    flake: np.ndarray | None = None
 
     @staticmethod
     def uniform(n: int, base_color=(0.8, 0.8, 0.8), metallic=0.0, roughness=0.5, specular=0.5, clearcoat=0.0,
-                retroreflective=0.0) -> "BRDFParams":
+                retroreflective=0.0, flake=0.0) -> "BRDFParams":
         """N identical samples (handy for tests)."""
         return BRDFParams(
             base_color=np.tile(np.asarray(base_color, dtype=np.float64), (n, 1)),
@@ -69,6 +81,7 @@ class BRDFParams:
             specular=np.full(n, float(specular)),
             clearcoat=np.full(n, float(clearcoat)),
             retroreflective=np.full(n, float(retroreflective)) if retroreflective else None,
+            flake=np.full(n, float(flake)) if flake else None,
         )
 
     @cached_property
@@ -79,8 +92,9 @@ class BRDFParams:
     def take(self, index: np.ndarray) -> "BRDFParams":
         """The parameters of the samples ``index`` (any numpy index); derived arrays already computed are taken too."""
         retro = None if self.retroreflective is None else self.retroreflective[index]
+        flake = None if self.flake is None else self.flake[index]
         out = BRDFParams(*(getattr(self, f)[index] for f in ("base_color", "metallic", "roughness", "specular", "clearcoat")),
-                         retroreflective=retro)
+                         retroreflective=retro, flake=flake)
         for key in ("c_diff", "c_spec", "alpha", "lobe_probs", "c_retro"):
             if self.__dict__.get(key) is not None:
                 out.__dict__[key] = self.__dict__[key][index]
@@ -96,6 +110,18 @@ class BRDFParams:
     def c_diff(self) -> np.ndarray:
         """(N, 3) diffuse colour."""
         return (1.0 - self.metallic)[:, None] * self.base_color
+
+    @property
+    def has_flake(self) -> bool:
+        """Whether any sample has a flake lobe."""
+        return self.flake is not None and bool(np.any(self.flake > 0))
+
+    @cached_property
+    def c_lambert(self) -> np.ndarray:
+        """(N, 3) colour of the Lambertian lobe: the diffuse colour less the flakes' share (``c_diff`` without flakes)."""
+        if self.flake is None:
+            return self.c_diff
+        return (1.0 - np.clip(self.flake, 0.0, 1.0))[:, None] * self.c_diff
 
     @cached_property
     def c_spec(self) -> np.ndarray:
@@ -165,7 +191,10 @@ def eval_brdf(n: np.ndarray, v: np.ndarray, l: np.ndarray, params: BRDFParams) -
     f90 = np.clip(50.0 * c_spec[:, 1:2], 0.0, 1.0)  # UE4 (BRDF.ush): F0 < 2 % fades the Fresnel rim out
     F = c_spec + (f90 - c_spec) * fw
     spec = (ggx_d(n_h, params.alpha) * smith_g(n_l, n_v, params.roughness) / (4.0 * n_l * n_v))[:, None] * F
-    f = params.c_diff / np.pi + spec
+    if params.has_flake:
+        f = params.c_lambert / np.pi + spec + flake_lobe(n_h, n_l, n_v, params)
+    else:
+        f = params.c_diff / np.pi + spec
     cc = params.clearcoat
     if np.any(cc > 0):
         a_c = np.full_like(n_h, CLEARCOAT_ROUGHNESS**2)
@@ -174,6 +203,41 @@ def eval_brdf(n: np.ndarray, v: np.ndarray, l: np.ndarray, params: BRDFParams) -
         coat = ggx_d(n_h, a_c) * smith_g(n_l, n_v, r_c) / (4.0 * n_l * n_v) * F_c
         f = f * (1.0 - cc * F_c)[:, None] + (cc * coat)[:, None]
     return np.where(ok[:, None], f, 0.0)
+
+
+def flake_lobe(n_h: np.ndarray, n_l: np.ndarray, n_v: np.ndarray, params: BRDFParams) -> np.ndarray:
+    """The flake lobe (N, 3), 1/sr: ``k c_diff [D G / (4 n.l n.v) + f_ms]`` at :data:`FLAKE_ROUGHNESS` (module docstring).
+
+    ``n_h``, ``n_l``, ``n_v`` (N,) are the cosines (``n_l``, ``n_v`` clamped > 0 by the caller)."""
+    r_f = np.full_like(n_h, FLAKE_ROUGHNESS)
+    single = ggx_d(n_h, r_f * r_f) * smith_g(n_l, n_v, r_f) / (4.0 * n_l * n_v)
+    multi = (1.0 - flake_energy(n_v)) * (1.0 - flake_energy(n_l)) / (np.pi * (1.0 - _flake_energy_avg()))
+    return (np.clip(params.flake, 0.0, 1.0) * (single + multi))[:, None] * params.c_diff
+
+
+def flake_energy(n_dot_v: np.ndarray) -> np.ndarray:
+    """Directional albedo E (N,) of the white single-scattering flake lobe ``int D G / (4 n.l n.v) n.l dl``."""
+    x = np.asarray(n_dot_v, dtype=np.float64)
+    white = BRDFParams.uniform(len(x), base_color=(1.0, 1.0, 1.0), metallic=1.0, roughness=FLAKE_ROUGHNESS)
+    return specular_albedo(x, white)[:, 0]
+
+
+_FLAKE_E_AVG: float | None = None
+
+
+def _flake_energy_avg() -> float:
+    """``E_avg = 2 int E(mu) mu dmu`` of :func:`flake_energy` (cached)."""
+    global _FLAKE_E_AVG
+    if _FLAKE_E_AVG is None:
+        mu = (np.arange(256) + 0.5) / 256
+        _FLAKE_E_AVG = float(2.0 * np.mean(flake_energy(mu) * mu))
+    return _FLAKE_E_AVG
+
+
+def flake_pick_share(n_dot_v: np.ndarray, params: BRDFParams) -> np.ndarray:
+    """(N,) share of the diffuse lobe's BRDF samples that sample the flakes' GGX lobe: ``k E(n.v)`` (the rest,
+    cosine-distributed, covers the Lambertian part and the flakes' multiple scattering)."""
+    return np.clip(params.flake, 0.0, 1.0) * flake_energy(np.clip(n_dot_v, 0.0, 1.0))
 
 
 def retro_lobe(n: np.ndarray, v: np.ndarray, l: np.ndarray, params: BRDFParams) -> np.ndarray:
@@ -264,12 +328,19 @@ def lobe_probabilities(params: BRDFParams) -> np.ndarray:
 
 
 def sample_brdf(n: np.ndarray, v: np.ndarray, params: BRDFParams, u: np.ndarray) -> np.ndarray:
-    """Directions l (N, 3) drawn from the lobe mixture of :func:`lobe_probabilities`; u is (N, 3) uniform."""
+    """Directions l (N, 3) drawn from the lobe mixture of :func:`lobe_probabilities`; u is (N, 3) uniform.
+
+    With flakes, a share :func:`flake_pick_share` of the diffuse lobe's picks samples the flake lobe (GGX) instead.
+    """
     probs = params.lobe_probs
     pick = u[:, 0]
     diffuse = pick < probs[:, 0]
     coat = pick >= probs[:, 0] + probs[:, 1]
     alpha = np.where(coat, CLEARCOAT_ROUGHNESS**2, params.alpha)
+    if params.has_flake:
+        flake = diffuse & (pick < probs[:, 0] * flake_pick_share(_dot(n, v), params))
+        alpha = np.where(flake, FLAKE_ROUGHNESS**2, alpha)
+        diffuse = diffuse & ~flake
     frame = tangent_frame(n)
     h = sample_ggx_half(n, alpha, u[:, 1], u[:, 2], frame)
     l = reflect(v, h)
@@ -285,7 +356,12 @@ def brdf_pdf(n: np.ndarray, v: np.ndarray, l: np.ndarray, params: BRDFParams) ->
     """Solid-angle pdf (N,) of :func:`sample_brdf` producing ``l``."""
     probs = params.lobe_probs
     n_l = np.clip(_dot(n, l), 0.0, 1.0)
-    pdf = probs[:, 0] * n_l / np.pi + probs[:, 1] * ggx_reflection_pdf(n, v, l, params.alpha)
+    if params.has_flake:
+        q = flake_pick_share(_dot(n, v), params)
+        p_diff = (1.0 - q) * n_l / np.pi + q * ggx_reflection_pdf(n, v, l, np.full(len(n), FLAKE_ROUGHNESS**2))
+        pdf = probs[:, 0] * p_diff + probs[:, 1] * ggx_reflection_pdf(n, v, l, params.alpha)
+    else:
+        pdf = probs[:, 0] * n_l / np.pi + probs[:, 1] * ggx_reflection_pdf(n, v, l, params.alpha)
     if np.any(probs[:, 2] > 0):
         pdf = pdf + probs[:, 2] * ggx_reflection_pdf(n, v, l, np.full(len(n), CLEARCOAT_ROUGHNESS**2))
     return pdf

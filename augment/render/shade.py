@@ -7,6 +7,8 @@ For shading points (object frame) with their :class:`~streetaug.augment.render.s
       control variates: the unoccluded diffuse term and, for rough lobes, the specular albedo x cosine
       term are integrated exactly from the irradiance map, so only occlusion and the lobes' shape
       carry Monte Carlo noise.
+    + metallic flakes (:func:`~streetaug.augment.render.brdf.flake_lobe`, paints that have them): part of the
+      BRDF the environment's MIS samples see (its share of the diffuse lobe is left out of the control variate).
     + retro-reflection (:func:`~streetaug.augment.render.brdf.retro_lobe`, materials that have it): for
       the sun's samples, and in closed form for the environment seen from the viewer's direction.
 
@@ -180,7 +182,7 @@ def _shade_batch(ctx: ShadingContext, p: np.ndarray, n_s: np.ndarray, n_g: np.nd
     # Rough specular lobes are nearly cosine-shaped: their directional albedo x cos / pi is a good
     # control variate too (its exact expectation is again the irradiance); glossy lobes get none.
     spec_cv = specular_albedo(n_v, params) * spec_cv_weight(params.roughness)[:, None]
-    g_color = (params.c_diff + spec_cv) / np.pi * coat_keep[:, None]  # (N, 3)
+    g_color = (params.c_lambert + spec_cv) / np.pi * coat_keep[:, None]  # (N, 3); flakes: sampled, no variate
     if cv_scale is not None:
         g_color = g_color * cv_scale[:, None]
     smooth += g_color * lookup_irradiance(ctx.env.irradiance, n_s @ ctx.R_cam_from_obj.T)
