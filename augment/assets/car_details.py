@@ -2,23 +2,25 @@
 
 Everything is placed on the lofted body (:func:`~.car_body.body_part`, object frame before centring:
 x = L/2 - d, y left, z up, metres) by casting rays at the body mesh (:class:`BodySurface`), so parts sit
-on its real surface.  The grille and the lamps are recessed into the body: the vertices inside those
-regions move inwards (the shell stays closed); the lamps get a lens (the old surface, transparent and
-tinted) over a bright reflector (the recessed surface).
+on its real surface.  Grille and lamps are layered sheets following the body's curve: a near-black
+opening under slats; a dark bezel, a bright reflector and a transparent tinted lens over it.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from .car_body import (CHROME, HEADLIGHT, PAINT, REFLECTOR, TAILLIGHT, TRIM, BodySpec, _bumper_line, body_profiles,
-                       panel_gaps, section_half_width, side_window_edges)
-from .mesh_parts import MeshPart
+from .car_body import (CHROME, GAP, HEADLIGHT, PAINT, REFLECTOR, TAILLIGHT, TRIM, BodySpec, _bumper_line,
+                       body_profiles, panel_gaps, section_half_width, side_window_edges)
+from .mesh_parts import MeshPart, grid_faces
 from .number_plates import PlateStyle, plate_part
 from .revolve import box, ellipsoid, tube
 from .validate import face_normals, smooth_vertex_normals
 
 from ..core.raycast import RayScene
+
+
+LAMP_WRAP_M = 0.25  # how far a lamp may reach along the body from its end (m)
 
 
 class BodySurface:
@@ -43,54 +45,102 @@ def _part(V: np.ndarray, F: np.ndarray, fm: np.ndarray) -> MeshPart:
     return MeshPart(V, F, fm, smooth_vertex_normals(V, F))
 
 
-def recess_lamps_and_grille(body: MeshPart, spec: BodySpec) -> tuple[MeshPart, list[MeshPart]]:
-    """The body with its grille and lamp regions pushed in, plus the lamp lenses over the recesses.
+def paint_over_loft_lamps(body: MeshPart) -> MeshPart:
+    """The body with the loft's own (staircased) lamp faces painted: the lamps are :func:`lamp_parts`."""
+    fm = body.face_material.copy()
+    fm[(fm == HEADLIGHT) | (fm == TAILLIGHT)] = PAINT
+    return MeshPart(body.vertices, body.faces, fm, body.normals)
 
-    The grille (the dark front faces above the bumper line) recedes 3 cm, each lamp 2 cm; the lamp
-    faces become the ``REFLECTOR`` and a copy of their original surface the lens (``HEADLIGHT`` /
-    ``TAILLIGHT``, transparent).  Only vertices all of whose faces are in a region move.
-    """
-    V, F, fm = body.vertices.copy(), body.faces, body.face_material.copy()
+
+def _sheet(P: np.ndarray, mat: int, outward: np.ndarray) -> MeshPart:
+    """An open grid surface through points P (rows, cols, 3), faces turned towards ``outward`` (3,)."""
+    r, c = P.shape[:2]
+    V = P.reshape(-1, 3)
+    F = grid_faces(r, c, wrap_cols=False)
     fn, _ = face_normals(V, F)
-    cen = V[F].mean(axis=1)
-    x_front = spec.length / 2
-    grille = (fm == TRIM) & (cen[:, 0] > x_front - 0.45) & (fn[:, 0] > 0.25) & (cen[:, 2] > _bumper_line(spec))
-    lenses = []
-    for region, depth, axis_sign in ((grille, 0.03, -1.0), (fm == HEADLIGHT, 0.02, -1.0), (fm == TAILLIGHT, 0.02, 1.0)):
-        if not region.any():
-            continue
-        inside = np.ones(len(V), bool)
-        np.logical_and.at(inside, F[~region].ravel(), False)  # vertices touching a face outside the region
-        move = inside & np.isin(np.arange(len(V)), F[region].ravel())
-        if region is not grille:
-            lens_F = F[region]
-            keep = np.unique(lens_F)
-            remap = np.full(len(V), -1)
-            remap[keep] = np.arange(len(keep))
-            lens_V = V[keep].copy()
-            lens_V[:, 0] -= axis_sign * 0.002  # 2 mm proud: never coincident with an unmoved reflector face
-            lenses.append(_part(lens_V, remap[lens_F], fm[region]))
-            fm[region] = REFLECTOR
-        V[move, 0] += axis_sign * depth
-    return MeshPart(V, F, fm, smooth_vertex_normals(V, F)), lenses
+    if (fn @ outward).mean() < 0:
+        F = F[:, ::-1].copy()
+    return MeshPart(V, F, np.full(len(F), mat, dtype=np.int64), smooth_vertex_normals(V, F))
 
 
-def grille_slats(surface: BodySurface, spec: BodySpec, chrome: bool) -> list[MeshPart]:
-    """Horizontal slats across the (recessed) grille opening, on the body's front surface."""
+def lamp_parts(surface: BodySurface, spec: BodySpec) -> list[MeshPart]:
+    """Head and tail lamps: a dark bezel (4 mm out), a bright reflector sheet (8 mm) and a tinted
+    transparent lens (16 mm over the body) (``HEADLIGHT`` / ``TAILLIGHT``), both following the body's curve.
+
+    Outlines (y, z): heights over the bumper line / under the rear belt line (headlights slant up
+    towards the car's corners, tail lights are bands); across, from a fixed share of the width out
+    towards the corner, but never wrapping more than ``LAMP_WRAP_M`` along the side (no streaks).
+    """
+    W = spec.width
     zb = _bumper_line(spec)
-    top, _, _, belt = body_profiles(spec, np.array([0.05]))
-    z_hi = min(float(top[0]) - 0.05, zb + 0.45 * (spec.belt_front - zb))
-    hw = 0.21 * spec.width
-    ys = np.linspace(-hw, hw, 7)
+    zt = spec.belt_rear - (0.12 if spec.length - spec.d_rear > 0.35 else 0.05)  # under a boot lid's rounded edge
+    t_y = np.linspace(0.0, 1.0, 9)
+    t_z = np.linspace(0.0, 1.0, 6)
     parts = []
-    for z in np.linspace(zb + 0.035, z_hi - 0.02, 4):
-        pts = np.stack([np.full(7, spec.length), ys, np.full(7, z)], 1)
-        x = surface.hit(pts, np.array([-1.0, 0.0, 0.0]))
-        if np.isnan(x).any():
+    for rear in (False, True):
+        u = np.array([1.0, 0.0, 0.0]) if rear else np.array([-1.0, 0.0, 0.0])  # into the body
+        y0 = (0.24 if rear else 0.22) * W
+        for s in (1.0, -1.0):
+            for y1 in np.linspace(0.46, 0.30, 9) * W:  # shrink the outer end until the lamp stays at the end
+                ys = s * (y0 + (y1 - y0) * t_y)
+                if rear:
+                    z_lo, z_hi = np.full(9, zt - 0.15), np.full(9, zt)
+                else:
+                    z_lo = zb + 0.03 + 0.05 * t_y  # rising towards the corner
+                    z_hi = z_lo + 0.11 - 0.03 * t_y
+                Y = np.broadcast_to(ys[None, :], (6, 9))
+                Z = z_lo[None, :] + (z_hi - z_lo)[None, :] * t_z[:, None]
+                pts = np.stack([np.full(Y.shape, -u[0] * spec.length), Y, Z], -1).reshape(-1, 3)
+                x = surface.hit(pts, u, reach_m=0.0)
+                if not np.isnan(x).any() and np.ptp(x) <= LAMP_WRAP_M:
+                    break
+            else:
+                continue
+            base = np.stack([x, Y.ravel(), Z.ravel()], 1).reshape(6, 9, 3)
+            out = -u
+            parts.append(_sheet(_grown(base, 0.015) + 0.004 * out, TRIM, out))  # the dark bezel around the lamp
+            parts.append(_sheet(base + 0.008 * out, REFLECTOR, out))
+            parts.append(_sheet(base + 0.016 * out, TAILLIGHT if rear else HEADLIGHT, out))
+    return parts
+
+
+def _grown(P: np.ndarray, margin_m: float) -> np.ndarray:
+    """Grid points (rows, cols, 3) with the outer rows / columns moved ``margin_m`` further out in y-z."""
+    G = P.copy()
+    for axis, idx in ((0, 0), (0, -1), (1, 0), (1, -1)):
+        edge = np.take(P, idx, axis=axis)
+        inner = np.take(P, 1 if idx == 0 else -2, axis=axis)
+        step = edge - inner
+        step[..., 0] = 0.0
+        step /= np.maximum(np.linalg.norm(step, axis=-1, keepdims=True), 1e-12)
+        sl = [slice(None)] * 3
+        sl[axis] = idx
+        G[tuple(sl)] += margin_m * step
+    return G
+
+
+def grille_parts(surface: BodySurface, spec: BodySpec, chrome: bool) -> list[MeshPart]:
+    """The grille: a near-black opening on the nose between the headlights (a sheet 2 mm over the body)
+    with four horizontal slats 1.2 cm in front of it (chrome or black), both following the nose's curve."""
+    zb = _bumper_line(spec)
+    hw = 0.22 * spec.width
+    ys = np.linspace(-hw, hw, 9)
+    z0, z1 = zb + 0.02, zb + 0.14
+    Y, Z = np.meshgrid(ys, np.linspace(z0, z1, 4))
+    pts = np.stack([np.full(Y.size, spec.length), Y.ravel(), Z.ravel()], 1)
+    x = surface.hit(pts, np.array([-1.0, 0.0, 0.0]), reach_m=0.0)
+    if np.isnan(x).any():
+        return []
+    out = np.array([1.0, 0.0, 0.0])
+    base = np.stack([x, Y.ravel(), Z.ravel()], 1).reshape(Y.shape + (3,))
+    parts = [_sheet(base + 0.002 * out, GAP, out)]
+    for z in np.linspace(z0 + 0.02, z1 - 0.02, 4):
+        row = np.stack([np.full(9, spec.length), ys[None].ravel() * 0.97, np.full(9, z)], 1)
+        xr = surface.hit(row, np.array([-1.0, 0.0, 0.0]), reach_m=0.0)
+        if np.isnan(xr).any():
             continue
-        # At the opening's edges the surface is the paint around it: keep the slat inside the opening.
-        pts[:, 0] = x - 0.012
-        parts.append(tube(pts, 0.007, CHROME if chrome else TRIM, n_around=4))
+        row[:, 0] = xr + 0.012
+        parts.append(tube(row, 0.006, CHROME if chrome else TRIM, n_around=4))
     return parts
 
 
@@ -173,5 +223,5 @@ def plate_parts(surface: BodySurface, spec: BodySpec, style: PlateStyle, rng: np
     return parts
 
 
-__all__ = ["BodySurface", "door_handle_parts", "grille_slats", "mirror_parts", "plate_parts",
-           "recess_lamps_and_grille", "wiper_parts"]
+__all__ = ["BodySurface", "door_handle_parts", "grille_parts", "lamp_parts", "mirror_parts", "paint_over_loft_lamps",
+           "plate_parts", "wiper_parts"]

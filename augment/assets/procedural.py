@@ -23,8 +23,8 @@ import numpy as np
 
 from .asset import Asset, Material
 from .car_body import BODY_SPECS, BODY_WEIGHTS, N_SLOTS, BodySpec, body_part, jitter_spec
-from .car_details import (BodySurface, door_handle_parts, grille_slats, mirror_parts, plate_parts,
-                          recess_lamps_and_grille, wiper_parts)
+from .car_details import (BodySurface, door_handle_parts, grille_parts, lamp_parts, mirror_parts,
+                          paint_over_loft_lamps, plate_parts, wiper_parts)
 from .car_interior import interior_parts
 from .car_wheels import wheel_parts, wheel_well_parts
 from .mesh_parts import MeshPart, merge_parts
@@ -162,9 +162,10 @@ def _car_parts(spec: BodySpec, style: PlateStyle, looks: dict, rng: np.random.Ge
     """Every mesh part of the car by group: the body (a little narrower than ``spec.width`` so the
     mirrors fit in the box), lamp lenses, wheels and wells, exterior details, plates and the interior."""
     shell = dataclasses.replace(spec, width=spec.width - 2 * MIRROR_OUT_M)
-    body, lenses = recess_lamps_and_grille(body_part(shell), shell)
+    body = paint_over_loft_lamps(body_part(shell))
     surface = BodySurface(body)
-    exterior = (grille_slats(surface, shell, looks["chrome"]) + mirror_parts(shell, 0.5 * spec.width, looks["mirror_paint"])
+    lenses = lamp_parts(surface, shell)
+    exterior = (grille_parts(surface, shell, looks["chrome"]) + mirror_parts(shell, 0.5 * spec.width, looks["mirror_paint"])
                 + door_handle_parts(shell, looks["chrome"]) + wiper_parts(surface, shell, style.right_hand_drive))
     return {
         "body": [body], "lenses": lenses, "wheels": wheel_parts(shell) + wheel_well_parts(shell), "exterior": exterior,
@@ -222,7 +223,7 @@ def _materials(rng: np.random.Generator, detail_rng: np.random.Generator, paint:
         Material("tyre", base_color=np.array([0.02, 0.02, 0.02]), metallic=0.0, roughness=0.9, specular=0.3),
         Material("rim", base_color=np.array([0.12, 0.12, 0.13]) if rim_dark else np.array([0.62, 0.62, 0.64]),
                  metallic=1.0, roughness=0.3),
-        Material("headlight", base_color=np.array([0.80, 0.82, 0.84]), metallic=0.0, roughness=0.04, opacity=0.2,
+        Material("headlight", base_color=np.array([0.80, 0.82, 0.84]), metallic=0.0, roughness=0.04, opacity=0.3,
                  emission=np.array([0.03, 0.03, 0.03])),
         Material("taillight", base_color=np.array([0.50, 0.010, 0.015]), metallic=0.0, roughness=0.06, opacity=0.6),
         Material("glass_rear", base_color=rear_tint, metallic=0.0, roughness=0.05, specular=0.5,
@@ -237,7 +238,7 @@ def _materials(rng: np.random.Generator, detail_rng: np.random.Generator, paint:
         Material("interior", base_color=seat_rgb, roughness=0.85, specular=0.3),
         Material("dashboard", base_color=np.array([0.022, 0.022, 0.024]), roughness=0.7, specular=0.35),
         Material("chrome", base_color=np.array([0.80, 0.80, 0.82]), metallic=1.0, roughness=0.15),
-        Material("lamp_reflector", base_color=np.array([0.85, 0.85, 0.86]), metallic=1.0, roughness=0.18),
+        Material("lamp_reflector", base_color=np.array([0.85, 0.85, 0.86]), metallic=1.0, roughness=0.3),
         Material("brake_disc", base_color=brake_rgb, metallic=1.0, roughness=0.45),
     ]
     if len(mats) != N_SLOTS:

@@ -158,8 +158,9 @@ def test_tail_lights_face_backwards_only(cars):
         n, _ = face_normals(car.vertices, car.faces)
         tail = car.face_material == cb.TAILLIGHT
         assert tail.sum() >= 8, body
-        assert (np.abs(n[tail, 1]) < 0.85).all(), body
-        assert (car.vertices[car.faces[tail]].mean(axis=1)[:, 0] < -0.4 * car.wlh[1]).all(), body
+        assert np.median(np.abs(n[tail, 1])) < 0.7, body  # mostly facing back (the outer end may wrap a little)
+        x = car.vertices[car.faces[tail]].mean(axis=1)[:, 0]
+        assert x.max() - car.vertices[:, 0].min() < 0.3, body  # within 30 cm of the rear: no streak along the side
 
 
 def test_panel_gaps_and_details_exist(cars):
