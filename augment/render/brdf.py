@@ -205,6 +205,49 @@ def eval_brdf(n: np.ndarray, v: np.ndarray, l: np.ndarray, params: BRDFParams) -
     return np.where(ok[:, None], f, 0.0)
 
 
+def mirror_lobes(n: np.ndarray, v: np.ndarray, l: np.ndarray, params: BRDFParams, spec_weight: np.ndarray) -> np.ndarray:
+    """The near-mirror part of :func:`eval_brdf` (N, 3): the clear coat ``clearcoat x coat`` plus ``spec_weight``
+    (N,) x the base's GGX specular as attenuated by the coat (zero where ``n.l`` or ``n.v <= 0``).
+
+    Lobes this narrow reflect about one texel of any environment map: the shader uses them as a control
+    variate whose expectation is the map at the mirror direction (:func:`mirror_albedo`)."""
+    n_l = _dot(n, l)
+    n_v = _dot(n, v)
+    ok = (n_l > 1e-6) & (n_v > 1e-6)
+    n_l = np.clip(n_l, 1e-6, 1.0)
+    n_v = np.clip(n_v, 1e-6, 1.0)
+    h = v + l
+    h /= np.maximum(row_norm(h)[:, None], 1e-12)
+    n_h = np.clip(_dot(n, h), 0.0, 1.0)
+    fw = schlick_weight(np.clip(_dot(v, h), 0.0, 1.0))
+    cc = params.clearcoat
+    F_c = CLEARCOAT_F0 + (1.0 - CLEARCOAT_F0) * fw
+    out = np.zeros((len(n), 3))
+    if np.any(spec_weight > 0):
+        c_spec = params.c_spec
+        f90 = np.clip(50.0 * c_spec[:, 1:2], 0.0, 1.0)
+        F = c_spec + (f90 - c_spec) * fw[:, None]
+        spec = ggx_d(n_h, params.alpha) * smith_g(n_l, n_v, params.roughness) / (4.0 * n_l * n_v)
+        out += (spec_weight * spec * (1.0 - cc * F_c))[:, None] * F
+    if np.any(cc > 0):
+        a_c = np.full_like(n_h, CLEARCOAT_ROUGHNESS**2)
+        coat = ggx_d(n_h, a_c) * smith_g(n_l, n_v, np.full_like(n_h, CLEARCOAT_ROUGHNESS)) / (4.0 * n_l * n_v) * F_c
+        out += (cc * coat)[:, None]
+    return np.where(ok[:, None], out, 0.0)
+
+
+def mirror_albedo(n_dot_v: np.ndarray, params: BRDFParams, spec_weight: np.ndarray) -> np.ndarray:
+    """``int mirror_lobes cos dl`` (N, 3), the lobes taken as mirrors (Fresnel and masking at ``n.l = n.v``): the
+    coat's ``clearcoat F_c(n.v) G(n.v, n.v)`` plus ``spec_weight`` x the specular albedo x ``1 - clearcoat F_c(n.v)``."""
+    n_v = np.clip(np.asarray(n_dot_v, dtype=np.float64), 1e-6, 1.0)
+    F_c = CLEARCOAT_F0 + (1.0 - CLEARCOAT_F0) * schlick_weight(n_v)
+    G_c = smith_g(n_v, n_v, np.full_like(n_v, CLEARCOAT_ROUGHNESS))
+    out = (params.clearcoat * F_c * G_c)[:, None] * np.ones((1, 3))
+    if np.any(spec_weight > 0):
+        out = out + (spec_weight * (1.0 - params.clearcoat * F_c))[:, None] * specular_albedo(n_dot_v, params)
+    return out
+
+
 def flake_lobe(n_h: np.ndarray, n_l: np.ndarray, n_v: np.ndarray, params: BRDFParams) -> np.ndarray:
     """The flake lobe (N, 3), 1/sr: ``k c_diff [D G / (4 n.l n.v) + f_ms]`` at :data:`FLAKE_ROUGHNESS` (module docstring).
 

@@ -29,8 +29,8 @@ import numpy as np
 from ..core import camera_dir_to_lonlat, sample_equirect
 from ..lighting.light import DistantLight
 from .bounce import BounceLight
-from .brdf import (BRDFParams, brdf_pdf, eval_brdf, retro_env_factor, retro_lobe, sample_brdf, schlick_weight,
-                   specular_albedo)
+from .brdf import (BRDFParams, brdf_pdf, eval_brdf, mirror_albedo, mirror_lobes, reflect, retro_env_factor,
+                   retro_lobe, sample_brdf, schlick_weight, specular_albedo)
 from .environment import EnvironmentTables
 from .sampling import lookup_irradiance, sample_cone
 from .settings import RenderSettings
@@ -41,6 +41,7 @@ RAY_EPS_M = 1e-3  # ray origin offset along the geometric normal
 FIS_LEVEL_BIAS = 1  # filtered importance sampling one level sharper than the sample footprint (less blur bias)
 SHADE_CHUNK_RAYS = 300_000  # light-sample rays per batch: bounds memory, keeps Embree batches large
 SPEC_CV_ROUGHNESS = (0.5, 0.75)  # the specular control variate fades in between these roughnesses (measured)
+MIRROR_CV_ROUGHNESS = (0.1, 0.15)  # specular lobes below this roughness (glass, chrome) are mirrors for their variate
 
 
 def lookup_envmap(envmap: np.ndarray, dirs_cam: np.ndarray) -> np.ndarray:
@@ -59,6 +60,12 @@ def filtered_env_radiance(pyramid: list[np.ndarray], dirs_cam: np.ndarray, sampl
         sel = np.flatnonzero(level == lev)
         out[sel] = lookup_envmap(pyramid[lev], dirs_cam[sel])
     return out
+
+
+def mirror_cv_weight(roughness: np.ndarray) -> np.ndarray:
+    """Weight (N,) in [0, 1] of the mirror control variate for the base specular lobe (1 mirror-like, 0 glossy)."""
+    lo, hi = MIRROR_CV_ROUGHNESS
+    return np.clip((hi - np.asarray(roughness)) / (hi - lo), 0.0, 1.0)
 
 
 def spec_cv_weight(roughness: np.ndarray) -> np.ndarray:
@@ -188,9 +195,19 @@ def _shade_batch(ctx: ShadingContext, p: np.ndarray, n_s: np.ndarray, n_g: np.nd
     smooth += g_color * lookup_irradiance(ctx.env.irradiance, n_s @ ctx.R_cam_from_obj.T)
     if params.has_retro:  # the environment behind the viewer, returned by the retro lobe (closed form)
         smooth += retro_env_factor(n_s, v, params) * lookup_envmap(ctx.env.pyramid[0], v @ ctx.R_cam_from_obj.T)
+    # Near-mirror lobes (clear coat, glass, chrome) reflect about one texel of the map: a control variate
+    # of their unoccluded light whose expectation is the full-resolution map at the mirror direction, so
+    # their reflections are as sharp as the map and noise-free (not left to the denoiser) where unblocked.
+    mirror = None
+    w_m = mirror_cv_weight(params.roughness)
+    if np.any(params.clearcoat > 0) or np.any(w_m > 0):
+        scale_m = np.ones(N) if cv_scale is None else cv_scale
+        mirror = (w_m, scale_m)
+        r_cam = reflect(v, n_s) @ ctx.R_cam_from_obj.T
+        smooth += mirror_albedo(n_v, params, w_m) * scale_m[:, None] * lookup_envmap(ctx.env.pyramid[0], r_cam)
     for kind in ("env", "brdf"):
         if (ctx.settings.env_samples if kind == "env" else ctx.settings.brdf_samples) > 0:
-            samples.append(_env_samples(ctx, kind, p, n_s, n_g, v, params, g_color, noisy))
+            samples.append(_env_samples(ctx, kind, p, n_s, n_g, v, params, g_color, noisy, mirror))
     if samples:
         _trace_light_samples(ctx, samples, smooth, noisy)
     return smooth, noisy
@@ -216,11 +233,13 @@ def _sun_samples(ctx: ShadingContext, p: np.ndarray, n_s: np.ndarray, n_g: np.nd
 
 
 def _env_samples(ctx: ShadingContext, kind: str, p: np.ndarray, n_s: np.ndarray, n_g: np.ndarray, v: np.ndarray,
-                 params: BRDFParams, g_color: np.ndarray, noisy: np.ndarray) -> LightSamples:
+                 params: BRDFParams, g_color: np.ndarray, noisy: np.ndarray,
+                 mirror: tuple[np.ndarray, np.ndarray] | None = None) -> LightSamples:
     """Environment samples drawn from the map (``kind`` "env") or the BRDF ("brdf"), MIS-weighted.
 
     Samples under the geometric surface count as blocked by the surface itself (added to ``noisy``
-    in place, no ray traced); the others are returned for the visibility test.
+    in place, no ray traced); the others are returned for the visibility test.  ``mirror`` = (spec weight,
+    scale), each (N,): the near-mirror lobes' control variate (:func:`~.brdf.mirror_lobes`), or None.
     """
     s, R, rng = ctx.settings, ctx.R_cam_from_obj, ctx.rng
     n_e, n_b = s.env_samples, s.brdf_samples
@@ -250,6 +269,10 @@ def _env_samples(ctx: ShadingContext, kind: str, p: np.ndarray, n_s: np.ndarray,
     else:
         L = lookup_envmap(ctx.env.sampler_map, l_cam[live])  # the map the samples were drawn from
     cv = g_color[il] * cw[live, None] * L  # the control variate, MIS-weighted
+    if mirror is not None:
+        w_m, scale_m = mirror
+        f_m = mirror_lobes(nn[live], vv[live], l[live], pr.take(live), w_m[il])
+        cv = cv + f_m * (scale_m[il] * cw[live])[:, None] * L
     contrib = weight * L - cv
     down = np.flatnonzero(~up[live])
     if len(down):
