@@ -160,7 +160,8 @@ def _build(seed: int, body: str | None, paint: tuple | None, plate_style: str
 
 def _car_parts(spec: BodySpec, style: PlateStyle, looks: dict, rng: np.random.Generator) -> dict[str, list[MeshPart]]:
     """Every mesh part of the car by group: the body (a little narrower than ``spec.width`` so the
-    mirrors fit in the box), lamp lenses, wheels and wells, exterior details, plates and the interior."""
+    mirrors fit in the box), lamp lenses, wheels and wells, exterior details, plates and the interior.
+    The wheels keep ``spec.width``'s track: their outer faces stand about flush with the body's sides."""
     shell = dataclasses.replace(spec, width=spec.width - 2 * MIRROR_OUT_M)
     body = paint_over_loft_lamps(body_part(shell))
     surface = BodySurface(body)
@@ -168,7 +169,7 @@ def _car_parts(spec: BodySpec, style: PlateStyle, looks: dict, rng: np.random.Ge
     exterior = (grille_parts(surface, shell, looks["chrome"]) + mirror_parts(shell, 0.5 * spec.width, looks["mirror_paint"])
                 + door_handle_parts(shell, looks["chrome"]) + wiper_parts(surface, shell, style.right_hand_drive))
     return {
-        "body": [body], "lenses": lenses, "wheels": wheel_parts(shell) + wheel_well_parts(shell), "exterior": exterior,
+        "body": [body], "lenses": lenses, "wheels": wheel_parts(spec) + wheel_well_parts(shell), "exterior": exterior,
         "plates": plate_parts(surface, shell, style, rng), "interior": interior_parts(shell, style.right_hand_drive),
     }
 
