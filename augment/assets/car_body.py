@@ -308,7 +308,7 @@ def body_materials(spec: BodySpec, V: np.ndarray, tri_a: np.ndarray, tri_b: np.n
     outward = np.sign(np.einsum("ij,ij->i", n[:, 1:], np.stack([y, z - 0.7], 1)) + 1e-12)
     n = n * outward[:, None]
     d = spec.length / 2 - x
-    _, _, _, belt = body_profiles(spec, d)
+    _, _, half_w_d, belt = body_profiles(spec, d)
     ay = np.abs(y)
     c0 = tri_a[:, 0] % n_sec
     c1 = (c0 + 1) % n_sec
@@ -330,8 +330,11 @@ def body_materials(spec: BodySpec, V: np.ndarray, tri_a: np.ndarray, tri_b: np.n
     above_belt = kind >= 3
     windscreen = (above_belt & (n[:, 0] > 0.3) & (ay < full_hw - 0.13)
                   & (d > spec.d_ws - 0.02) & (d < spec.d_roof_front + 0.02))
-    rear = (above_belt & (n[:, 0] < -0.3) & (ay < full_hw - 0.16) & (d > spec.d_roof_back - 0.02)
-            & (z > belt + 0.04))
+    # The rear window: inside D / C pillars measured from the section's own (plan-rounded) half width,
+    # so it does not wrap round the rear corners.
+    local_hw = half_w_d * tumblehome_taper(spec, z, belt)
+    rear = (above_belt & (n[:, 0] < -0.3) & (ay < np.minimum(full_hw - 0.16, local_hw - 0.12))
+            & (d > spec.d_roof_back - 0.02) & (z > belt + 0.04))
     mat[side | windscreen] = GLASS
     # Behind the B pillar (rear doors, rear quarter) and the rear window: the (often tinted) rear glass.
     mat[(side & (d > spec.pillars[0])) | rear] = GLASS_REAR
