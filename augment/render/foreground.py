@@ -267,7 +267,7 @@ def _shade_hits(ctx: ShadingContext, surf: SurfaceHits, p: np.ndarray, v: np.nda
         pr = surf.params.take(fr)
         op = surf.opacity[fr]
         pr = BRDFParams(pr.base_color * op[:, None], pr.metallic, pr.roughness, pr.specular, pr.clearcoat,
-                        pr.retroreflective)
+                        pr.retroreflective, pr.flake)
         scale = None if ctx.bounce is None else ctx.bounce.face_sky_visibility(face[fr])
         smooth, noisy = shade(ctx, p[fr], surf.normal[fr], surf.geometric_normal[fr], v[fr], pr, scale)
         radiance[idx[fr], :3] += tp[fr] * (smooth + surf.emission[fr])

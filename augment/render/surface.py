@@ -38,6 +38,7 @@ class PreparedAsset:
         base_color, emission: (M, 3) float64; metallic, roughness, specular, opacity, clearcoat: (M,).
         mean_albedo: area-weighted mean diffuse-plus-specular albedo (luminance) of the surface.
         retroreflective: (M,) retro-reflective strength per material, or None when no material has any.
+        flake: (M,) metallic-flake share of the diffuse lobe per material, or None when no material has any.
     """
 
     asset: Asset
@@ -56,6 +57,7 @@ class PreparedAsset:
     emission: np.ndarray
     mean_albedo: float
     retroreflective: np.ndarray | None = None
+    flake: np.ndarray | None = None
 
     @property
     def materials(self) -> tuple[Material, ...]:
@@ -137,6 +139,7 @@ def _prepare(asset: Asset, backend: str) -> PreparedAsset:
     clearcoat = np.array([m.clearcoat for m in mats], dtype=np.float64)
     emission = np.array([np.asarray(m.emission, dtype=np.float64)[:3] for m in mats])
     retro = np.array([float(getattr(m, "retroreflective", 0.0)) for m in mats], dtype=np.float64)
+    flake = np.clip(np.array([float(getattr(m, "flake", 0.0)) for m in mats], dtype=np.float64), 0.0, 1.0)
     fm = np.asarray(asset.face_material, dtype=np.int64)[keep]
     base_lum = luminance(base)
     albedo = (1 - metallic) * base_lum + (1 - metallic) * 0.08 * specular + metallic * base_lum
@@ -158,6 +161,7 @@ def _prepare(asset: Asset, backend: str) -> PreparedAsset:
         emission=emission,
         mean_albedo=mean_albedo,
         retroreflective=retro if np.any(retro > 0) else None,
+        flake=flake if np.any(flake > 0) else None,
     )
 
 
@@ -238,8 +242,9 @@ def surface_at_hits(prep: PreparedAsset, face: np.ndarray, bary: np.ndarray, dir
         n_s[fix] += view[fix] * (0.02 - nv[fix])[:, None]
         n_s[fix] /= row_norm(n_s[fix])[:, None]
     retro = None if prep.retroreflective is None else prep.retroreflective[mid]
+    flake = None if prep.flake is None else prep.flake[mid]
     params = BRDFParams(base, np.clip(metallic, 0, 1), np.clip(rough, 0, 1), prep.specular[mid], prep.clearcoat[mid],
-                        retro)
+                        retro, flake)
     return SurfaceHits(n_s, n_g, front, mid, params, prep.opacity[mid], prep.emission[mid])
 
 
