@@ -175,8 +175,13 @@ def schlick_weight(v_dot_h: np.ndarray) -> np.ndarray:
     return np.exp2((-5.55473 * v_dot_h - 6.98316) * v_dot_h)
 
 
-def eval_brdf(n: np.ndarray, v: np.ndarray, l: np.ndarray, params: BRDFParams) -> np.ndarray:
-    """BRDF value f(v, l) (N, 3), zero where ``n.l <= 0`` or ``n.v <= 0``."""
+def eval_brdf(n: np.ndarray, v: np.ndarray, l: np.ndarray, params: BRDFParams,
+              mirror_spec_weight: np.ndarray | None = None) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
+    """BRDF value f(v, l) (N, 3), zero where ``n.l <= 0`` or ``n.v <= 0``.
+
+    With ``mirror_spec_weight`` (N,), returns ``(f, f_mirror)``: also its near-mirror part, the clear coat
+    plus that weight x the base's specular as the coat attenuates it (:func:`mirror_lobes`, computed once here).
+    """
     n_l = _dot(n, l)
     n_v = _dot(n, v)
     ok = (n_l > 1e-6) & (n_v > 1e-6)
@@ -195,6 +200,7 @@ def eval_brdf(n: np.ndarray, v: np.ndarray, l: np.ndarray, params: BRDFParams) -
         f = params.c_lambert / np.pi + spec + flake_lobe(n_h, n_l, n_v, params)
     else:
         f = params.c_diff / np.pi + spec
+    f_m = None if mirror_spec_weight is None else mirror_spec_weight[:, None] * spec
     cc = params.clearcoat
     if np.any(cc > 0):
         a_c = np.full_like(n_h, CLEARCOAT_ROUGHNESS**2)
@@ -202,7 +208,11 @@ def eval_brdf(n: np.ndarray, v: np.ndarray, l: np.ndarray, params: BRDFParams) -
         F_c = CLEARCOAT_F0 + (1.0 - CLEARCOAT_F0) * fw[:, 0]
         coat = ggx_d(n_h, a_c) * smith_g(n_l, n_v, r_c) / (4.0 * n_l * n_v) * F_c
         f = f * (1.0 - cc * F_c)[:, None] + (cc * coat)[:, None]
-    return np.where(ok[:, None], f, 0.0)
+        if f_m is not None:
+            f_m = f_m * (1.0 - cc * F_c)[:, None] + (cc * coat)[:, None]
+    if f_m is None:
+        return np.where(ok[:, None], f, 0.0)
+    return np.where(ok[:, None], f, 0.0), np.where(ok[:, None], f_m, 0.0)
 
 
 def mirror_lobes(n: np.ndarray, v: np.ndarray, l: np.ndarray, params: BRDFParams, spec_weight: np.ndarray) -> np.ndarray:
@@ -211,29 +221,7 @@ def mirror_lobes(n: np.ndarray, v: np.ndarray, l: np.ndarray, params: BRDFParams
 
     Lobes this narrow reflect about one texel of any environment map: the shader uses them as a control
     variate whose expectation is the map at the mirror direction (:func:`mirror_albedo`)."""
-    n_l = _dot(n, l)
-    n_v = _dot(n, v)
-    ok = (n_l > 1e-6) & (n_v > 1e-6)
-    n_l = np.clip(n_l, 1e-6, 1.0)
-    n_v = np.clip(n_v, 1e-6, 1.0)
-    h = v + l
-    h /= np.maximum(row_norm(h)[:, None], 1e-12)
-    n_h = np.clip(_dot(n, h), 0.0, 1.0)
-    fw = schlick_weight(np.clip(_dot(v, h), 0.0, 1.0))
-    cc = params.clearcoat
-    F_c = CLEARCOAT_F0 + (1.0 - CLEARCOAT_F0) * fw
-    out = np.zeros((len(n), 3))
-    if np.any(spec_weight > 0):
-        c_spec = params.c_spec
-        f90 = np.clip(50.0 * c_spec[:, 1:2], 0.0, 1.0)
-        F = c_spec + (f90 - c_spec) * fw[:, None]
-        spec = ggx_d(n_h, params.alpha) * smith_g(n_l, n_v, params.roughness) / (4.0 * n_l * n_v)
-        out += (spec_weight * spec * (1.0 - cc * F_c))[:, None] * F
-    if np.any(cc > 0):
-        a_c = np.full_like(n_h, CLEARCOAT_ROUGHNESS**2)
-        coat = ggx_d(n_h, a_c) * smith_g(n_l, n_v, np.full_like(n_h, CLEARCOAT_ROUGHNESS)) / (4.0 * n_l * n_v) * F_c
-        out += (cc * coat)[:, None]
-    return np.where(ok[:, None], out, 0.0)
+    return eval_brdf(n, v, l, params, np.asarray(spec_weight, dtype=np.float64))[1]
 
 
 def mirror_albedo(n_dot_v: np.ndarray, params: BRDFParams, spec_weight: np.ndarray) -> np.ndarray:

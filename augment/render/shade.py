@@ -29,8 +29,8 @@ import numpy as np
 from ..core import camera_dir_to_lonlat, sample_equirect
 from ..lighting.light import DistantLight
 from .bounce import BounceLight
-from .brdf import (BRDFParams, brdf_pdf, eval_brdf, mirror_albedo, mirror_lobes, reflect, retro_env_factor,
-                   retro_lobe, sample_brdf, schlick_weight, specular_albedo)
+from .brdf import (BRDFParams, brdf_pdf, eval_brdf, mirror_albedo, reflect, retro_env_factor, retro_lobe,
+                   sample_brdf, schlick_weight, specular_albedo)
 from .environment import EnvironmentTables
 from .sampling import lookup_irradiance, sample_cone
 from .settings import RenderSettings
@@ -263,15 +263,18 @@ def _env_samples(ctx: ShadingContext, kind: str, p: np.ndarray, n_s: np.ndarray,
     cw = cos * w  # cos / (n p) x MIS weight
     live = np.flatnonzero(cw > 0)
     il = idx[live]
-    weight = eval_brdf(nn[live], vv[live], l[live], pr.take(live)) * cw[live, None]
+    if mirror is None:
+        weight = eval_brdf(nn[live], vv[live], l[live], pr.take(live)) * cw[live, None]
+    else:
+        w_m, scale_m = mirror
+        f, f_m = eval_brdf(nn[live], vv[live], l[live], pr.take(live), w_m[il])
+        weight = f * cw[live, None]
     if kind == "brdf":  # filtered importance sampling: a sample of a wide lobe sees a blurred sky
         L = filtered_env_radiance(ctx.env.pyramid, l_cam[live], 1.0 / np.maximum(n_b * p_brdf[live], 1e-12))
     else:
         L = lookup_envmap(ctx.env.sampler_map, l_cam[live])  # the map the samples were drawn from
     cv = g_color[il] * cw[live, None] * L  # the control variate, MIS-weighted
     if mirror is not None:
-        w_m, scale_m = mirror
-        f_m = mirror_lobes(nn[live], vv[live], l[live], pr.take(live), w_m[il])
         cv = cv + f_m * (scale_m[il] * cw[live])[:, None] * L
     contrib = weight * L - cv
     down = np.flatnonzero(~up[live])
