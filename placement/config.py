@@ -45,6 +45,9 @@ class PlacementConfig:
         ground_max_offset_m, ground_max_offset_per_m: fitted planes whose height differs from the ego's
             ground plane by more than ``offset_m + offset_per_m * distance from the ego`` are rejected
             (10 % grade by default: a road does not climb faster).
+        ground_box_radius_m, ground_box_tolerance_m: annotated objects standing within this radius of a
+            placement give the ground's height there when the LiDAR fit is further than the tolerance from
+            theirs (their median height above the ego's ground plane).
         grid_resolution_m: cell size of bird's-eye drivable grids built from LiDAR.
         closing_radius_m: morphological closing radius applied to those grids.
         ray_fill_max_gap_m: along one azimuth, two consecutive drivable points closer than this fill the
@@ -85,6 +88,8 @@ class PlacementConfig:
     ground_max_tilt_deg: float = 12.0
     ground_max_offset_m: float = 0.5
     ground_max_offset_per_m: float = 0.1
+    ground_box_radius_m: float = 15.0
+    ground_box_tolerance_m: float = 0.35
     grid_resolution_m: float = 0.25
     closing_radius_m: float = 0.75
     ray_fill_max_gap_m: float = 15.0

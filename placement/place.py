@@ -94,7 +94,7 @@ class Placement:
         box: nuScenes :class:`Box` in the global frame (centre = bottom centre + h/2 along the object's up).
         wlh: (3,) float64 width, length, height in metres.
         ground_normal_global: (3,) unit normal of the local ground (global frame).
-        ground_source: ``"lidarseg"``, ``"lidar-plane"`` or ``"ego-plane"``.
+        ground_source: ``"lidarseg"``, ``"lidar-plane"``, ``"boxes"`` or ``"ego-plane"`` (:class:`~.ground.GroundPlane`).
         drivable_source: ``"map"``, ``"lidarseg"`` or ``"lidar-ground"``.
         drivable_confidence: ``"high"``, ``"medium"`` or ``"low"``.
         attribute: ``"vehicle.parked"`` when the footprint is within ``kerb_distance_m`` of the drivable

@@ -82,6 +82,15 @@ def box_footprints(boxes: Sequence[Box]) -> np.ndarray:
     return np.stack([b.corners()[[0, 1, 5, 4], :2] for b in boxes])
 
 
+def box_bottoms(boxes: Sequence[Box]) -> np.ndarray:
+    """Bottom centres (B, 3) of nuScenes :class:`Box` objects (global frame): the centre less half the
+    height along each box's own up axis (where the object stands on the ground)."""
+    if len(boxes) == 0:
+        return np.zeros((0, 3))
+    return np.stack([np.asarray(b.center, np.float64) - 0.5 * float(b.wlh[2]) * b.T_global_from_box[:3, 2]
+                     for b in boxes])
+
+
 def points_in_box(points_global: np.ndarray, box: Box, margin_m: float = 0.0) -> np.ndarray:
     """(P,) bool: whether each point (P, 3) lies inside the box grown by ``margin_m``, boundary included
     (a nuScenes ``num_lidar_pts`` count with ``margin_m`` 0)."""

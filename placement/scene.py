@@ -20,7 +20,7 @@ from streetaug.datasets.sample import CameraView, Sample
 from .config import PlacementConfig
 from .drivable import DrivableArea
 from .ground import LocalGroundFitter
-from .rules import box_footprints, points_in_boxes
+from .rules import box_bottoms, box_footprints, points_in_boxes
 from .zones import SurfaceZones, surface_zones
 
 
@@ -80,7 +80,8 @@ class PlacementScene:
                 non_drivable_xy = points[non_drivable][:, :2]
                 non_ground_xy = points[non_drivable & ~np.isin(lidar.labels, LIDARSEG_GROUND)][:, :2]
                 labels = lidar.labels[free]
-        fitter = LocalGroundFitter(obstacles if lidar is not None else None, view.T_global_from_ego, labels, config)
+        fitter = LocalGroundFitter(obstacles if lidar is not None else None, view.T_global_from_ego, labels, config,
+                                   box_bottoms(boxes))
         return cls(sample, view, config, drivable, box_footprints(boxes), box_dyn, obstacles, non_drivable_xy,
                    fitter, depth_m, non_ground_xy)
 

@@ -167,7 +167,7 @@ class Track:
         timestamps_us: (K,) int64 their timestamps.
         T_global_from_object: (K, 4, 4) object frame (x front, y left, z up, origin bottom centre) -> global.
         velocity_global: (K, 3) float64 the trajectory's velocity (m/s) at each keyframe.
-        ground_source: (K,) the ground each pose stands on (``"lidar-plane"``, ``"lidarseg"``, ``"ego-plane"``).
+        ground_source: (K,) the ground each pose stands on (``"lidar-plane"``, ``"lidarseg"``, ``"boxes"``, ``"ego-plane"``).
         drivable_source, drivable_confidence: the drivable area's source at the anchor keyframe.
         anchor_sample_token, anchor_camera: where it was sampled (it is in that camera's view there).
         detection_class, zone: the class whose rule placed it and the surface it stands on.

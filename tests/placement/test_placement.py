@@ -186,6 +186,36 @@ def test_ground_fit_rejects_a_canopy_far_above_the_road(height_m, source):
     assert plane.point_global[2] == pytest.approx(5.0 + (height_m if source == "lidar-plane" else 0.0), abs=0.01)
 
 
+def test_annotated_objects_correct_a_hedge_mistaken_for_the_ground():
+    """Far away only a 1.1 m high layer (a hedge top; the road hidden behind parked cars) is in the LiDAR:
+    the fit accepts it (within 0.5 m + 10 % of 30 m), but annotated cars standing 6 m away on the road
+    (z = 0.1 above the ego's road) give the height; without them, or far from them, the fit stands; an
+    annotated height within the tolerance leaves the LiDAR plane (with its tilt) alone."""
+    pts = ground_grid_ego(0.5, x_range=(26.0, 34.0), y_half=4.0)
+    pts[:, 2] = 1.1
+    pg = transform_points(T_GLOBAL_FROM_EGO, pts)
+    xy = ego_to_global_xy([[30.0, 0.0]])[0]
+    bottoms = transform_points(T_GLOBAL_FROM_EGO, np.array([[30.0, 6.0, 0.1], [33.0, 6.5, 0.12], [27.0, -6.0, 0.05]]))
+    plane = LocalGroundFitter(pg, T_GLOBAL_FROM_EGO, None, CFG).fit(xy)
+    assert plane.source == "lidar-plane" and plane.point_global[2] == pytest.approx(5.0 + 1.1, abs=0.01)
+    checked = LocalGroundFitter(pg, T_GLOBAL_FROM_EGO, None, CFG, bottoms).fit(xy)
+    assert checked.source == "boxes" and checked.n_points == 3
+    assert checked.point_global[2] == pytest.approx(5.0 + 0.1, abs=1e-9)  # their median height
+    far = transform_points(T_GLOBAL_FROM_EGO, np.array([[30.0, 25.0, 0.1]]))  # 25 m away: no say
+    assert LocalGroundFitter(pg, T_GLOBAL_FROM_EGO, None, CFG, far).fit(xy).source == "lidar-plane"
+    agree = transform_points(T_GLOBAL_FROM_EGO, np.array([[30.0, 6.0, 0.9]]))  # 0.2 m from the fit: kept
+    assert LocalGroundFitter(pg, T_GLOBAL_FROM_EGO, None, CFG, agree).fit(xy).source == "lidar-plane"
+
+
+def test_box_bottoms_stand_under_the_centres():
+    from streetaug.datasets.sample import Box
+    from streetaug.placement.rules import box_bottoms
+
+    box = Box(np.array([10.0, 2.0, 1.3]), np.array([1.8, 4.5, 1.6]), np.array([1.0, 0, 0, 0]), "vehicle.car")
+    np.testing.assert_allclose(box_bottoms([box]), [[10.0, 2.0, 0.5]])
+    assert box_bottoms([]).shape == (0, 3)
+
+
 # ---------------------------------------------------------------------- rules, both sides of each threshold
 
 
