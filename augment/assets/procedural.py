@@ -208,7 +208,9 @@ def _materials(rng: np.random.Generator, detail_rng: np.random.Generator, paint:
     front_tint = np.array([0.40, 0.47, 0.45]) * d.uniform(0.92, 1.08)
     privacy = d.random() < (0.6 if body in ("suv", "van") else 0.2)
     rear_tint = np.array([0.055, 0.065, 0.065]) * d.uniform(0.8, 1.3) if privacy else front_tint
-    flake = float(np.clip(1.3 * metallic, 0.0, 1.0)) if metallic >= 0.2 else 0.0
+    # The flakes share the base layer with the metallic lobe: half the metallic weight (more made the paint
+    # blotchy: the flake lobe is glossy, sampled by Monte Carlo, and the denoiser leaves mottling at 1 spp).
+    flake = float(np.clip(0.5 * metallic, 0.0, 1.0)) if metallic >= 0.2 else 0.0
     dirt = float(d.uniform(0.0, 1.0)) ** 2
     lower = np.clip(color * (1.0 - 0.18 * dirt) + dirt * 0.02 * np.array([0.9, 0.8, 0.6]), 0.0, 1.0)
     chrome = bool(d.random() < 0.3)

@@ -191,7 +191,7 @@ def test_paint_layers():
     for seed in range(16):
         car = procedural_car(seed)
         paint, lower = car.materials[cb.PAINT], car.materials[cb.PAINT_LOWER]
-        assert paint.flake == (pytest.approx(min(1.3 * paint.metallic, 1.0)) if paint.metallic >= 0.2 else 0.0)
+        assert paint.flake == (pytest.approx(0.5 * paint.metallic) if paint.metallic >= 0.2 else 0.0)
         assert lower.roughness >= paint.roughness  # dirt: rougher, a little darker (or dustier on dark paint)
         assert (np.abs(lower.base_color - paint.base_color) <= 0.2 * paint.base_color + 0.02).all()
         flakes.append(paint.flake)
