@@ -22,7 +22,7 @@ from .surface import box_corners_object
 
 SKY_RADIUS_PER_HEIGHT = 2.0  # sky occlusion beyond ~2 object heights is below a few per cent
 SKY_RADIUS_PAD_M = 0.3
-SKY_FADE_START = 0.6  # the sky occlusion fades out from this fraction of the sky radius to the radius
+SKY_FADE_START = 0.85  # the sky occlusion fades out from this fraction of the sky radius to the radius
 SUN_FADE_START = 0.6  # sun shadows fade out from this fraction of ``shadow_max_length_m`` to all of it
 OBJECT_BOX_PAD_PX = 2
 

@@ -170,7 +170,7 @@ class SkyOcclusion:
     Attributes:
         uv: (C, 2) float64 pixel positions of the coarse cells (every ``shadow_factor`` pixels).
         valid: (C,) bool cells with a ground point.
-        D0, C: (C, 3) float64 per-cell sky deficit ``D0 - C S_foot`` (irradiance units).
+        D0, C: (C, 3) float64 per-cell sky deficit ``D0 - C S_foot`` (irradiance units), before the fade to the sky radius.
         deficit, bounce_gain: (h, w, 3) float32 ``D0 / E`` and ``C / E`` over the box, upsampled and
             refined at full resolution where the occlusion changes fast.
     """
@@ -200,7 +200,8 @@ def _sky_occlusion(geo: "_Ground", box: PixelBox, light: DistantLight, prep: Pre
     cells = np.flatnonzero(valid)
     for a in range(0, len(cells), chunk):
         sel = cells[a : a + chunk]
-        D0[sel], C[sel] = _sky_deficit(p_obj[sel], geo.n_obj, light, prep, bounce, settings.shadow_sky_dirs, geo.R, rng, stats)
+        D0[sel], C[sel] = _sky_deficit(p_obj[sel], geo.n_obj, light, prep, bounce, settings.shadow_sky_dirs, geo.R, rng,
+                                       stats, fade=False)
     stats["grid"] = [int(hl), int(wl)]
     stats["pixels"] = int(valid.sum())
 
@@ -211,6 +212,15 @@ def _sky_occlusion(geo: "_Ground", box: PixelBox, light: DistantLight, prep: Pre
         return cv2.resize(low, (wl * f, hl * f), interpolation=cv2.INTER_LINEAR)[:h, :w]
 
     sky_def, bounce_gain = upsample(D0), upsample(C)
+    # The fade to the sky radius at full resolution, from the cells' distances interpolated (not blurred):
+    # the blurred, upsampled deficit ends inside the box instead of bleeding to its edge.
+    lo, hi = prep.asset.vertices.min(axis=0), prep.asset.vertices.max(axis=0)
+    radius = sky_radius_m(hi[2])
+    dist = np.where(valid, _footprint_distance(p_obj, lo, hi), 2.0 * radius).reshape(hl, wl).astype(np.float32)
+    dist_px = cv2.resize(dist, (wl * f, hl * f), interpolation=cv2.INTER_LINEAR)[:h, :w]
+    fade = fade_weight(dist_px, radius, SKY_FADE_START).astype(np.float32)[..., None]
+    sky_def *= fade
+    bounce_gain *= fade
     if f > 1:
         low = np.where(valid, luminance(D0 / E_safe), 0.0).reshape(hl, wl).astype(np.float32)
         _refine_sky_edges(geo, box, low, light, prep, bounce, settings, rng, stats, E_safe, sky_def, bounce_gain)
@@ -318,7 +328,7 @@ CONTACT_BAND_M = 0.1  # ground this close to a contact gets full-resolution sky 
 CONTACT_MAX_POINTS = 256
 GROUND_SNAP_M = 0.25  # depth-map points this close to the object's ground plane are taken on it ...
 GROUND_SNAP_END_M = 0.5  # ... and from this far on as the depth map says (smoothstep between)
-REFINE_RANGE_SIGMA = 0.06  # deficit difference (fraction of E) the refined band's smoothing does not cross
+REFINE_RANGE_SIGMA = 0.12  # deficit difference (fraction of E) the refined band's smoothing does not cross
 SKY_REFINE_JUMP = 0.08  # sky-occlusion change (fraction of E) between neighbouring cells that asks for full resolution
 
 
@@ -380,16 +390,24 @@ class _Ground:
         return valid & np.all((p[:, :2] >= lo[:2]) & (p[:, :2] <= hi[:2]), axis=1)
 
 
+def _footprint_distance(p_obj: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """(N,) horizontal distance (m) of object-frame points (N, 3) from the footprint box [lo, hi] (x, y); 0 under it."""
+    gap = np.maximum(np.maximum(lo[None, :2] - p_obj[:, :2], p_obj[:, :2] - hi[None, :2]), 0.0)
+    return np.sqrt((gap * gap).sum(axis=1))
+
+
 def _sky_deficit(p_obj: np.ndarray, n_obj: np.ndarray, light: DistantLight, prep: PreparedAsset, bounce: BounceLight,
-                 n_dirs: int, R: np.ndarray, rng: np.random.Generator, stats: dict) -> tuple[np.ndarray, np.ndarray]:
+                 n_dirs: int, R: np.ndarray, rng: np.random.Generator, stats: dict,
+                 fade: bool = True) -> tuple[np.ndarray, np.ndarray]:
     """Sky light the object takes from ground points p_obj (P, 3): (D0, C), each (P, 3), the deficit being
     ``D0 - C S_foot`` (irradiance units).  ``n_obj`` (3,) is the ground normal, ``R`` (3, 3) object -> camera.
 
     Only directions towards the object can be blocked: each point samples ``n_dirs`` directions
     uniformly (a randomly rotated Fibonacci spiral) in the cone around the object's bounding sphere,
     or in the whole upper hemisphere when it is inside the sphere; a direction stands for
-    ``cone solid angle / n_dirs`` and counts with its cosine to the ground normal.  The deficit fades
-    to 0 at the sky radius (:func:`~.footprint.sky_radius_m`) from the footprint box, where the pixel box ends.
+    ``cone solid angle / n_dirs`` and counts with its cosine to the ground normal.  With ``fade`` the
+    deficit fades to 0 at the sky radius (:func:`~.footprint.sky_radius_m`) from the footprint box, where
+    the pixel box ends (the coarse cells are faded after upsampling instead, :func:`_sky_occlusion`).
     """
     P = len(p_obj)
     org = p_obj + RAY_EPS_M * n_obj
@@ -431,10 +449,11 @@ def _sky_deficit(p_obj: np.ndarray, n_obj: np.ndarray, light: DistantLight, prep
     for k in range(3):
         D0[:, k] = np.bincount(pix, weights=(L[:, k] - A[:, k]) * wgt, minlength=P)
         C[:, k] = np.bincount(pix, weights=B[:, k] * wgt, minlength=P)
+    if not fade:
+        return D0, C
     # Truncated at the sky radius of the shadow's pixel box, smoothly (no step at the box's edge).
-    gap = np.maximum(np.maximum(lo[None, :2] - p_obj[:, :2], p_obj[:, :2] - hi[None, :2]), 0.0)
-    fade = fade_weight(np.sqrt((gap * gap).sum(axis=1)), sky_radius_m(hi[2]), SKY_FADE_START)[:, None]
-    return D0 * fade, C * fade
+    w = fade_weight(_footprint_distance(p_obj, lo, hi), sky_radius_m(hi[2]), SKY_FADE_START)[:, None]
+    return D0 * w, C * w
 
 
 def _sun_polygon_mask(geo: _Ground, box: PixelBox, light: DistantLight, prep: PreparedAsset) -> np.ndarray | None:
