@@ -253,15 +253,19 @@ def analyse(args, cache: Path, commit: str, render_s: float) -> dict:
     chosen = np.concatenate([real_idx[pick_r], ins_idx[pick_i]])
     feats = [crop_features(crops[i]) for i in chosen]
     X = np.stack([crop_descriptor(crops[i], f) for i, f in zip(chosen, feats)])
+    X_car = np.stack([crop_descriptor(crops[i], f, car_only=True) for i, f in zip(chosen, feats)])
     y = labels[chosen]
     n_hog = X.shape[1] - 24 - len(FEATURE_NAMES)
-    parts = {"all": slice(None), "hog": slice(0, n_hog), "lab_histogram": slice(n_hog, n_hog + 24),
-             "scalar_features": slice(n_hog + 24, None)}
+    # "car_only": the HOG of the box's hull alone (real cars are mostly parked on verges, inserted ones on
+    # the road: the surroundings alone tell them apart)
+    parts = {"all": (X, slice(None)), "hog": (X, slice(0, n_hog)), "lab_histogram": (X, slice(n_hog, n_hog + 24)),
+             "scalar_features": (X, slice(n_hog + 24, None)), "all_car_only": (X_car, slice(None)),
+             "hog_car_only": (X_car, slice(0, n_hog))}
     classifier = {}
-    for name, cols in parts.items():
-        by_keyframe = classifier_accuracy(X[:, cols], y, keyframes[chosen], seed=args.seed)
-        seeds = [classifier_accuracy(X[:, cols], y, keyframes[chosen], seed=s)["accuracy_mean"] for s in range(5)]
-        by_image = classifier_accuracy(X[:, cols], y, images[chosen], seed=args.seed)
+    for name, (D, cols) in parts.items():
+        by_keyframe = classifier_accuracy(D[:, cols], y, keyframes[chosen], seed=args.seed)
+        seeds = [classifier_accuracy(D[:, cols], y, keyframes[chosen], seed=s)["accuracy_mean"] for s in range(5)]
+        by_image = classifier_accuracy(D[:, cols], y, images[chosen], seed=args.seed)
         classifier[name] = {"grouped_by_keyframe": by_keyframe, "grouped_by_image": by_image,
                             "mean_over_5_fold_seeds": float(np.mean(seeds)), "std_over_5_fold_seeds": float(np.std(seeds))}
     n = len(pick_r)

@@ -259,11 +259,16 @@ _HOG = cv2.HOGDescriptor((64, 64), (16, 16), (8, 8), (8, 8), 9)
 
 
 def crop_descriptor(crop: CarCrop, features: dict[str, float] | None = None, size: int = 64,
-                    bins: int = 8) -> np.ndarray:
+                    bins: int = 8, car_only: bool = False) -> np.ndarray:
     """(D,) float32 fixed-length descriptor of a crop resized to ``size`` x ``size``: HOG of luma (1764
     values for 64 px), a normalised ``bins``-per-channel CIELAB histogram inside the hull (3 * bins) and the
-    scalar features (NaN kept: the classifier imputes)."""
-    rgb = cv2.resize(crop.rgb, (size, size), interpolation=cv2.INTER_AREA)
+    scalar features (NaN kept: the classifier imputes).  ``car_only``: the HOG sees the box's hull only
+    (the pixels outside it set to the hull's mean colour), so the surroundings (a parked car's verge
+    against an inserted car's road) do not tell the two apart."""
+    rgb = crop.rgb
+    if car_only and crop.car_mask.any():
+        rgb = np.where(crop.car_mask[..., None], rgb, rgb[crop.car_mask].mean(axis=0)).astype(np.uint8)
+    rgb = cv2.resize(rgb, (size, size), interpolation=cv2.INTER_AREA)
     y = np.clip(luma(rgb), 0, 255).astype(np.uint8)
     hog = _HOG.compute(y).ravel() if size == 64 else cv2.HOGDescriptor((size, size), (16, 16), (8, 8), (8, 8),
                                                                        9).compute(y).ravel()

@@ -176,3 +176,24 @@ def test_box_rect_keeps_only_the_corners_in_front_of_the_camera():
     np.testing.assert_allclose(rect, [uv[:, 0].min(), uv[:, 1].min(), uv[:, 0].max(), uv[:, 1].max()])
     T[:3, 3] = [0.0, 0.0, -10.0]  # wholly behind
     assert np.isnan(box_rect_px(K, T, np.array([1.0, 1.0, 4.0]))).all()
+
+
+def test_car_only_descriptor_ignores_the_surroundings():
+    T = np.eye(4)
+    T[:3, 3] = [0.0, 0.5, 12.0]
+    rng = np.random.default_rng(0)
+    image = np.full((H, W, 3), 120, np.uint8)
+    other = image.copy()
+    other[:, :] = rng.integers(0, 255, (H, W, 3))  # busy surroundings
+    crop_a = extract_crop(image, K, T, WLH)
+    inside = crop_a.car_mask
+    other_crop = extract_crop(other, K, T, WLH)
+    rgb = np.where(inside[..., None], crop_a.rgb, other_crop.rgb).astype(np.uint8)  # same car, other background
+    crop_b = CarCrop(rgb, inside, crop_a.ground_dist_m, crop_a.exclude_mask, crop_a.window, crop_a.box_height_px,
+                     crop_a.distance_m)
+    feats = crop_features(crop_a)
+    n_hog = 1764
+    plain = crop_descriptor(crop_a, feats)[:n_hog], crop_descriptor(crop_b, feats)[:n_hog]
+    car = crop_descriptor(crop_a, feats, car_only=True)[:n_hog], crop_descriptor(crop_b, feats, car_only=True)[:n_hog]
+    assert np.abs(plain[0] - plain[1]).max() > 0.05  # the plain HOG sees the background
+    np.testing.assert_allclose(car[0], car[1], atol=1e-6)
