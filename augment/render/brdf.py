@@ -224,15 +224,18 @@ def mirror_lobes(n: np.ndarray, v: np.ndarray, l: np.ndarray, params: BRDFParams
     return eval_brdf(n, v, l, params, np.asarray(spec_weight, dtype=np.float64))[1]
 
 
-def mirror_albedo(n_dot_v: np.ndarray, params: BRDFParams, spec_weight: np.ndarray) -> np.ndarray:
+def mirror_albedo(n_dot_v: np.ndarray, params: BRDFParams, spec_weight: np.ndarray,
+                  spec_albedo: np.ndarray | None = None) -> np.ndarray:
     """``int mirror_lobes cos dl`` (N, 3), the lobes taken as mirrors (Fresnel and masking at ``n.l = n.v``): the
-    coat's ``clearcoat F_c(n.v) G(n.v, n.v)`` plus ``spec_weight`` x the specular albedo x ``1 - clearcoat F_c(n.v)``."""
+    coat's ``clearcoat F_c(n.v) G(n.v, n.v)`` plus ``spec_weight`` x the specular albedo x ``1 - clearcoat F_c(n.v)``
+    (``spec_albedo`` (N, 3): :func:`specular_albedo` already computed, else computed here)."""
     n_v = np.clip(np.asarray(n_dot_v, dtype=np.float64), 1e-6, 1.0)
     F_c = CLEARCOAT_F0 + (1.0 - CLEARCOAT_F0) * schlick_weight(n_v)
     G_c = smith_g(n_v, n_v, np.full_like(n_v, CLEARCOAT_ROUGHNESS))
     out = (params.clearcoat * F_c * G_c)[:, None] * np.ones((1, 3))
     if np.any(spec_weight > 0):
-        out = out + (spec_weight * (1.0 - params.clearcoat * F_c))[:, None] * specular_albedo(n_dot_v, params)
+        alb = specular_albedo(n_dot_v, params) if spec_albedo is None else spec_albedo
+        out = out + (spec_weight * (1.0 - params.clearcoat * F_c))[:, None] * alb
     return out
 
 

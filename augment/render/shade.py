@@ -188,7 +188,8 @@ def _shade_batch(ctx: ShadingContext, p: np.ndarray, n_s: np.ndarray, n_g: np.nd
     coat_keep = 1.0 - params.clearcoat * (0.04 + 0.96 * schlick_weight(n_v))
     # Rough specular lobes are nearly cosine-shaped: their directional albedo x cos / pi is a good
     # control variate too (its exact expectation is again the irradiance); glossy lobes get none.
-    spec_cv = specular_albedo(n_v, params) * spec_cv_weight(params.roughness)[:, None]
+    spec_alb = specular_albedo(n_v, params)
+    spec_cv = spec_alb * spec_cv_weight(params.roughness)[:, None]
     g_color = (params.c_lambert + spec_cv) / np.pi * coat_keep[:, None]  # (N, 3); flakes: sampled, no variate
     if cv_scale is not None:
         g_color = g_color * cv_scale[:, None]
@@ -204,7 +205,7 @@ def _shade_batch(ctx: ShadingContext, p: np.ndarray, n_s: np.ndarray, n_g: np.nd
         scale_m = np.ones(N) if cv_scale is None else cv_scale
         mirror = (w_m, scale_m)
         r_cam = reflect(v, n_s) @ ctx.R_cam_from_obj.T
-        smooth += mirror_albedo(n_v, params, w_m) * scale_m[:, None] * lookup_envmap(ctx.env.pyramid[0], r_cam)
+        smooth += mirror_albedo(n_v, params, w_m, spec_alb) * scale_m[:, None] * lookup_envmap(ctx.env.pyramid[0], r_cam)
     for kind in ("env", "brdf"):
         if (ctx.settings.env_samples if kind == "env" else ctx.settings.brdf_samples) > 0:
             samples.append(_env_samples(ctx, kind, p, n_s, n_g, v, params, g_color, noisy, mirror))

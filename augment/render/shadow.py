@@ -262,21 +262,15 @@ def _smooth_refined(sky_def: np.ndarray, bounce_gain: np.ndarray, ys: np.ndarray
     step at a tyre's or a sill's edge (ground fully occluded next to ground half open) stays a step and the
     darkness under the object does not bleed out as a band beside it."""
     h, w = sky_def.shape[:2]
-    guide = luminance(sky_def).astype(np.float32)
-    g0 = guide[ys, xs]
-    acc_d = np.zeros((len(ys), 3), np.float64)
-    acc_c = np.zeros((len(ys), 3), np.float64)
-    wsum = np.zeros(len(ys), np.float64)
-    for dy in range(-2, 3):
-        yy = np.clip(ys + dy, 0, h - 1)
-        for dx in range(-2, 3):
-            xx = np.clip(xs + dx, 0, w - 1)
-            wgt = np.exp(-(dy * dy + dx * dx) / (2 * 1.2**2) - 0.5 * ((guide[yy, xx] - g0) / REFINE_RANGE_SIGMA) ** 2)
-            acc_d += wgt[:, None] * sky_def[yy, xx]
-            acc_c += wgt[:, None] * bounce_gain[yy, xx]
-            wsum += wgt
-    sky_def[ys, xs] = acc_d / wsum[:, None]
-    bounce_gain[ys, xs] = acc_c / wsum[:, None]
+    # The bounding rectangle of the refined pixels (+ the 5 x 5 support), filtered by OpenCV, then written back.
+    ya, yb = max(int(ys.min()) - 2, 0), min(int(ys.max()) + 3, h)
+    xa, xb = max(int(xs.min()) - 2, 0), min(int(xs.max()) + 3, w)
+    d_win = np.ascontiguousarray(sky_def[ya:yb, xa:xb], dtype=np.float32)
+    c_win = np.ascontiguousarray(bounce_gain[ya:yb, xa:xb], dtype=np.float32)
+    guide = np.ascontiguousarray(luminance(d_win), dtype=np.float32)
+    for a, win in ((sky_def, d_win), (bounce_gain, c_win)):
+        out = cv2.ximgproc.jointBilateralFilter(guide, win, 5, REFINE_RANGE_SIGMA, 1.2, borderType=cv2.BORDER_REPLICATE)
+        a[ys, xs] = out[ys - ya, xs - xa]
 
 
 def _contact_pixels(geo: "_Ground", box: PixelBox, prep: PreparedAsset) -> np.ndarray | None:
