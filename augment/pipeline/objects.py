@@ -36,9 +36,9 @@ class RenderedImage:
 
     Attributes:
         image: (H, W, 3) uint8 the composite with every object.
-        mask: (H, W) float32 union of the objects' alpha.
+        mask: (H, W) float32 union of the objects' visible extent (``Insertion.mask``).
         shadow_ratio: (H, W) float32 product of the objects' shadow ratio maps.
-        objects: the objects in render order.
+        objects: the objects, in the order given (rendered nearest first).
     """
 
     image: np.ndarray
@@ -52,29 +52,37 @@ def render_objects(image: np.ndarray, K: np.ndarray, depth_m: np.ndarray, lights
                    ground_normals_cam: Sequence[np.ndarray], options: InsertOptions, rng: np.random.Generator,
                    timing: dict[str, float], velocities_cam_mps: Sequence[np.ndarray | None] | None = None,
                    jpeg_quality: int | None = None) -> RenderedImage:
-    """Render objects one after the other (each with its light); each later one is occluded by the earlier ones.
+    """Render objects nearest first (each with its light); each is occluded by the nearer ones already drawn.
+
+    Nearest first, so that an object's mask and visible fraction (its labels) count the inserted objects in
+    front of it, not only the scene: rendered the other way round, a car behind a nearer inserted car was
+    drawn over first and labelled fully visible (11 of 21 such cars on the real dev scene).
 
     Args:
         image: (H, W, 3) uint8; K: (3, 3) intrinsics; depth_m: (H, W) scene camera-z depth, metres.
         lights, assets, T_cam_from_objects, ground_normals_cam: one per object (camera frame).
-        rng: draws one render seed per object, in order.
+        rng: draws one render seed per object, in the given order (whatever the render order).
         timing: receives ``render`` and the renderer's stages summed over the objects (``render.<stage>``).
         velocities_cam_mps: per object, its (3,) velocity relative to the camera (camera frame, m/s; the
             renderer's motion blur), or None (no motion blur).
         jpeg_quality: the source image file's JPEG quality (``render.camera_look.jpeg_quality_from_file``), or None.
+
+    Returns:
+        The composite; ``objects`` in the given order.
     """
     mask_union = np.zeros(image.shape[:2], np.float32)
     shadow = np.ones(image.shape[:2], np.float32)
-    rendered = []
     settings = render_settings(options)
     t = time.perf_counter()
-    velocities = list(velocities_cam_mps) if velocities_cam_mps is not None else [None] * len(assets)
-    for light, asset, T_cam_from_object, normal, velocity in zip(lights, assets, T_cam_from_objects,
-                                                                 ground_normals_cam, velocities):
+    n = len(assets)
+    seeds = [int(rng.integers(2**31)) for _ in range(n)]
+    velocities = list(velocities_cam_mps) if velocities_cam_mps is not None else [None] * n
+    order = np.argsort([float(np.linalg.norm(np.asarray(T)[:3, 3])) for T in T_cam_from_objects], kind="stable")
+    rendered: list[RenderedObject | None] = [None] * n
+    for i in order:
         ins = render_insertion(
-            image, K, depth_m, light, asset, T_cam_from_object, ground_normal_cam=normal,
-            quality=settings, ev=options.ev, seed=int(rng.integers(2**31)), velocity_cam_mps=velocity,
-            jpeg_quality=jpeg_quality,
+            image, K, depth_m, lights[i], assets[i], T_cam_from_objects[i], ground_normal_cam=ground_normals_cam[i],
+            quality=settings, ev=options.ev, seed=seeds[i], velocity_cam_mps=velocities[i], jpeg_quality=jpeg_quality,
         )
         for stage, seconds in ins.timing_s.items():
             if stage != "total":
@@ -83,7 +91,7 @@ def render_objects(image: np.ndarray, K: np.ndarray, depth_m: np.ndarray, lights
         depth_m = np.where(ins.mask > 0.5, np.minimum(depth_m, ins.object_depth_m), depth_m)
         mask_union = np.maximum(mask_union, ins.mask)
         shadow = shadow * ins.shadow_ratio
-        rendered.append(RenderedObject(T_cam_from_object, asset, ins))
+        rendered[i] = RenderedObject(T_cam_from_objects[i], assets[i], ins)
     timing["render"] = time.perf_counter() - t
     return RenderedImage(image, mask_union, shadow, rendered)
 

@@ -87,6 +87,8 @@ class ObjectLayers:
         radiance_premult: (H, W, 3) float32 linear object radiance x coverage.
         ratio_rgb: (H, W, 3) float32 per-channel shadow ratio S, 1 = unchanged.
         box: the union of the object's and the shadow's boxes (everything outside is untouched), or None.
+        solid_coverage, solid_mask: (H, W) float32 the object's extent before / after occlusion (its glass
+            counts as the object: ``Foreground.solid``), for labels and for occluding other objects.
     """
 
     coverage: np.ndarray
@@ -96,6 +98,8 @@ class ObjectLayers:
     radiance_premult: np.ndarray
     ratio_rgb: np.ndarray
     box: PixelBox | None
+    solid_coverage: np.ndarray | None = None
+    solid_mask: np.ndarray | None = None
 
 
 def object_layers(fg: Foreground | None, sh: ShadowMap | None, scene_depth_m: np.ndarray) -> ObjectLayers:
@@ -103,6 +107,8 @@ def object_layers(fg: Foreground | None, sh: ShadowMap | None, scene_depth_m: np
     H, W = scene_depth_m.shape
     coverage = np.zeros((H, W), np.float32)
     mask = np.zeros((H, W), np.float32)
+    solid_coverage = np.zeros((H, W), np.float32)
+    solid_mask = np.zeros((H, W), np.float32)
     obj_depth = np.full((H, W), np.inf, np.float32)
     rad_premult = np.zeros((H, W, 3), np.float32)
     vis_full = np.zeros((H, W), np.float32)
@@ -114,13 +120,16 @@ def object_layers(fg: Foreground | None, sh: ShadowMap | None, scene_depth_m: np
         vis = depth_visibility(fg.depth_m, scene_depth_m[sl])
         coverage[sl] = fg.alpha
         mask[sl] = fg.alpha * vis
+        solid = fg.alpha if fg.solid is None else np.maximum(fg.solid, fg.alpha)
+        solid_coverage[sl] = solid
+        solid_mask[sl] = solid * vis
         vis_full[sl] = vis
         obj_depth[sl] = fg.depth_m
         rad_premult[sl] = fg.radiance_premult
     if sh is not None:
         ratio[sh.box.slices] = sh.ratio_rgb
         box = sh.box if box is None else box.union(sh.box)
-    return ObjectLayers(coverage, vis_full, mask, obj_depth, rad_premult, ratio, box)
+    return ObjectLayers(coverage, vis_full, mask, obj_depth, rad_premult, ratio, box, solid_coverage, solid_mask)
 
 
 @dataclass(frozen=True)

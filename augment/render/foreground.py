@@ -44,6 +44,8 @@ class Foreground:
         alpha: (h, w) float32 coverage in [0, 1] (glass that shows the scene behind lowers it).
         depth_m: (h, w) float32 camera-frame z of the nearest hit, inf where the object is absent.
         stats: rays cast per stage and sample counts.
+        solid: (h, w) float32 the share of the pixel's camera samples that hit the object (glass counts: the
+            object's extent in the image for labels and for occluding other objects), or None (= ``alpha``).
     """
 
     box: PixelBox
@@ -51,6 +53,7 @@ class Foreground:
     alpha: np.ndarray
     depth_m: np.ndarray
     stats: dict = field(default_factory=dict)
+    solid: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -177,6 +180,7 @@ def _resolve_pixels(traced: CameraSamples, counts: np.ndarray, box: PixelBox, R:
     pix = traced.pixel
     rad_px = np.stack([np.bincount(pix, weights=traced.radiance[:, c], minlength=P) for c in range(6)], axis=1) / counts[:, None]
     alpha_px = np.bincount(pix, weights=traced.alpha, minlength=P) / counts
+    solid_px = np.bincount(pix, weights=np.isfinite(traced.t_first), minlength=P) / counts
     # Camera z of the nearest hit per pixel.
     t = traced.t_first
     z = np.where(np.isfinite(t), t * np.einsum("ij,j->i", traced.dirs_obj, R[2]), np.inf)
@@ -205,6 +209,7 @@ def _resolve_pixels(traced: CameraSamples, counts: np.ndarray, box: PixelBox, R:
         alpha=np.clip(alpha_px, 0.0, 1.0).reshape(h, w).astype(np.float32),
         depth_m=depth_px.reshape(h, w).astype(np.float32),
         stats=stats,
+        solid=np.clip(solid_px, 0.0, 1.0).reshape(h, w).astype(np.float32),
     )
 
 

@@ -38,8 +38,9 @@ class Insertion:
 
     Attributes:
         image: (H, W, 3) uint8 composited image (pixels outside ``footprint.box`` byte-identical).
-        mask: (H, W) float32 final object alpha after occlusion, 0..1.
-        coverage: (H, W) float32 object coverage before occlusion (for the visible fraction).
+        mask: (H, W) float32 the object's visible extent after occlusion, 0..1 (its see-through glass counts as
+            the object: labels, the 2D box, occluding the objects rendered after it).
+        coverage: (H, W) float32 the object's extent before occlusion (for the visible fraction).
         shadow_ratio: (H, W) float32 ratio map S (luminance of the per-channel ratio), 1 = unchanged.
         object_depth_m: (H, W) float32 camera-z of the object, inf where none.
         timing_s: seconds per stage: "prepare" (cached BVH, irradiance), "shadow", "foreground" (= "raycast"
@@ -48,6 +49,7 @@ class Insertion:
         shadow_ratio_rgb: (H, W, 3) float32 per-channel ratio actually used in the composite.
         object_radiance: (H, W, 3) float32 un-premultiplied linear object radiance (0 where no coverage).
         footprint: the pixel boxes the object and its shadow could reach (:func:`~.footprint.footprint`).
+        alpha: (H, W) float32 the composited alpha after occlusion (``mask`` less what its glass lets through).
     """
 
     image: np.ndarray
@@ -60,6 +62,7 @@ class Insertion:
     shadow_ratio_rgb: np.ndarray | None = None
     object_radiance: np.ndarray | None = None
     footprint: Footprint | None = None
+    alpha: np.ndarray | None = None
 
     @cached_property
     def coverage_px(self) -> float:
@@ -68,7 +71,7 @@ class Insertion:
 
     @cached_property
     def visible_px(self) -> float:
-        """The object's final alpha summed over the image (pixels): what remains visible after occlusion."""
+        """The object's visible extent summed over the image (pixels): what remains visible after occlusion."""
         return float(self.mask.sum())
 
 
@@ -143,9 +146,10 @@ def render_insertion(image_rgb: np.ndarray, K: np.ndarray, depth_m: np.ndarray, 
     out = composite_layers(x.image_rgb, layers, x.camera, settings.match_camera, ev, rng, motion, jpeg_quality)
     timing["composite"] = time.perf_counter() - t0
     timing["total"] = time.perf_counter() - t_start
-    return Insertion(image=out.image, mask=layers.mask, coverage=layers.coverage, shadow_ratio=out.shadow_ratio,
-                     object_depth_m=layers.depth_m, timing_s=timing, stats=_stats(quality, fg, sh, prepared, out),
-                     shadow_ratio_rgb=layers.ratio_rgb, object_radiance=out.object_radiance, footprint=where)
+    return Insertion(image=out.image, mask=layers.solid_mask, coverage=layers.solid_coverage,
+                     shadow_ratio=out.shadow_ratio, object_depth_m=layers.depth_m, timing_s=timing,
+                     stats=_stats(quality, fg, sh, prepared, out), shadow_ratio_rgb=layers.ratio_rgb,
+                     object_radiance=out.object_radiance, footprint=where, alpha=layers.mask)
 
 
 def _image_motion(x: _Inputs, asset: Asset, velocity_cam_mps: np.ndarray | None,
