@@ -9,9 +9,9 @@ Usage::
 Data: ``../shared/data/nuscenes-seq`` (scene-0916, 41 keyframes x 6 cameras, LiDAR, no lidarseg). Every
 ``--stride``-th keyframe, all 6 cameras: ``place_in_sample`` places 3 procedural cars per camera (the
 CLI's asset choice, seed 0). Each placement's ground height (the object frame's origin z) is compared
-with the median bottom height of the annotated objects of the *other* keyframes standing within 8 m
-(nuScenes boxes are annotated on the LiDAR: their bottoms are the ground); placements with fewer than 3
-such objects are left out. Writes ``benchmarks/results/ground_height_<tag>.json``.
+with the median bottom height of the annotated vehicles of the *other* keyframes standing within 8 m
+(nuScenes boxes are annotated on the LiDAR: their bottoms are the ground a car stands on); placements with
+fewer than 3 such vehicles are left out. Writes ``benchmarks/results/ground_height_<tag>.json``.
 """
 
 from __future__ import annotations
@@ -50,6 +50,8 @@ def main(argv=None) -> None:
     centres, heights, owner = [], [], []
     for t, s in samples.items():
         for b in s.boxes:
+            if not b.category.startswith("vehicle."):  # people stand on sidewalks and platforms
+                continue
             centres.append(np.asarray(b.center, np.float64))
             heights.append(float(b.wlh[2]))
             owner.append(t)
@@ -81,7 +83,7 @@ def main(argv=None) -> None:
                 "share_above_1_m": float(np.mean(e > 1.0))}
 
     doc = {"tag": args.tag, "data": "nuscenes-seq scene-0916", "stride": args.stride, "cars_per_camera": 3,
-           "reference": f"median bottom of >= {MIN_OBJECTS} annotated objects of other keyframes within {RADIUS_M} m",
+           "reference": f"median bottom of >= {MIN_OBJECTS} annotated vehicles of other keyframes within {RADIUS_M} m",
            "ground_sources": sources, "all": summary(err), "beyond_25_m": summary(err[far]),
            "seconds": time.perf_counter() - t0, "rows": rows}
     out = Path(args.out) / f"ground_height_{args.tag}.json"

@@ -74,8 +74,9 @@ class LocalGroundFitter:
             (all flat.* points where those are too few).
         config: thresholds (``ground_radius_m``, ``ground_min_points``, ``ground_inlier_m``, ``ground_max_tilt_deg``,
             ``ground_max_offset_m``, ``ground_max_offset_per_m``, ``ground_box_radius_m``, ``ground_box_tolerance_m``).
-        box_bottoms_global: (M, 3) bottom centres of the sample's annotated objects (cars, people... all stand
-            on the ground: each is a ground height measured by the annotators), or None.
+        box_bottoms_global: (M, 3) bottom centres of the sample's annotated vehicles (each a height of the
+            ground a car stands on, measured by the annotators; people stand on sidewalks and platforms too,
+            so they are left out: on scene-0916 they lifted a car 0.6 m), or None.
 
     Pass only points outside the annotated boxes: a car roof is no ground.  Far from the ego the LiDAR
     sees little road (sparse rings, the ground hidden behind parked cars), and the lowest points there

@@ -81,7 +81,7 @@ class PlacementScene:
                 non_ground_xy = points[non_drivable & ~np.isin(lidar.labels, LIDARSEG_GROUND)][:, :2]
                 labels = lidar.labels[free]
         fitter = LocalGroundFitter(obstacles if lidar is not None else None, view.T_global_from_ego, labels, config,
-                                   box_bottoms(boxes))
+                                   box_bottoms([b for b in boxes if b.category.startswith("vehicle.")]))
         return cls(sample, view, config, drivable, box_footprints(boxes), box_dyn, obstacles, non_drivable_xy,
                    fitter, depth_m, non_ground_xy)
 
