@@ -120,17 +120,19 @@ class LocalGroundFitter:
         other.config = config
         return other
 
-    def fit(self, xy: np.ndarray) -> GroundPlane:
+    def fit(self, xy: np.ndarray, check_by_boxes: bool = True) -> GroundPlane:
         """Ground plane below global x/y ``xy`` (2,); falls back to the ego plane when LiDAR is insufficient.
 
         The fit uses points within ``ground_radius_m``; where the far LiDAR rings are too sparse the
         radius grows to 2x and 3x before falling back. A fitted plane whose height below ``xy`` differs from
         the ego's ground plane by more than ``ground_max_offset_m + ground_max_offset_per_m * distance``
         (distance from the ego, metres) is rejected (canopies, roofs, walls seen without the road).  Then the
-        annotated objects nearby have the last word on the height (see the class docstring).
+        annotated vehicles nearby have the last word on the height (see the class docstring) unless
+        ``check_by_boxes`` is False (tracks: see :func:`~.track.stand_heights`).
         """
         xy = np.asarray(xy, dtype=np.float64)
-        return self._checked_by_boxes(self._fit_lidar(xy), xy)
+        plane = self._fit_lidar(xy)
+        return self._checked_by_boxes(plane, xy) if check_by_boxes else plane
 
     def _fit_lidar(self, xy: np.ndarray) -> GroundPlane:
         ego = ego_ground_plane(self.T_global_from_ego, xy)
