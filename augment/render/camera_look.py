@@ -19,6 +19,8 @@ import numpy as np
 DAY_EXPOSURE_S = 0.002  # assumption: sunny daylight auto exposure (not recorded by nuScenes)
 NIGHT_EXPOSURE_S = 0.020  # assumption: the usual 20 ms cap of automotive auto exposure
 MIN_MOTION_PX = 0.5  # shorter smears are below the measured blur's resolution and are not applied
+MAX_MOTION_PX = 64.0  # longer smears are cut to this (a car 2 m away passing at 30 m/s in 2 ms: ~40 px)
+MIN_MOTION_DEPTH_M = 0.5  # a centre nearer the camera plane has no meaningful image motion (none applied)
 
 # IJG base luminance table (ITU T.81 Annex K), row-major (natural) order
 IJG_LUMA = np.array([
@@ -29,10 +31,11 @@ IJG_LUMA = np.array([
 
 def image_motion_px(K: np.ndarray, point_cam: np.ndarray, velocity_cam_mps: np.ndarray, exposure_s: float) -> np.ndarray:
     """(2,) image displacement (pixels, u right / v down) of ``point_cam`` (3,) moving at ``velocity_cam_mps``
-    (3,) relative to the camera during ``exposure_s`` seconds (zero behind the camera)."""
+    (3,) relative to the camera during ``exposure_s`` seconds (zero behind or within ``MIN_MOTION_DEPTH_M`` of
+    the camera plane, e.g. an object beside the camera whose shadow alone reaches the image)."""
     X, Y, Z = np.asarray(point_cam, np.float64)
     vx, vy, vz = np.asarray(velocity_cam_mps, np.float64)
-    if Z <= 1e-6:
+    if Z <= MIN_MOTION_DEPTH_M or not np.all(np.isfinite([X, Y, vx, vy, vz])):
         return np.zeros(2)
     du = K[0, 0] * (vx / Z - X * vz / Z**2)
     dv = K[1, 1] * (vy / Z - Y * vz / Z**2)
@@ -41,11 +44,14 @@ def image_motion_px(K: np.ndarray, point_cam: np.ndarray, velocity_cam_mps: np.n
 
 def motion_kernel(motion_px: np.ndarray, samples_per_px: int = 8) -> np.ndarray:
     """(k, k) float32 normalised line kernel of a smear ``motion_px`` (2,) (u, v pixels) centred on the
-    pixel (the exposure is centred on the timestamp); a 1 x 1 identity below ``MIN_MOTION_PX``."""
+    pixel (the exposure is centred on the timestamp); a 1 x 1 identity below ``MIN_MOTION_PX``; smears longer
+    than ``MAX_MOTION_PX`` are cut to it (the kernel stays small whatever the input)."""
     m = np.asarray(motion_px, np.float64)
     length = float(np.hypot(*m))
-    if length < MIN_MOTION_PX:
+    if not np.isfinite(length) or length < MIN_MOTION_PX:
         return np.ones((1, 1), np.float32)
+    if length > MAX_MOTION_PX:
+        m, length = m * (MAX_MOTION_PX / length), MAX_MOTION_PX
     r = int(np.ceil(length / 2.0)) + 1
     k = np.zeros((2 * r + 1, 2 * r + 1), np.float64)
     t = np.linspace(-0.5, 0.5, max(int(np.ceil(length * samples_per_px)), 2) + 1)

@@ -18,7 +18,7 @@ from ..core import InputError, PinholeCamera, check_shape
 from ..lighting.light import DistantLight
 from .bounce import BounceLight
 from .camera_look import DAY_EXPOSURE_S, NIGHT_EXPOSURE_S, image_motion_px
-from .composite import Composited, composite_layers, object_layers
+from .composite import Composited, ObjectLayers, composite_layers, object_layers
 from .footprint import Footprint, footprint
 from .foreground import Foreground, render_foreground
 from .settings import RenderSettings, resolve_settings
@@ -142,7 +142,7 @@ def render_insertion(image_rgb: np.ndarray, K: np.ndarray, depth_m: np.ndarray, 
     timing["shade"] = timing["foreground"] - timing["raycast"]
     t0 = time.perf_counter()
     layers = object_layers(fg, sh, x.depth_m)
-    motion = _image_motion(x, asset, velocity_cam_mps, exposure_s) if settings.match_camera else None
+    motion = _image_motion(x, layers, velocity_cam_mps, exposure_s) if settings.match_camera else None
     out = composite_layers(x.image_rgb, layers, x.camera, settings.match_camera, ev, rng, motion, jpeg_quality)
     timing["composite"] = time.perf_counter() - t0
     timing["total"] = time.perf_counter() - t_start
@@ -152,17 +152,25 @@ def render_insertion(image_rgb: np.ndarray, K: np.ndarray, depth_m: np.ndarray, 
                      object_radiance=out.object_radiance, footprint=where, alpha=layers.mask)
 
 
-def _image_motion(x: _Inputs, asset: Asset, velocity_cam_mps: np.ndarray | None,
+def _image_motion(x: _Inputs, layers: ObjectLayers, velocity_cam_mps: np.ndarray | None,
                   exposure_s: float | None) -> np.ndarray | None:
-    """(2,) image motion (pixels) of the object's centre during the exposure, or None without a velocity."""
-    if velocity_cam_mps is None:
+    """(2,) image motion (pixels) during the exposure of the object's visible part (the point under its
+    visible pixels' mean, at their mean depth: an object mostly beside the camera smears as its part in the
+    image does, not as its centre would), or None without a velocity or a visible part."""
+    if velocity_cam_mps is None or layers.box is None:
         return None
     if exposure_s is None:
         night = np.median(x.image_rgb[::8, ::8].mean(axis=2)) < NIGHT_MEDIAN_LEVEL
         exposure_s = NIGHT_EXPOSURE_S if night else DAY_EXPOSURE_S
-    T = x.T_cam_from_object
-    centre = T[:3, 3] + 0.5 * float(asset.wlh[2]) * T[:3, 2]
-    return image_motion_px(x.camera.K, centre, np.asarray(velocity_cam_mps, np.float64), exposure_s)
+    sl = layers.box.slices
+    w = layers.solid_mask[sl] * np.isfinite(layers.depth_m[sl])
+    if w.sum() < 1.0:
+        return None
+    ys, xs = np.mgrid[sl]
+    u, v = float((w * xs).sum() / w.sum()), float((w * ys).sum() / w.sum())
+    z = float((w * np.where(np.isfinite(layers.depth_m[sl]), layers.depth_m[sl], 0.0)).sum() / w.sum())
+    point = z * (np.linalg.inv(x.camera.K) @ np.array([u, v, 1.0]))
+    return image_motion_px(x.camera.K, point, np.asarray(velocity_cam_mps, np.float64), exposure_s)
 
 
 def _check_inputs(image_rgb: np.ndarray, K: np.ndarray, depth_m: np.ndarray, T_cam_from_object: np.ndarray) -> _Inputs:

@@ -108,3 +108,14 @@ def test_jpeg_round_trip_only_in_touched_blocks(scene):
     assert changed.any()
     ys, xs = np.nonzero(plain.coverage > 0)
     assert not changed[: max(ys.min() - 32, 0)].any() and not changed[ys.max() + 32 :].any()
+
+
+def test_motion_stays_bounded_near_the_camera_plane_and_for_wild_speeds():
+    from streetaug.augment.render.camera_look import MAX_MOTION_PX, image_motion_px, motion_kernel
+
+    K = np.array([[1266.0, 0, 800], [0, 1266.0, 450], [0, 0, 1]])
+    # a car beside the camera (its shadow alone in view): its centre 1 cm in front of the camera plane
+    assert np.all(image_motion_px(K, np.array([3.0, 1.0, 0.01]), np.array([0.0, 0.0, -10.0]), 0.002) == 0)
+    k = motion_kernel(np.array([1.3e5, 2.0e4]))  # a wild input gives a bounded kernel
+    assert k.shape[0] <= 2 * (int(np.ceil(MAX_MOTION_PX / 2)) + 1) + 1 and abs(k.sum() - 1) < 1e-5
+    assert motion_kernel(np.array([np.nan, 1.0])).shape == (1, 1)
