@@ -328,24 +328,20 @@ class NuScenesReader:
         same channel's keyframe in the sample's ``prev`` / ``next`` sample; a missing side is the row
         itself (dt 0).  None when neither side exists (a single frame): no motion is known.
         """
-        index = self._token_index("sample_data")
-        channel = None
+        rows, samples = self._token_index("sample_data"), self._token_index("sample")
+        sample_token = sample_data.get("sample_token") or ""
+        sensor = self.sensor_of(sample_data)
 
         def neighbour(direction: str) -> dict | None:
-            nonlocal channel
             token = sample_data.get(direction) or ""
-            if token in index:
-                return self.table("sample_data")[index[token]]
-            sample_token = sample_data.get("sample_token") or ""
-            if sample_token not in self._token_index("sample"):
+            if token in rows:
+                return self.table("sample_data")[rows[token]]
+            if sample_token not in samples:
                 return None
             other = self.get("sample", sample_token).get(direction) or ""
-            if other not in self._token_index("sample"):
+            if other not in samples:
                 return None
-            if channel is None:
-                channel = self.sensor_of(sample_data).get("channel")
-            modality = self.sensor_of(sample_data).get("modality", "camera")
-            return self.keyframe_sample_data(other, modality).get(channel)
+            return self.keyframe_sample_data(other, sensor.get("modality", "camera")).get(sensor.get("channel"))
 
         before, after = neighbour("prev"), neighbour("next")
         if before is None and after is None:
