@@ -112,8 +112,7 @@ def render_into_view(context: ViewContext, token: str, placed: SamplePlacement, 
     timing["depth"] = time.perf_counter() - t
     rng = item_seed(options.seed, "render", token, view.channel)
     normals = [rotate_vectors(T_cam_from_global, placements[i].ground_normal_global[None])[0] for i in shown]
-    velocities = [velocity_in_camera_mps(view, placements[i].T_global_from_object[:3, 3] + 0.5 * placements[i].wlh[2]
-                                         * placements[i].T_global_from_object[:3, 2], _object_velocity(placed, i))
+    velocities = [velocity_in_camera_mps(view, placements[i].box.center, _object_velocity(placed, i))
                   for i in shown] if options.match_camera else None
     jpeg_quality = _jpeg_quality(view) if options.match_camera else None
     rendered = render_objects(image, view.K, depth_m, [lights[i] for i in shown], [assets[i] for i in shown],
