@@ -163,13 +163,15 @@ def _image_motion(x: _Inputs, layers: ObjectLayers, velocity_cam_mps: np.ndarray
         night = np.median(x.image_rgb[::8, ::8].mean(axis=2)) < NIGHT_MEDIAN_LEVEL
         exposure_s = NIGHT_EXPOSURE_S if night else DAY_EXPOSURE_S
     sl = layers.box.slices
-    w = layers.solid_mask[sl] * np.isfinite(layers.depth_m[sl])
+    depth = layers.depth_m[sl]
+    hit = np.isfinite(depth)
+    w = layers.solid_mask[sl] * hit
     if w.sum() < 1.0:
         return None
     ys, xs = np.mgrid[sl]
-    u, v = float((w * xs).sum() / w.sum()), float((w * ys).sum() / w.sum())
-    z = float((w * np.where(np.isfinite(layers.depth_m[sl]), layers.depth_m[sl], 0.0)).sum() / w.sum())
-    point = z * (np.linalg.inv(x.camera.K) @ np.array([u, v, 1.0]))
+    uv = np.array([[(w * xs).sum(), (w * ys).sum()]]) / w.sum()
+    z = np.array([(w * np.where(hit, depth, 0.0)).sum() / w.sum()])
+    point = x.camera.unproject(uv, z)[0]
     return image_motion_px(x.camera.K, point, np.asarray(velocity_cam_mps, np.float64), exposure_s)
 
 
