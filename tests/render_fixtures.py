@@ -92,6 +92,28 @@ def sunny_light(sun_dir_cam=(0.5, -0.6, 0.62), sun_irradiance=8.0, sky=(0.25, 0.
     return DistantLight(env, sun)
 
 
+def two_level_sky(up: np.ndarray, above: float, below: float, height: int = 32, width: int = 64) -> np.ndarray:
+    """(height, width, 3) float32 camera-frame env map: grey radiance ``above`` the horizon of ``up``, ``below`` under it."""
+    d = camera_envmap_directions(height, width)
+    return np.where((d @ np.asarray(up) > 0)[..., None], above, below).astype(np.float32) * np.ones(3, np.float32)
+
+
+def plane_shadow(camera: PinholeCamera, asset: Asset, T_cam_from_object: np.ndarray, up: np.ndarray,
+                 light: DistantLight, depth_m: np.ndarray, settings=None, seed: int = 0):
+    """The renderer's shadow of ``asset`` on the scene ``depth_m`` (its footprint's shadow box, the bounce light
+    of the asset): (box, ShadowMap)."""
+    from streetaug.augment.render import RenderSettings, footprint, prepare_asset
+    from streetaug.augment.render.bounce import BounceLight
+    from streetaug.augment.render.shadow import render_shadow
+
+    settings = settings or RenderSettings()
+    prep = prepare_asset(asset)
+    box = footprint(camera, asset, T_cam_from_object, light, settings).shadow_box
+    sh = render_shadow(camera, box, depth_m, light, prep, T_cam_from_object, up, settings,
+                       np.random.default_rng(seed), BounceLight.build(light, prep, T_cam_from_object, up))
+    return box, sh
+
+
 def read_hdri_light(name: str, height: int = 128, width: int = 256) -> DistantLight:
     """A camera-frame DistantLight from ``shared/data/hdri/<name>.hdr`` (camera looking horizontally).
 

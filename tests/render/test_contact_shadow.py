@@ -3,13 +3,13 @@
 import numpy as np
 import pytest
 
-from render_fixtures import primitive_car
-from streetaug.augment.core import PinholeCamera, camera_envmap_directions, intrinsics_from_fov, pose_camera_to_transform
+from render_fixtures import plane_shadow, primitive_car, two_level_sky
+from streetaug.augment.core import PinholeCamera, intrinsics_from_fov, pose_camera_to_transform
 from streetaug.augment.core.depth import ground_plane_depth
 from streetaug.augment.lighting.light import DistantLight
-from streetaug.augment.render import RenderSettings, footprint, prepare_asset
+from streetaug.augment.render import footprint, prepare_asset
 from streetaug.augment.render.bounce import BounceLight
-from streetaug.augment.render.shadow import _Ground, _sky_deficit, render_shadow
+from streetaug.augment.render.shadow import _Ground, _sky_deficit
 
 W, H = 480, 270
 K = intrinsics_from_fov(W, H, 60.0)
@@ -22,15 +22,11 @@ PLANE_DEPTH = ground_plane_depth(K, W, H, UP, 1.5)
 
 def _uniform_sky() -> DistantLight:
     """Sky radiance 1 above the horizon, the unshadowed ground's 0.2 (albedo 0.2) below; no sun."""
-    d = camera_envmap_directions(32, 64)
-    return DistantLight(np.where((d @ UP > 0)[..., None], 1.0, 0.2).astype(np.float32) * np.ones(3, np.float32), None)
+    return DistantLight(two_level_sky(UP, 1.0, 0.2), None)
 
 
 def _ratio(depth=PLANE_DEPTH, seed=0):
-    light, prep, settings = _uniform_sky(), prepare_asset(CAR), RenderSettings()
-    box = footprint(CAMERA, CAR, T, light, settings).shadow_box
-    sh = render_shadow(CAMERA, box, depth, light, prep, T, UP, settings, np.random.default_rng(seed),
-                       BounceLight.build(light, prep, T, UP))
+    box, sh = plane_shadow(CAMERA, CAR, T, UP, _uniform_sky(), depth, seed=seed)
     return box, sh.ratio_rgb.mean(axis=2)
 
 

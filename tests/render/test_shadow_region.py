@@ -3,14 +3,12 @@
 import numpy as np
 import pytest
 
-from render_fixtures import primitive_car
-from streetaug.augment.core import PinholeCamera, camera_envmap_directions, intrinsics_from_fov, pose_camera_to_transform
+from render_fixtures import plane_shadow, primitive_car, two_level_sky
+from streetaug.augment.core import PinholeCamera, intrinsics_from_fov, pose_camera_to_transform
 from streetaug.augment.core.depth import ground_plane_depth
 from streetaug.augment.lighting.light import DistantLight, SunLight
-from streetaug.augment.render import RenderSettings, footprint, prepare_asset
-from streetaug.augment.render.bounce import BounceLight
+from streetaug.augment.render import RenderSettings, footprint
 from streetaug.augment.render.footprint import fade_weight
-from streetaug.augment.render.shadow import render_shadow
 
 W, H = 480, 270
 K = intrinsics_from_fov(W, H, 70.0)
@@ -22,20 +20,14 @@ T = pose_camera_to_transform(1.0, 1.5, 12.0, 30.0)
 
 def _light(elev_deg: float, az_deg: float) -> DistantLight:
     """Uniform sky (0.3 above the horizon, 0.1 below) and a sun at ``elev_deg`` above the horizon (camera frame)."""
-    d = camera_envmap_directions(32, 64)
-    env = np.where((d @ UP > 0)[..., None], 0.3, 0.1).astype(np.float32) * np.ones(3, np.float32)
+    env = two_level_sky(UP, 0.3, 0.1)
     e, a = np.radians(elev_deg), np.radians(az_deg)
     s = np.array([np.cos(e) * np.sin(a), -np.sin(e), np.cos(e) * np.cos(a)])
     return DistantLight(env, SunLight(s, np.full(3, 3.0), np.radians(0.27)))
 
 
 def _ratio(light: DistantLight, settings: RenderSettings | None = None):
-    settings = settings or RenderSettings()
-    prep = prepare_asset(CAR)
-    box = footprint(CAMERA, CAR, T, light, settings).shadow_box
-    depth = ground_plane_depth(K, W, H, UP, 1.5)
-    sh = render_shadow(CAMERA, box, depth, light, prep, T, UP, settings, np.random.default_rng(0),
-                       BounceLight.build(light, prep, T, UP))
+    box, sh = plane_shadow(CAMERA, CAR, T, UP, light, ground_plane_depth(K, W, H, UP, 1.5), settings)
     return box, sh.ratio_rgb
 
 
