@@ -7,7 +7,7 @@ from render_fixtures import plane_shadow, primitive_car, two_level_sky
 from streetaug.augment.core import PinholeCamera, intrinsics_from_fov, pose_camera_to_transform
 from streetaug.augment.core.depth import ground_plane_depth
 from streetaug.augment.lighting.light import DistantLight, SunLight
-from streetaug.augment.render import RenderSettings, footprint
+from streetaug.augment.render import RenderSettings
 from streetaug.augment.render.footprint import fade_weight
 
 W, H = 480, 270
