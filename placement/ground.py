@@ -56,6 +56,11 @@ def ego_ground_plane(T_global_from_ego: np.ndarray, xy: np.ndarray) -> GroundPla
     return _plane_at(np.asarray(xy, float), T_global_from_ego[:3, 2].copy(), T_global_from_ego[:3, 3], "ego-plane", 0)
 
 
+def _height_on_level(up: np.ndarray, level: float, xy: np.ndarray) -> float:
+    """z below global x/y ``xy`` (2,) of the plane ``up . p = level`` (normal ``up``, e.g. the ego's)."""
+    return float((level - up[:2] @ xy) / up[2])
+
+
 def _fit_plane(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Least-squares plane through points (N, 3): (normal (3,), centroid (3,))."""
     c = points.mean(axis=0)
@@ -159,7 +164,7 @@ class LocalGroundFitter:
         up = self.T_global_from_ego[:3, 2]
         origin = self.T_global_from_ego[:3, 3]
         offset = float(np.median((bottoms - origin) @ up))  # heights above the ego's ground plane
-        z_boxes = float((offset + up @ origin - up[:2] @ xy) / up[2])  # that offset, below xy
+        z_boxes = _height_on_level(up, offset + up @ origin, xy)  # that offset, below xy
         if abs(plane.height_at(xy[None])[0] - z_boxes) <= self.config.ground_box_tolerance_m:
             return plane
         return _plane_at(xy, plane.normal_global.copy(), np.array([xy[0], xy[1], z_boxes]), "boxes", len(near))
@@ -191,7 +196,7 @@ class LocalGroundFitter:
         if spread[0] < 0.5**2:
             # points on one scan line: trust only the height, keep the ego's tilt (plane up . p = median)
             d = float(np.median(inl @ up))
-            z = (d - up[:2] @ xy) / up[2]
+            z = _height_on_level(up, d, xy)
             return _plane_at(xy, up.copy(), np.array([xy[0], xy[1], z]), source, len(inl))
         tilt = np.degrees(np.arccos(np.clip(abs(normal @ up), -1.0, 1.0)))
         if tilt > cfg.ground_max_tilt_deg:
