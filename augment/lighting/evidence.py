@@ -17,6 +17,7 @@ the camera frame.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property, lru_cache
 
 import cv2
 import numpy as np
@@ -57,6 +58,23 @@ class PreparedImage:
     K: np.ndarray
     surface_uv: np.ndarray | None = None
 
+    @cached_property
+    def ldr_max(self) -> np.ndarray:
+        """(h, w) the largest channel of ``ldr`` (computed once)."""
+        return np.maximum(np.maximum(self.ldr[..., 0], self.ldr[..., 1]), self.ldr[..., 2])
+
+    @cached_property
+    def clipped(self) -> np.ndarray:
+        """(h, w) bool, some channel is at or above ``SATURATED_LDR`` (its radiance is a lower bound)."""
+        return self.ldr_max >= SATURATED_LDR
+
+    @cached_property
+    def sky(self) -> np.ndarray:
+        """(h, w) bool :func:`sky_mask` with the default thresholds, LiDAR surfaces excluded (computed once)."""
+        mask = sky_mask(self.ldr, self.elevation, surface_uv=self.surface_uv)
+        mask.flags.writeable = False
+        return mask
+
 
 def downscale_image(image_rgb: np.ndarray, K: np.ndarray, max_width: int) -> tuple[np.ndarray, np.ndarray]:
     """The image shrunk (area filter) to at most ``max_width`` pixels wide, and its intrinsics."""
@@ -65,6 +83,20 @@ def downscale_image(image_rgb: np.ndarray, K: np.ndarray, max_width: int) -> tup
     w, h = max(int(round(W * f)), 8), max(int(round(H * f)), 8)
     small = cv2.resize(np.ascontiguousarray(image_rgb), (w, h), interpolation=cv2.INTER_AREA)
     return small, scale_intrinsics(K, w / W, h / H)
+
+
+# the contract's inverse response of every uint8 value (what ldr_uint8_to_hdr computes per pixel)
+_UINT8_TO_HDR = ldr_uint8_to_hdr(np.arange(256, dtype=np.uint8)).astype(np.float64)
+_UINT8_TO_LDR = np.arange(256, dtype=np.float64) / 255.0
+
+
+@lru_cache(maxsize=16)
+def _pixel_rays(K_bytes: bytes, w: int, h: int) -> np.ndarray:
+    """(h, w, 3) read-only unit rays of a pinhole camera (intrinsics as ``K.tobytes()``), cached: a camera's
+    images share them."""
+    rays = PinholeCamera(np.frombuffer(K_bytes, np.float64).reshape(3, 3).copy(), w, h).rays()
+    rays.flags.writeable = False
+    return rays
 
 
 def prepare_image(image_rgb: np.ndarray, K: np.ndarray, up_cam: np.ndarray,
@@ -81,7 +113,7 @@ def prepare_image(image_rgb: np.ndarray, K: np.ndarray, up_cam: np.ndarray,
     check_shape(K, (3, 3), "K")
     small, Ks = downscale_image(image_rgb, K, WORK_WIDTH)
     h, w = small.shape[:2]
-    rays = PinholeCamera(Ks, w, h).rays()
+    rays = _pixel_rays(np.ascontiguousarray(Ks, np.float64).tobytes(), w, h)
     elevation = np.arcsin(np.clip(rays @ up_cam, -1.0, 1.0))
     surface_uv = None
     if lidar_points_cam is not None:
@@ -89,7 +121,7 @@ def prepare_image(image_rgb: np.ndarray, K: np.ndarray, up_cam: np.ndarray,
         pts = pts[np.linalg.norm(pts, axis=1) >= SURFACE_MIN_RANGE_M]
         uv, _ = project_points(Ks, pts)
         surface_uv = uv[np.isfinite(uv).all(axis=1)]
-    return PreparedImage(ldr_uint8_to_hdr(small).astype(np.float64), small / 255.0, rays, elevation, Ks, surface_uv)
+    return PreparedImage(_UINT8_TO_HDR[small], _UINT8_TO_LDR[small], rays, elevation, Ks, surface_uv)
 
 
 def box_shadow_evidence(work: PreparedImage, T_cam_from_global: np.ndarray, boxes: list[Box],
@@ -109,7 +141,6 @@ def box_shadow_evidence(work: PreparedImage, T_cam_from_global: np.ndarray, boxe
         return None
     h, w = work.hdr.shape[:2]
     lum = luminance(work.hdr)
-    lum_ldr = work.ldr.max(axis=-1)
     sun = sun_dir_global / np.linalg.norm(sun_dir_global)
     shadows, silhouettes, items = [], np.zeros((h, w), np.uint8), []
     for box in boxes:
@@ -131,7 +162,7 @@ def box_shadow_evidence(work: PreparedImage, T_cam_from_global: np.ndarray, boxe
         return None
     all_shadows = unary_union(shadows)
 
-    free = (silhouettes == 0) & (lum_ldr < SATURATED_LDR)
+    free = (silhouettes == 0) & ~work.clipped
     ratios, lit_values, tokens = [], [], []
     for shadow, z0, token in items:
         in_shadow = _rasterise_ground(shadow, z0, T_cam_from_global, work.K, (h, w)) & free
@@ -197,15 +228,15 @@ def otsu_log(values: np.ndarray) -> tuple[float, float, float, float]:
 def ground_evidence(work: PreparedImage, up_cam: np.ndarray, camera_height_m: float) -> dict | None:
     """Sunlit / shadow / median ground luminance, or None when too little ground is visible."""
     cos_down = -(work.rays_cam @ up_cam)  # > 0 for rays going down
-    with np.errstate(divide="ignore"):
-        dist = np.where(cos_down > 1e-3, camera_height_m / np.maximum(cos_down, 1e-3), np.inf)
-    points = work.rays_cam * np.where(np.isfinite(dist), dist, 0.0)[..., None]
-    lateral = np.abs(points[..., 0])
+    down = cos_down > 1e-3
+    dist = camera_height_m / np.maximum(cos_down, 1e-3)  # along the ray to the ground (rays going down)
+    lateral = np.abs(work.rays_cam[..., 0] * dist)
     horizontal = np.sqrt(np.maximum(dist**2 - camera_height_m**2, 0.0))
-    mask = (horizontal > 4.0) & (horizontal < 40.0) & (lateral < 8.0) & np.isfinite(dist)
-    mask &= work.ldr.max(axis=-1) < SATURATED_LDR
+    mask = down & (horizontal > 4.0) & (horizontal < 40.0) & (lateral < 8.0) & ~work.clipped
     # Roads are grey: drop saturated colours (vegetation, barriers, painted cars).
-    chroma = (work.ldr.max(axis=-1) - work.ldr.min(axis=-1)) / np.maximum(work.ldr.max(axis=-1), 1e-3)
+    ldr = work.ldr
+    ldr_min = np.minimum(np.minimum(ldr[..., 0], ldr[..., 1]), ldr[..., 2])
+    chroma = (work.ldr_max - ldr_min) / np.maximum(work.ldr_max, 1e-3)
     grey = mask & (chroma < 0.25)
     if grey.sum() >= 0.3 * mask.sum():
         mask = grey
@@ -263,8 +294,9 @@ def sky_mask(ldr: np.ndarray, elevation: np.ndarray, min_elevation_deg: float = 
 
 
 def image_sky_mask(work: PreparedImage) -> np.ndarray:
-    """(h, w) bool :func:`sky_mask` of a prepared image with the default thresholds (LiDAR surfaces excluded)."""
-    return sky_mask(work.ldr, work.elevation, surface_uv=work.surface_uv)
+    """(h, w) bool :func:`sky_mask` of a prepared image with the default thresholds (LiDAR surfaces excluded);
+    computed once per image (``work.sky``), read-only."""
+    return work.sky
 
 
 def sky_evidence(work: PreparedImage, sky_mask: np.ndarray) -> dict | None:
@@ -273,7 +305,7 @@ def sky_evidence(work: PreparedImage, sky_mask: np.ndarray) -> dict | None:
     frac = float(sky_mask.mean())
     if sky_mask.sum() < 30:
         return None
-    unsat = sky_mask & (work.ldr.max(axis=-1) < SATURATED_LDR)
+    unsat = sky_mask & ~work.clipped
     out = {"fraction": frac, "saturated_fraction": float(1.0 - unsat.sum() / sky_mask.sum())}
     # colour and level need a sizeable unclipped part of the sky: a few unclipped pixels of a clipped sky are
     # its horizon haze, not its colour

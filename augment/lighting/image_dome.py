@@ -27,8 +27,10 @@ import numpy as np
 
 from dataclasses import dataclass
 
-from ..core import camera_dir_to_lonlat, camera_envmap_directions, check_shape, clipped_to_lower_bound, luminance
-from .evidence import SATURATED_LDR, PreparedImage, image_sky_mask
+from functools import lru_cache
+
+from ..core import SATURATION_LDR, camera_envmap_directions, check_shape, ldr_to_hdr, luminance
+from .evidence import PreparedImage
 from .fill import UNSEEN_KEEP, mean_colour_radiance, shrink_unseen
 from .skydome import blend_observed
 
@@ -37,6 +39,25 @@ MIN_BAND_CELLS = 3  # a band needs this many seen map cells to carry a ratio
 BLEND_DEG = 8.0
 MAX_LOG_GAIN = np.log(20.0)
 MIN_SKY_PIXELS = 20
+# where the response saturates: a clipped pixel's channels are "at least" this (core.clipped_to_lower_bound)
+_SATURATION_RADIANCE = ldr_to_hdr(np.full(3, SATURATION_LDR))
+
+
+@lru_cache(maxsize=4)
+def _map_directions(H: int, W: int) -> np.ndarray:
+    """(H, W, 3) read-only unit directions of a camera-frame equirect map's cells (cached)."""
+    d = camera_envmap_directions(H, W)
+    d.flags.writeable = False
+    return d
+
+
+def map_cells(rays: np.ndarray, H: int, W: int) -> np.ndarray:
+    """(N,) flat index (row * W + col) of the camera-frame equirect cell holding each unit ray (N, 3)."""
+    lon = np.arctan2(rays[:, 0], rays[:, 2])
+    lat = np.arcsin(np.clip(-rays[:, 1], -1.0, 1.0))
+    col = np.clip(((lon / (2 * np.pi) + 0.5) * W).astype(np.int64), 0, W - 1)
+    row = np.clip(((0.5 - lat / np.pi) * H).astype(np.int64), 0, H - 1)
+    return row * W + col
 
 
 @dataclass(frozen=True)
@@ -60,14 +81,15 @@ def seen_pixels(work: PreparedImage, R_map_from_cam: np.ndarray | None = None, g
                 sky: np.ndarray | None = None) -> SeenPixels:
     """A prepared image's pixels turned into the map's frame (``R_map_from_cam``, default identity) and scale
     (radiance x ``gain``: the map camera's image units per this camera's); ``sky`` (h, w) defaults to
-    :func:`.evidence.image_sky_mask`."""
+    ``work.sky`` (:func:`.evidence.image_sky_mask`)."""
     rays = work.rays_cam.reshape(-1, 3)
     if R_map_from_cam is not None:
         rays = rays @ np.asarray(R_map_from_cam, np.float64).T
-    clipped = work.ldr.reshape(-1, 3).max(axis=1) >= SATURATED_LDR
-    is_sky = (image_sky_mask(work) if sky is None else np.asarray(sky, bool)).reshape(-1)
-    rad = clipped_to_lower_bound(work.hdr.reshape(-1, 3), work.ldr.reshape(-1, 3))  # clipped: a lower bound
-    return SeenPixels(rays, rad * float(gain), clipped, is_sky)
+    clipped = work.clipped.reshape(-1)
+    is_sky = (work.sky if sky is None else np.asarray(sky, bool)).reshape(-1)
+    rad = work.hdr.reshape(-1, 3) * float(gain)  # a copy: the clipped pixels are lowered in place
+    rad[clipped] = np.minimum(rad[clipped], _SATURATION_RADIANCE * float(gain))  # clipped: a lower bound
+    return SeenPixels(rays, rad, clipped, is_sky)
 
 
 def band_log_gains(log_ratio_cells: np.ndarray, cell_elev_deg: np.ndarray, all_elev_deg: np.ndarray,
@@ -115,10 +137,7 @@ def image_corrected_envmap(model_envmap: np.ndarray, pixels: SeenPixels | list[S
     rays = np.concatenate([p.rays for p in pixels])
     rad = np.concatenate([p.radiance for p in pixels])
     clipped = np.concatenate([p.clipped for p in pixels])
-    lon, lat = camera_dir_to_lonlat(rays)
-    col = np.clip(((lon / (2 * np.pi) + 0.5) * W).astype(np.int64), 0, W - 1)
-    row = np.clip(((0.5 - lat / np.pi) * H).astype(np.int64), 0, H - 1)
-    cell = row * W + col
+    cell = map_cells(rays, H, W)
     ok = ~clipped
     # a cell's mean over all its pixels, clipped ones at their recorded value: exact where nothing clipped, a
     # lower bound where something did (a fully clipped cell keeps the model if that is brighter)
@@ -130,7 +149,7 @@ def image_corrected_envmap(model_envmap: np.ndarray, pixels: SeenPixels | list[S
     all_clipped = ((n_clipped == count) & (count > 0)).reshape(H, W)
     floor = np.where(all_clipped, luminance(mean_obs), 0.0)
     up = np.asarray(up_cam, np.float64) / np.linalg.norm(up_cam)
-    elev = np.degrees(np.arcsin(np.clip(camera_envmap_directions(H, W) @ up, -1.0, 1.0)))
+    elev = np.degrees(np.arcsin(np.clip(_map_directions(H, W) @ up, -1.0, 1.0)))
     stats = {"seen_fraction": float(seen.mean()), "bands": 0, "pixels": int(len(rays)), "clipped_pixels": int(clipped.sum())}
     if not seen.any():
         return model_envmap.astype(np.float32), stats

@@ -224,9 +224,12 @@ def sky_radiance(
     shape_dir, clear_gain, overcast_zenith, sky_e = _sky_components(sun, turbidity, cloud_cover)
     cos_theta = dirs[:, 2]
     up = cos_theta >= 0.0
-    clear = clear_gain * _clear_sky_shape(dirs, shape_dir, turbidity)
-    overcast = overcast_zenith * ((1.0 + 2.0 * np.clip(cos_theta, 0.0, 1.0)) / 3.0)[:, None] * OVERCAST_RGB[None]
-    sky = (1.0 - cloud_cover) * clear + cloud_cover * overcast
+    sky = 0.0  # the clear / overcast blend; a weight of 0 skips its component's work
+    if cloud_cover < 1.0:
+        sky = (1.0 - cloud_cover) * (clear_gain * _clear_sky_shape(dirs, shape_dir, turbidity))
+    if cloud_cover > 0.0:
+        overcast = overcast_zenith * ((1.0 + 2.0 * np.clip(cos_theta, 0.0, 1.0)) / 3.0)[:, None] * OVERCAST_RGB[None]
+        sky = sky + cloud_cover * overcast
     sun_e = sun_irradiance(sun, turbidity, cloud_cover) * max(float(sun[2]), 0.0)
     ground = ground_albedo * (sun_e + sky_e) / np.pi
     out = np.where(up[:, None], sky, ground[None, :])
