@@ -12,6 +12,8 @@ scale. :func:`build_volume` runs these steps (all vectorised):
   height of the structures the cameras saw whole, else ``DEFAULT_CANYON_HEIGHT_M``) — the same height on both
   sides of the street (symmetry) and behind the camera; standing structures thickened away from the centre so
   that rays cannot step over them;
+* *sky carving* (:func:`sky_carved`): what the prior added is removed again where a camera's sky pixel's ray
+  passes through it (the camera saw the sky there, so nothing stands in between);
 * *surfaces* (:func:`surfaces_and_normals`): occupied voxels with a free neighbour, normals from the occupancy
   gradient;
 * *unobserved surfaces are shaded* (:func:`shade_surfaces`): ``a max(n.s, 0) tau_sun + b (1 + n_z) / 2`` (sun
@@ -49,6 +51,8 @@ LIDAR_MAX_ELEVATION_DEG = 10.7  # nuScenes HDL-32E: -30.67 .. +10.67 deg
 SIGMA_SURFACE = 2.0  # lobe sharpness of surfaces (broad: near-diffuse)
 EGO_BOX_EGO_M = ((-1.5, 4.0), (-1.2, 1.2), (-0.5, 2.2))  # LiDAR returns inside the ego car are dropped
 THICKEN_VOXELS = 2
+SKY_CARVE_STRIDE = 4  # every n-th sky pixel's ray carves
+SKY_CARVE_SAMPLES = 96  # samples along a carving ray (quadratic spacing: dense near the camera)
 SHADOW_SAMPLES = 48  # samples of the sun-visibility rays that shade unobserved surfaces
 STREET_PRIOR_WEIGHT = 3.0  # the shading model counts as this many observed voxels of a street cell (see .fill);
 # chosen a priori (a cell needs a few observed voxels to outweigh the model), not fitted to any scene
@@ -218,6 +222,26 @@ def canyon_prior(grid: LogGrid, occ: np.ndarray, obs: ObservedVoxels, stats: dic
     return occ
 
 
+def sky_carved(grid: LogGrid, observations: list[ViewObservation], stride: int = SKY_CARVE_STRIDE,
+               n_samples: int = SKY_CARVE_SAMPLES) -> np.ndarray:
+    """(X, Y, Z) bool voxels crossed by the rays of the cameras' sky pixels (every ``stride``-th), from each
+    camera's centre to where the ray leaves the grid."""
+    carved = np.zeros(grid.n_voxels, bool)
+    lo, hi = grid.bounds()
+    frac = ((np.arange(n_samples) + 0.5) / n_samples) ** 2
+    for o in observations:
+        d = o.far_dirs[o.far_is_sky][::stride]
+        if not len(d):
+            continue
+        c = np.asarray(o.camera_centre, np.float64)
+        safe = np.where(np.abs(d) < 1e-12, 1e-12, d)
+        t_exit = np.maximum((lo - c) / safe, (hi - c) / safe).min(axis=1).clip(min=0.0)
+        pos = c[None, None] + (t_exit[:, None] * frac[None])[..., None] * d[:, None, :]
+        flat, inside = grid.flat_index(torch.from_numpy(pos.reshape(-1, 3)))
+        carved[flat.numpy()[inside.numpy()]] = True
+    return carved.reshape(grid.shape)
+
+
 def surfaces_and_normals(grid: LogGrid, occ: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(surface (X, Y, Z) bool: occupied voxels with a free 6-neighbour, unit normals (X, Y, Z, 3): minus the
     metric gradient of the blurred occupancy; up in the ground)."""
@@ -357,7 +381,11 @@ def build_volume(grid: LogGrid, observations: list[ViewObservation], lidar_point
     stats: dict = {}
     obs = observed_voxels(grid, observations)
     stats["observed_voxels"] = int(obs.observed.sum())
-    occ = canyon_prior(grid, occupancy(grid, obs.observed, lidar_points_vol, stats), obs, stats)
+    occ_seen = occupancy(grid, obs.observed, lidar_points_vol, stats)
+    occ = canyon_prior(grid, occ_seen, obs, stats)
+    carved = sky_carved(grid, observations) & occ & ~occ_seen
+    occ &= ~carved
+    stats["sky_carved_voxels"] = int(carved.sum())
     surface, normal = surfaces_and_normals(grid, occ)
     surf = surface_lighting(grid, occ, surface, normal, obs.observed, light, sky_world)
     ego_forward = next((o.ego_forward for o in observations if o.ego_forward is not None), None)
