@@ -34,6 +34,7 @@ from .exposure import exposure_ratios
 from .fill import mean_colour_radiance
 from .levels import L2_GRID, L3_GRID, HeightMap, choose_level, predicted_errors, region_points
 from .observe import ViewObservation, observe_view, restrict_to_grid
+from .seen_surfaces import SeenSurfaces
 from .parametric import DEFAULT_TURBIDITY, GROUND_ALBEDO, ViewInputs, l0_estimate
 from .skydome import build_sky_dome, camera_envmap_to_world, model_sky_world
 from .types import LightingEstimate, SampleLighting, join_reasons, json_clean
@@ -141,7 +142,8 @@ def sun_factor(dome: np.ndarray, model: np.ndarray) -> tuple[float, str]:
 
 def build_hybrid(ref_est: LightingEstimate, T_vol_from_cam: np.ndarray, observations: list[ViewObservation],
                  lidar_vol: np.ndarray | None, grid: LogGrid, timing: dict) -> tuple[HybridLighting, dict]:
-    """Sky dome (model corrected by the images), the sun (L1's, following the dome's correction) and the volume."""
+    """Sky dome (model corrected by the images), the sun (L1's, following the dome's correction), the volume and
+    the cameras' seen surfaces."""
     t = time.perf_counter()
     model = sky_model_world(ref_est, T_vol_from_cam, DOME_HEIGHT, DOME_WIDTH)
     seen = [o.radiance for o in observations if len(o.radiance)] + [o.far_radiance for o in observations
@@ -160,9 +162,14 @@ def build_hybrid(ref_est: LightingEstimate, T_vol_from_cam: np.ndarray, observat
     light = DistantSun(sun_dir_vol, np.zeros(3) if sun_irr is None else sun_irr, sky_horizontal_irradiance_world(dome))
     params_t, out["volume"] = build_volume(grid, observations, lidar_vol, light, dome, GROUND_ALBEDO)
     timing["volume"] = time.perf_counter() - t
+    t = time.perf_counter()
+    surfaces = SeenSurfaces.from_views([o.depth_view for o in observations if o.depth_view is not None])
+    timing["seen_surfaces"] = time.perf_counter() - t
+    out["seen_surfaces"] = {"faces": 0 if surfaces is None else surfaces.n_faces,
+                            "cameras": [] if surfaces is None else list(surfaces.channels)}
     hybrid = HybridLighting(
         torch.from_numpy(dome), sun_dir_vol, None if sun_irr is None else torch.from_numpy(sun_irr.astype(np.float32)),
-        grid=grid, params=params_t,
+        grid=grid, params=params_t, seen=surfaces,
     )
     return hybrid, out
 

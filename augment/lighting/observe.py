@@ -19,6 +19,7 @@ from ...datasets.sample import CameraView
 from ..core import PinholeCamera, check_shape, clipped_to_lower_bound, ldr_uint8_to_hdr, transform_points
 from ..core.depth import densify_lidar_depth
 from .evidence import PreparedImage, downscale_image, image_sky_mask, prepare_image
+from .seen_surfaces import DepthView
 from .volume import LogGrid
 
 WORK_WIDTH = 480
@@ -42,6 +43,7 @@ class ViewObservation:
         far_saturated: (F,) bool, the pixel is clipped (its radiance is a lower bound).
         camera_centre: (3,) camera centre in the volume frame.
         ego_forward: (3,) unit forward axis of the ego vehicle in the volume frame (the street's direction), or None.
+        depth_view: the whole depth and radiance images (the seen-surface mesh of :mod:`.seen_surfaces`), or None.
     """
 
     channel: str
@@ -55,6 +57,7 @@ class ViewObservation:
     far_saturated: np.ndarray
     camera_centre: np.ndarray
     ego_forward: np.ndarray | None = None
+    depth_view: DepthView | None = None
 
 
 def extend_facades(depth_m: np.ndarray, sky: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -144,6 +147,7 @@ def observe_view(view: CameraView, T_vol_from_cam: np.ndarray, exposure_ratio: f
         channel=view.channel, points=p_vol, radiance=hdr[near], view_dirs=view_dirs, capped=capped,
         far_dirs=d_far, far_radiance=hdr[far], far_is_sky=sky[far], far_saturated=ldr_max[far] >= SATURATED_LDR,
         camera_centre=centre, ego_forward=ego_forward_vol(view, T_vol_from_cam),
+        depth_view=DepthView(view.channel, depth.astype(np.float32), hdr, Ks, np.asarray(T_vol_from_cam, np.float64)),
     )
 
 

@@ -19,6 +19,12 @@ respect to the sky dome, the sun irradiance and the volume parameters.
 * **Radiance query** (paper Eq. 1): K equi-spaced samples at ``t_k = (k - 1/2) t_exit / K`` between the
   point and where the ray leaves the grid, nearest-neighbour voxel lookup, alpha compositing, then the sky:
   ``L(x, l) = sum_k tau_{k-1} alpha_k G(-l; xi_k) + tau_K L_env(l)``, ``tau_k = prod_{i<=k} (1 - alpha_i)``.
+* **Seen surfaces** ``seen`` (optional, :mod:`.seen_surfaces`): the input cameras' depth meshes textured with
+  their pixels. A ray that hits one takes the hit's pixel radiance; only the rays that miss every mesh go
+  through Eq. 1 (the mesh is the precise geometry of what was seen: on scene-0916 letting voxels in front of
+  the hit still block -- 25 % or 50 % of the hit distance -- lost 0.2-0.8 dB on the novel view and 1-7 dB on
+  the self view). The mesh radiance is a constant; the rest stays differentiable.
+  :meth:`HybridLighting.transmittance` (sun visibility, shadows) is the volume's alone.
 """
 
 from __future__ import annotations
@@ -43,6 +49,7 @@ from ..core import (
     write_exr,
     write_json_atomic,
 )
+from .seen_surfaces import SeenSurfaces
 
 N_CHANNELS = 8
 CH_COLOR, CH_AXIS, CH_SIGMA, CH_ALPHA = slice(0, 3), slice(3, 6), 6, 7
@@ -240,6 +247,7 @@ class HybridLighting:
         grid: the volume's grid, or None (sky only).
         params: (X, Y, Z, 8) float32 tensor of VSG parameters (see module doc), or None.
         n_samples: K of Eq. 1.
+        seen: the input cameras' seen surfaces at image resolution, or None (volume and sky only).
     """
 
     sky_world: torch.Tensor
@@ -249,6 +257,7 @@ class HybridLighting:
     grid: LogGrid | None = None
     params: torch.Tensor | None = None
     n_samples: int = DEFAULT_SAMPLES
+    seen: SeenSurfaces | None = None
     _envmap_cache: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
@@ -296,10 +305,22 @@ class HybridLighting:
         alpha = self.params.reshape(-1, N_CHANNELS)[:, CH_ALPHA][flat] * inside
         return flat, alpha, inside
 
-    def _radiance_chunk(self, points: torch.Tensor, dirs: torch.Tensor, include_sun: bool) -> tuple[torch.Tensor, torch.Tensor]:
+    def _radiance_chunk(self, points: torch.Tensor, dirs: torch.Tensor, include_sun: bool) -> torch.Tensor:
+        """Radiance (N, 3) of a chunk: the seen surfaces where a ray hits one, else :meth:`_volume_chunk`."""
+        if self.seen is None:
+            return self._volume_chunk(points, dirs, include_sun)
+        hit, _, mesh_rgb = self.seen.trace(points.detach().numpy(), dirs.detach().numpy())
+        miss = torch.from_numpy(np.flatnonzero(~hit))
+        out = torch.from_numpy(mesh_rgb).to(self.sky_world.dtype)
+        if len(miss):
+            out = out.index_put((miss,), self._volume_chunk(points[miss], dirs[miss], include_sun))
+        return out
+
+    def _volume_chunk(self, points: torch.Tensor, dirs: torch.Tensor, include_sun: bool) -> torch.Tensor:
+        """Eq. 1 (N, 3) for a chunk of rays (the sky dome and sun alone without a volume)."""
         env = self.env_radiance(dirs, include_sun)
         if self.params is None:
-            return env, torch.ones(len(dirs), dtype=env.dtype)
+            return env
         flat, alpha, _ = self._march(points, dirs)
         trans = torch.cumprod(1.0 - alpha, dim=1)  # tau_k
         trans_before = torch.cat([torch.ones_like(trans[:, :1]), trans[:, :-1]], dim=1)  # tau_{k-1}
@@ -314,13 +335,13 @@ class HybridLighting:
             sigma2 = vox[:, CH_SIGMA].square().clamp(min=1e-6)
             lobe = vox[:, CH_COLOR] * torch.exp(-(1.0 - cosang) / sigma2)[:, None]
             out = out.index_add(0, ray, weight[ray, k][:, None] * lobe)
-        return out, trans[:, -1]
+        return out
 
     def radiance(self, points: torch.Tensor | np.ndarray, dirs: torch.Tensor | np.ndarray,
                  include_sun: bool = True) -> torch.Tensor:
         """Eq. 1: radiance (N, 3) arriving at points (N, 3) from unit directions (N, 3) (pointing away), batched."""
         points, dirs = _as_rays(points, dirs, self.sky_world.dtype)
-        outs = [self._radiance_chunk(points[i : i + CHUNK_RAYS], dirs[i : i + CHUNK_RAYS], include_sun)[0]
+        outs = [self._radiance_chunk(points[i : i + CHUNK_RAYS], dirs[i : i + CHUNK_RAYS], include_sun)
                 for i in range(0, len(points), CHUNK_RAYS)]
         return torch.cat(outs) if outs else torch.zeros((0, 3), dtype=self.sky_world.dtype)
 
@@ -379,7 +400,7 @@ class HybridLighting:
         tensors are unchanged: an object that several cameras see is traced once and then rotated into each
         camera (:func:`world_to_frame_envmap`; 0.4 % mean difference from tracing the camera's map directly)."""
         p = np.asarray(point, dtype=np.float64)
-        versions = (self.sky_world._version, -1 if self.params is None else self.params._version)
+        versions = (self.sky_world._version, -1 if self.params is None else self.params._version, id(self.seen))
         key = (tuple(np.round(p, 3).tolist()), height, width, versions)
         if key not in self._envmap_cache:
             if len(self._envmap_cache) >= ENVMAP_CACHE_SIZE:
@@ -412,7 +433,8 @@ class HybridLighting:
     # ------------------------------------------------------------------ files
 
     def save(self, out_dir: str | Path, extra: dict | None = None) -> dict:
-        """Write ``sky_world.exr`` (dome), ``volume.npz`` (occupied voxels only, float16) and ``hybrid.json``.
+        """Write ``sky_world.exr`` (dome), ``volume.npz`` (occupied voxels only, float16), ``seen_surfaces.npz``
+        (if any; :meth:`SeenSurfaces.save`) and ``hybrid.json``.
 
         Empty voxels (alpha 0) do not affect the radiance; they load back as :func:`empty_params` voxels.
         """
@@ -429,6 +451,9 @@ class HybridLighting:
                                 values=flat[keep].astype(np.float16))
             write_bytes_atomic(out / "volume.npz", buf.getvalue())
             files["volume"] = "volume.npz"
+        if self.seen is not None:
+            self.seen.save(out / "seen_surfaces.npz")
+            files["seen_surfaces"] = "seen_surfaces.npz"
         doc = {
             "schema": VOLUME_SCHEMA,
             "frame": "volume frame: z up, metres (see streetaug.augment.lighting.volume)",
@@ -471,12 +496,13 @@ class HybridLighting:
             params = empty_params(grid)
             params.reshape(-1, N_CHANNELS)[torch.from_numpy(index.astype(np.int64))] = torch.from_numpy(
                 values.astype(np.float32))
+        seen = SeenSurfaces.load(d / doc["files"]["seen_surfaces"]) if "seen_surfaces" in doc["files"] else None
         return HybridLighting(
             sky_world=sky,
             sun_dir=None if sun is None else np.array(sun["direction"]),
             sun_irradiance=None if sun is None else torch.tensor(sun["irradiance_rgb"], dtype=torch.float32),
             sun_half_angle_rad=float(sun["half_angle_rad"]) if sun else float(np.radians(0.2665)),
-            grid=grid, params=params, n_samples=int(doc.get("n_samples", DEFAULT_SAMPLES)),
+            grid=grid, params=params, n_samples=int(doc.get("n_samples", DEFAULT_SAMPLES)), seen=seen,
         )
 
 

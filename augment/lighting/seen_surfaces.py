@@ -1,0 +1,216 @@
+"""Seen surfaces at image resolution: each input camera's dense depth as a textured triangle mesh.
+
+The VSG volume holds one lobe colour per voxel (1-3 m at 20 m), far coarser than a pixel. This layer keeps
+what the cameras saw at their own resolution: every camera's depth map (<= 480 px, :mod:`.observe`)
+subsampled every ``GEOMETRY_STEP_PX`` pixels becomes a grid mesh in the volume frame (z up, metres), each
+vertex carrying its pixel coordinate (u, v) in that camera's radiance image (linear, the reference
+radiometric scale; pixel centres at integer coordinates). Neighbouring pixels are joined; triangles across
+depth discontinuities (vertex depths more than ``MAX_DEPTH_RATIO`` apart; ``MAX_GROUND_DEPTH_RATIO`` for
+ground triangles -- all three vertices below ``GROUND_HEIGHT_M``, normal within ``GROUND_MAX_TILT_DEG`` of
+vertical -- since the ground is continuous but grazing far away) are dropped; sky pixels and pixels
+without depth are not in the mesh.
+
+A ray query (:meth:`SeenSurfaces.trace`) finds the closest hit over all cameras' meshes (Embree) and returns
+the owning camera's radiance sampled bilinearly at the interpolated pixel coordinate. The radiance is a
+constant (not a function of the volume's parameters).
+"""
+
+from __future__ import annotations
+
+import functools
+import io
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..core import InputError, check_shape, transform_points, write_bytes_atomic
+from ..core.raycast import RayScene
+
+GEOMETRY_STEP_PX = 2  # 480 px radiance -> 240 px geometry
+MAX_DEPTH_RATIO = 1.3
+MAX_GROUND_DEPTH_RATIO = 2.5
+GROUND_HEIGHT_M = 0.3  # vertices below this height (volume frame) may be on the ground
+GROUND_MAX_TILT_DEG = 25.0
+MAX_DEPTH_M = 300.0
+T_MIN_M = 0.05  # hits nearer than this to the ray's origin are ignored (a point on the road)
+SEEN_SCHEMA = "streetaug.seen_surfaces/1"
+
+
+@dataclass(frozen=True)
+class DepthView:
+    """One camera's depth and radiance images, what its mesh is built from.
+
+    Attributes:
+        channel: camera channel.
+        depth_m: (h, w) float32 camera-z depth, inf where unknown (sky).
+        radiance: (h, w, 3) float32 linear radiance, reference scale.
+        K: (3, 3) intrinsics of these images.
+        T_vol_from_cam: (4, 4) camera -> volume frame.
+    """
+
+    channel: str
+    depth_m: np.ndarray
+    radiance: np.ndarray
+    K: np.ndarray
+    T_vol_from_cam: np.ndarray
+
+
+def depth_mesh(view: DepthView, step: int = GEOMETRY_STEP_PX) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A view's depth as a grid mesh: (vertices (V, 3) volume frame, faces (F, 3) int64, pixel uv (V, 2)).
+
+    Vertices sit at every ``step``-th pixel (rows and columns); a quad's two triangles are kept where all three
+    vertices have a finite depth and pass the depth-ratio test (see module doc).
+    """
+    depth = np.asarray(view.depth_m, dtype=np.float64)
+    check_shape(depth, ("H", "W"), "depth_m")
+    rows = np.arange(0, depth.shape[0], step)
+    cols = np.arange(0, depth.shape[1], step)
+    u, v = np.meshgrid(cols.astype(np.float64), rows.astype(np.float64))
+    d = depth[np.ix_(rows, cols)]
+    d = np.where(d <= MAX_DEPTH_M, d, np.inf)
+    uv = np.stack([u, v], axis=-1).reshape(-1, 2)
+    rays = np.concatenate([uv, np.ones((len(uv), 1))], axis=1) @ np.linalg.inv(np.asarray(view.K, np.float64)).T
+    finite = np.isfinite(d).reshape(-1)
+    p_cam = rays * np.where(finite, d.reshape(-1), 0.0)[:, None]
+    vertices = transform_points(np.asarray(view.T_vol_from_cam, np.float64), p_cam)
+    h, w = d.shape
+    idx = np.arange(h * w).reshape(h, w)
+    a, b, c, e = idx[:-1, :-1].ravel(), idx[:-1, 1:].ravel(), idx[1:, :-1].ravel(), idx[1:, 1:].ravel()
+    faces = np.concatenate([np.stack([a, c, b], 1), np.stack([b, c, e], 1)])
+    fd = d.reshape(-1)[faces]
+    ok = np.isfinite(fd).all(axis=1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        ratio = fd.max(axis=1) / fd.min(axis=1)
+    tri = vertices[faces]
+    normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    flat = np.abs(normal[:, 2]) >= np.cos(np.radians(GROUND_MAX_TILT_DEG)) * np.linalg.norm(normal, axis=1)
+    ground = (tri[..., 2] < GROUND_HEIGHT_M).all(axis=1) & flat
+    ok &= ratio <= np.where(ground, MAX_GROUND_DEPTH_RATIO, MAX_DEPTH_RATIO)
+    faces = faces[ok]
+    used = np.unique(faces)
+    remap = np.full(len(vertices), -1, np.int64)
+    remap[used] = np.arange(len(used))
+    return vertices[used], remap[faces], uv[used]
+
+
+@dataclass(frozen=True)
+class SeenSurfaces:
+    """All input cameras' depth meshes, textured by their radiance images (see module doc).
+
+    Attributes:
+        vertices: (V, 3) float32 volume-frame positions, metres.
+        faces: (F, 3) int32 vertex indices.
+        pixel_uv: (V, 2) float32 each vertex's pixel coordinate in its camera's texture.
+        face_camera: (F,) int16 index of the camera that owns each face.
+        textures: (C, h, w, 3) float32 linear radiance per camera (reference scale; zero-padded to one size).
+        channels: (C,) camera channels.
+    """
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    pixel_uv: np.ndarray
+    face_camera: np.ndarray
+    textures: np.ndarray
+    channels: tuple[str, ...]
+
+    def __post_init__(self) -> None:
+        check_shape(self.vertices, ("V", 3), "vertices")
+        check_shape(self.faces, ("F", 3), "faces")
+        check_shape(self.pixel_uv, (len(self.vertices), 2), "pixel_uv")
+        check_shape(self.face_camera, (len(self.faces),), "face_camera")
+        check_shape(self.textures, (len(self.channels), "h", "w", 3), "textures")
+        if len(self.faces) == 0:
+            raise ValueError("SeenSurfaces: no faces (use None for no seen surfaces)")
+
+    @staticmethod
+    def from_views(views: list[DepthView], step: int = GEOMETRY_STEP_PX) -> "SeenSurfaces | None":
+        """The meshes of ``views`` in one layer, or None when no view has a face."""
+        verts, faces, uvs, owner, kept = [], [], [], [], []
+        offset = 0
+        for view in views:
+            v, f, uv = depth_mesh(view, step)
+            if not len(f):
+                continue
+            verts.append(v)
+            faces.append(f + offset)
+            uvs.append(uv)
+            owner.append(np.full(len(f), len(kept), np.int16))
+            kept.append(view)
+            offset += len(v)
+        if not kept:
+            return None
+        h = max(v.radiance.shape[0] for v in kept)
+        w = max(v.radiance.shape[1] for v in kept)
+        tex = np.zeros((len(kept), h, w, 3), np.float32)
+        for i, view in enumerate(kept):
+            r = np.asarray(view.radiance, np.float32)
+            tex[i, : r.shape[0], : r.shape[1]] = r
+        return SeenSurfaces(np.concatenate(verts).astype(np.float32), np.concatenate(faces).astype(np.int32),
+                            np.concatenate(uvs).astype(np.float32), np.concatenate(owner), tex,
+                            tuple(v.channel for v in kept))
+
+    @functools.cached_property
+    def scene(self) -> RayScene:
+        return RayScene(self.vertices, self.faces)
+
+    def trace(self, origins: np.ndarray, dirs: np.ndarray, t_min: float = T_MIN_M) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Closest seen surface along rays from origins (N, 3) along unit dirs (N, 3), volume frame.
+
+        Returns (hit (N,) bool, t (N,) metres (inf on a miss), radiance (N, 3) float32 (0 on a miss)).
+        """
+        hits = self.scene.intersect(origins, dirs, t_min)
+        rgb = np.zeros((len(hits.hit), 3), np.float32)
+        k = np.flatnonzero(hits.hit)
+        if len(k):
+            face = hits.face[k]
+            tri = self.faces[face]
+            bu, bv = hits.bary[k, :1], hits.bary[k, 1:]
+            uv = (1 - bu - bv) * self.pixel_uv[tri[:, 0]] + bu * self.pixel_uv[tri[:, 1]] + bv * self.pixel_uv[tri[:, 2]]
+            rgb[k] = bilinear(self.textures, self.face_camera[face].astype(np.int64), uv)
+        return hits.hit, hits.t, rgb
+
+    @property
+    def n_faces(self) -> int:
+        return int(len(self.faces))
+
+    # ------------------------------------------------------------------ files
+
+    def save(self, path: str | Path) -> None:
+        """Write the layer as one npz (float16 textures; loads with ``allow_pickle=False``)."""
+        buf = io.BytesIO()
+        np.savez_compressed(buf, schema=np.array(SEEN_SCHEMA), vertices=self.vertices, faces=self.faces,
+                            pixel_uv=self.pixel_uv, face_camera=self.face_camera,
+                            textures=np.clip(self.textures, 0.0, 65504.0).astype(np.float16),
+                            channels=np.array(self.channels, dtype=str))
+        write_bytes_atomic(path, buf.getvalue())
+
+    @staticmethod
+    def load(path: str | Path) -> "SeenSurfaces":
+        """Read what :meth:`save` wrote (``InputError`` naming the file on bad input)."""
+        try:
+            with np.load(path, allow_pickle=False) as z:
+                if str(z["schema"]) != SEEN_SCHEMA:
+                    raise InputError(f"{path}: schema {str(z['schema'])!r}, expected {SEEN_SCHEMA!r}")
+                return SeenSurfaces(z["vertices"].astype(np.float32), z["faces"].astype(np.int32),
+                                    z["pixel_uv"].astype(np.float32), z["face_camera"].astype(np.int16),
+                                    z["textures"].astype(np.float32), tuple(str(c) for c in z["channels"]))
+        except (OSError, KeyError, ValueError) as e:
+            raise InputError(f"{path}: cannot read the seen surfaces ({e}); expected arrays schema, vertices, "
+                             "faces, pixel_uv, face_camera, textures, channels") from None
+
+
+def bilinear(textures: np.ndarray, camera: np.ndarray, uv: np.ndarray) -> np.ndarray:
+    """Bilinear lookup (N, 3) in textures (C, h, w, 3) of camera (N,) at pixel coordinates uv (N, 2) (pixel
+    centres at integers; clamped to the image)."""
+    _, h, w, _ = textures.shape
+    x = np.clip(uv[:, 0], 0.0, w - 1.0)
+    y = np.clip(uv[:, 1], 0.0, h - 1.0)
+    x0 = np.minimum(np.floor(x).astype(np.int64), w - 2 if w > 1 else 0)
+    y0 = np.minimum(np.floor(y).astype(np.int64), h - 2 if h > 1 else 0)
+    x1, y1 = np.minimum(x0 + 1, w - 1), np.minimum(y0 + 1, h - 1)
+    fx, fy = (x - x0)[:, None], (y - y0)[:, None]
+    t = textures
+    top = t[camera, y0, x0] * (1 - fx) + t[camera, y0, x1] * fx
+    bottom = t[camera, y1, x0] * (1 - fx) + t[camera, y1, x1] * fx
+    return (top * (1 - fy) + bottom * fy).astype(np.float32)
