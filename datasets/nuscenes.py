@@ -443,14 +443,15 @@ class NuScenesReader:
     def box(self, annotation: dict) -> Box:
         """A ``Box`` (global frame) from a ``sample_annotation`` row."""
         table = "sample_annotation"
-        instance = self.get("instance", self._field(annotation, table, "instance_token"))
+        instance_token = self._field(annotation, table, "instance_token")
+        instance = self.get("instance", instance_token)
         category = self.get("category", self._field(instance, "instance", "category_token"))
         attributes = tuple(self.get("attribute", t)["name"] for t in annotation.get("attribute_tokens", []))
         center = vector_field(self._field(annotation, table, "translation"), 3,
                               self.where(table, annotation, "translation"), "the box centre [x, y, z] in metres")
         wlh = size_field(self._field(annotation, table, "size"), self.where(table, annotation, "size"))
         rotation = rotation_field(self._field(annotation, table, "rotation"), self.where(table, annotation, "rotation"))
-        return Box(center, wlh, rotation, category["name"], annotation["token"], attributes)
+        return Box(center, wlh, rotation, category["name"], annotation["token"], attributes, instance_token)
 
     # ------------------------------------------------------------------ map
 

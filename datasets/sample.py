@@ -43,6 +43,8 @@ class Box:
         rotation: (4,) float64 ``[w, x, y, z]`` rotation from the box frame to the global frame.
         category: nuScenes category name, e.g. ``vehicle.car``.
         token: the ``sample_annotation`` token ('' for boxes we create).
+        attributes: the annotation's attribute names.
+        instance_token: the object's ``instance`` token (the same in every keyframe; '' for boxes we create).
     """
 
     center: np.ndarray
@@ -51,6 +53,7 @@ class Box:
     category: str
     token: str = ""
     attributes: tuple[str, ...] = ()
+    instance_token: str = ""
 
     @property
     def is_dynamic(self) -> bool:
@@ -73,7 +76,8 @@ class Box:
         """The same box expressed in another frame (returns a new Box; never mutates)."""
         center = transform_points(T_new_from_global, self.center[None])[0]
         R = T_new_from_global[:3, :3] @ quat_to_rotation(self.rotation)
-        return Box(center, self.wlh.copy(), rotation_to_quat(R), self.category, self.token, self.attributes)
+        return Box(center, self.wlh.copy(), rotation_to_quat(R), self.category, self.token, self.attributes,
+                   self.instance_token)
 
 
 @dataclass(frozen=True)

@@ -45,6 +45,7 @@ from .class_rules import ClassRule, ClassRules, read_class_rules
 from .config import PlacementConfig
 from .drivable import DrivableArea, drivable_area_for_sample
 from .ego_path import EgoPath, PathCoords, traffic_side
+from .height_drift import height_drift_m, static_bottoms
 from .place import OFF_ROAD_ZONES, Placeable, Placement, check_objects, zone_order
 from .rules import (box_corners_object, box_footprint_rect, footprint_corners, occlusion_tolerance_for,
                     rule_box_clearance, rule_drivable, rule_in_view, rule_lidarseg, rule_mutual, rule_obstacles,
@@ -474,14 +475,15 @@ def plan_tracks(
         if left_votes == right_votes:
             side_source = "default (no location rule, no annotated traffic)"
     swept = swept_ego_footprints(frames)
+    static_m = static_bottoms([f.sample for f in frames])
     tracks: list[Track] = []
     rules = class_rules or read_class_rules()
     for index, obj in enumerate(objects):
         rule = rules.for_category(obj.category)
         moving = bool(rng.random() < config.moving_probability) and speed_range(obj.category)[1] > 0 \
             and rule.attribute == "vehicle"
-        track = _plan_one(frames, usable, index, obj, moving, rng, config, path, votes, side, swept, tracks, report,
-                          rule, still_in_zone=rule.attribute not in ("vehicle", "parked"))
+        track = _plan_one(frames, usable, index, obj, moving, rng, config, path, votes, side, swept, static_m, tracks,
+                          report, rule, still_in_zone=rule.attribute not in ("vehicle", "parked"))
         if track is not None:
             tracks.append(track)
     reason = None
@@ -529,10 +531,11 @@ class LaneMotion:
 
 
 def _plan_one(frames, usable, index, obj, moving, rng, config: TrackConfig, path: EgoPath, votes: DirectionVotes,
-              side: str, swept: np.ndarray, placed: list[Track], report: dict[str, int], class_rule: ClassRule,
-              still_in_zone: bool) -> Track | None:
+              side: str, swept: np.ndarray, static_m: np.ndarray, placed: list[Track], report: dict[str, int],
+              class_rule: ClassRule, still_in_zone: bool) -> Track | None:
     """One track of ``obj`` (of ``class_rule``'s class): a vehicle by the kerb or in a lane, or with
-    ``still_in_zone`` a still object in one of the rule's zones, with its thresholds."""
+    ``still_in_zone`` a still object in one of the rule's zones, with its thresholds. ``static_m``: the scene's
+    static annotated objects (:func:`~.height_drift.static_bottoms`)."""
     rule = class_rule if still_in_zone else None  # the zone-rule path below; vehicles keep the kerb and lanes
     if rule is not None:
         config = dataclasses.replace(config, placement=rule.config(config.placement))
@@ -646,8 +649,8 @@ def _plan_one(frames, usable, index, obj, moving, rng, config: TrackConfig, path
             edge = scene.drivable.edge_distance(flat[alive, k])
             alive = tally.keep("kerb", alive, edge <= pc.kerb_distance_m + 0.5)
         for c in alive[:CHUNK]:  # the first survivors only: a bounded cost per attempt
-            track = _stand_and_check(frames, k, channel, c, xy_j[c], yaw_j[c], span[c], wlh, moving, swept, placed,
-                                     config, tally, surface)
+            track = _stand_and_check(frames, k, channel, c, xy_j[c], yaw_j[c], span[c], wlh, moving, swept, static_m,
+                                     placed, config, tally, surface)
             if track is None:
                 continue
             velocity = (_trajectory_velocity(path, motion, c, coords.d[c], t_s[span[c]]) if moving
@@ -772,14 +775,17 @@ def _clear_of_ego_in_time(frames, path: EgoPath, motion: LaneMotion, d: np.ndarr
     return alive[ok]
 
 
-def stand_heights(frames, keep: np.ndarray, xy_j: np.ndarray, moving: bool) -> tuple[list, np.ndarray]:
+def stand_heights(frames, keep: np.ndarray, xy_j: np.ndarray, moving: bool, static_m: np.ndarray | None = None
+                  ) -> tuple[list, np.ndarray]:
     """The ground planes a track stands on at its span's keyframes ``keep`` and their heights (K',).
 
     Each keyframe's LiDAR fits the plane below the track's position there (:class:`LocalGroundFitter`). One
     sweep can mistake a canopy, a wall or car roofs for the ground (within its tolerance: 10 % grade), more so
     far from the ego where the rings are sparse, so: a parked track stands on the plane fitted at the keyframe
-    where the ego is closest to it (the densest LiDAR there; the same plane throughout: it is static); a moving
-    track's heights are median-filtered over 5 keyframes. The annotated vehicles' check of single placements
+    where the ego is closest to it (the densest LiDAR there; the same plane throughout: it is static), at that
+    keyframe's height plus the global frame's height drift at its place (:func:`~.height_drift.height_drift_m`
+    from ``static_m``, the scene's static annotated objects; none: no drift), so that it stands on every
+    keyframe's ground; a moving track's heights are median-filtered over 5 keyframes. The annotated vehicles' check of single placements
     is not used: candidates span every keyframe, most of them 40-50 m from that keyframe's ego, where it moved
     many grounds down onto a lower level and the LiDAR obstacle rule then refused them (scene-0916, batch
     seeds 0-5, 3 tracks each: 5 of 18 planned with it, 9 without).
@@ -790,13 +796,15 @@ def stand_heights(frames, keep: np.ndarray, xy_j: np.ndarray, moving: bool) -> t
         fitted = [q for q, p in enumerate(planes) if p.source != "ego-plane"] or list(range(len(planes)))
         dist = [np.linalg.norm(frames[keep[q]].T_global_from_ego[:2, 3] - xy_j[keep[q]]) for q in fitted]
         best = fitted[int(np.argmin(dist))]
-        return [planes[best]] * len(keep), np.full(len(keep), z[best])
+        drift = (np.zeros(len(frames)) if static_m is None or len(static_m) == 0
+                 else height_drift_m(static_m, xy_j[keep[best]], int(keep[best])))
+        return [planes[best]] * len(keep), z[best] + drift[keep]
     return planes, median_filter(z, size=5, mode="nearest") if len(z) >= 3 else z
 
 
 def _stand_and_check(frames, k: int, channel: str | None, c: int, xy_j: np.ndarray, yaw_j: np.ndarray, span: np.ndarray,
-                     wlh: np.ndarray, moving: bool, swept: np.ndarray, placed: Sequence[Track], config: TrackConfig,
-                     tally: _Tally, surface: tuple[ClassRule, str] | None = None
+                     wlh: np.ndarray, moving: bool, swept: np.ndarray, static_m: np.ndarray, placed: Sequence[Track],
+                     config: TrackConfig, tally: _Tally, surface: tuple[ClassRule, str] | None = None
                      ) -> tuple[np.ndarray, tuple[str, ...], str] | None:
     """Stand candidate ``c`` on the ground (:func:`stand_heights`) and apply every
     rule to its tilted boxes at every frame of its span; (T (K', 4, 4), ground sources, anchor camera) or None.
@@ -804,7 +812,7 @@ def _stand_and_check(frames, k: int, channel: str | None, c: int, xy_j: np.ndarr
     pc = config.placement
     off_road = surface is not None and surface[1] in OFF_ROAD_ZONES
     keep = np.flatnonzero(span)
-    planes, heights = stand_heights(frames, keep, xy_j, moving)
+    planes, heights = stand_heights(frames, keep, xy_j, moving, static_m)
     T_all, sources = [], []
     for q, j in enumerate(keep):
         plane = planes[q]

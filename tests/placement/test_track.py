@@ -14,6 +14,7 @@ from streetaug.augment.core import InputError
 from streetaug.placement.ego_path import EgoPath, traffic_side
 from streetaug.placement.place import ObjectBox
 from streetaug.placement.rules import box_footprint_rect
+from streetaug.placement.height_drift import height_drift_m, static_bottoms
 from streetaug.placement.track import (Track, TrackConfig, ego_footprint, interpolate_poses, plan_tracks, speed_range,
                                        swept_ego_footprints, track_frames)
 
@@ -117,12 +118,24 @@ def test_real_scene_plans_parked_and_moving_tracks(seq_plan):
 
 
 @needs_seq
-def test_parked_track_is_identical_in_the_global_frame(seq_plan):
+def test_parked_track_stays_put_and_follows_the_frames_height_drift(seq_frames, seq_plan):
+    """x, y and rotation are the same in every keyframe; the height follows the global frame's drift at its
+    place (nuScenes' ego z is 0 in every keyframe), measured by the scene's static annotated objects."""
+    samples, _ = seq_frames
     parked = [t for t in seq_plan.tracks if t.motion == "parked"]
     assert parked
+    static_m = static_bottoms(samples)
+    index = {s.token: k for k, s in enumerate(samples)}
     for t in parked:
-        assert np.array_equal(t.T_global_from_object, np.repeat(t.T_global_from_object[:1], len(t.sample_tokens), 0))
+        T = t.T_global_from_object
+        assert np.array_equal(T[:, :3, :3], np.repeat(T[:1, :3, :3], len(T), 0))
+        assert np.array_equal(T[:, :2, 3], np.repeat(T[:1, :2, 3], len(T), 0))
         assert np.all(t.velocity_global == 0) and t.attribute == "vehicle.parked"
+        k = np.array([index[tok] for tok in t.sample_tokens])
+        drift = height_drift_m(static_m, T[0, :2, 3], int(k[0]))[k]
+        np.testing.assert_allclose(T[:, 2, 3] - T[0, 2, 3], drift, atol=1e-9)
+    # the scene climbs: somewhere along the scene a parked track's height changes
+    assert max(np.ptp(t.T_global_from_object[:, 2, 3]) for t in parked) > 0.1
 
 
 @needs_seq
@@ -206,11 +219,16 @@ def test_other_classes_stand_still_in_their_zone_through_the_span(seq_frames):
     assert plan.tracks, plan.reason
     rules = read_class_rules()
     by_token = {f.token: f for f in frames}
+    static_m, index = static_bottoms(samples), {s.token: k for k, s in enumerate(samples)}
     for t in plan.tracks:
         rule = rules.for_category(t.category)
         assert t.motion == "parked" and t.zone in rule.zones and t.attribute is None
         assert t.detection_class == rule.name
-        assert np.allclose(t.T_global_from_object, t.T_global_from_object[0], atol=0.2)  # still (heights may vary)
+        T = t.T_global_from_object
+        assert np.allclose(T[:, :3, :3], T[0, :3, :3]) and np.allclose(T[:, :2, 3], T[0, :2, 3])  # still
+        k = np.array([index[tok] for tok in t.sample_tokens])  # its height follows the keyframes' drift
+        np.testing.assert_allclose(T[:, 2, 3] - T[0, 2, 3], height_drift_m(static_m, T[0, :2, 3], int(k[0]))[k],
+                                   atol=1e-9)
         for i, token in enumerate(t.sample_tokens):
             fp = box_footprint_rect(t.T_global_from_object[i][None], t.wlh)
             assert by_token[token].scene().zones.footprints_in(t.zone, fp, rule)[0]
