@@ -37,21 +37,10 @@ def _stats(e: np.ndarray) -> dict:
 
 
 def leave_one_out(samples, bottoms) -> dict:
-    from streetaug.placement.height_drift import height_drift_m
+    from streetaug.placement.height_drift import held_out_errors_m
 
     ego_xy = np.array([s.cameras["CAM_FRONT"].T_global_from_ego[:2, 3] for s in samples])
-    constant, drifted = [], []
-    for i in range(len(bottoms)):
-        seen = np.flatnonzero(np.isfinite(bottoms[i, :, 2]))
-        if len(seen) < 10:
-            continue
-        xy = np.nanmean(bottoms[i, :, :2], axis=0)
-        ref = int(seen[np.argmin(np.linalg.norm(ego_xy[seen] - xy, axis=1))])
-        drift = height_drift_m(np.delete(bottoms, i, axis=0), xy, ref)
-        other = seen[seen != ref]
-        z, z_ref = bottoms[i, other, 2], bottoms[i, ref, 2]
-        constant.extend(z - z_ref)
-        drifted.extend(z - (z_ref + drift[other]))
+    constant, drifted = held_out_errors_m(bottoms, ego_xy)
     return {"constant": _stats(constant), "with_drift": _stats(drifted)}
 
 

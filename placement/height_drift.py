@@ -83,3 +83,23 @@ def height_drift_m(bottoms: np.ndarray, xy: np.ndarray, ref: int, radius_m: floa
     steps = step_drift_m(bottoms, xy, radius_m)
     cumulative = np.concatenate([[0.0], np.cumsum(steps)])
     return cumulative - cumulative[ref]
+
+
+def held_out_errors_m(bottoms: np.ndarray, ego_xy: np.ndarray, min_keyframes: int = 10
+                      ) -> tuple[np.ndarray, np.ndarray]:
+    """Leave one out over the static objects seen in >= ``min_keyframes`` keyframes: each one's bottom height in
+    its other keyframes predicted from the keyframe where the ego (``ego_xy`` (K, 2)) passes closest, held
+    constant and plus the drift the *other* objects measure; the signed errors (constant, with drift), (N,)."""
+    constant, drifted = [], []
+    for i in range(len(bottoms)):
+        seen = np.flatnonzero(np.isfinite(bottoms[i, :, 2]))
+        if len(seen) < min_keyframes:
+            continue
+        xy = np.nanmean(bottoms[i, :, :2], axis=0)
+        ref = int(seen[np.argmin(np.linalg.norm(ego_xy[seen] - xy, axis=1))])
+        drift = height_drift_m(np.delete(bottoms, i, axis=0), xy, ref)
+        other = seen[seen != ref]
+        z, z_ref = bottoms[i, other, 2], bottoms[i, ref, 2]
+        constant.append(z - z_ref)
+        drifted.append(z - (z_ref + drift[other]))
+    return (np.concatenate(constant), np.concatenate(drifted)) if constant else (np.zeros(0), np.zeros(0))

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from streetaug.datasets.sample import Box
-from streetaug.placement.height_drift import height_drift_m, static_bottoms, step_drift_m
+from streetaug.placement.height_drift import height_drift_m, held_out_errors_m, static_bottoms, step_drift_m
 
 SEQ = Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "nuscenes-seq"
 needs_seq = pytest.mark.skipif(not (SEQ / "v1.0-mini").is_dir(), reason=f"real dev scene not found at {SEQ}")
@@ -74,19 +74,7 @@ def test_real_scene_drift_predicts_held_out_static_objects():
     ego_xy = np.array([s.cameras["CAM_FRONT"].T_global_from_ego[:2, 3] for s in samples])
     bottoms = static_bottoms(samples)
     assert len(bottoms) >= 20
-    constant, drifted = [], []
-    for i in range(len(bottoms)):
-        seen = np.flatnonzero(np.isfinite(bottoms[i, :, 2]))
-        if len(seen) < 10:
-            continue
-        xy = np.nanmean(bottoms[i, :, :2], axis=0)
-        ref = int(seen[np.argmin(np.linalg.norm(ego_xy[seen] - xy, axis=1))])
-        drift = height_drift_m(np.delete(bottoms, i, axis=0), xy, ref)
-        other = seen[seen != ref]
-        z, z_ref = bottoms[i, other, 2], bottoms[i, ref, 2]
-        constant.extend(np.abs(z - z_ref))
-        drifted.extend(np.abs(z - (z_ref + drift[other])))
-    constant, drifted = np.array(constant), np.array(drifted)
+    constant, drifted = (np.abs(e) for e in held_out_errors_m(bottoms, ego_xy))
     assert len(drifted) > 300
     assert np.median(drifted) < 0.15 and np.median(drifted) < 0.6 * np.median(constant)
     assert np.percentile(drifted, 90) < 0.6 * np.percentile(constant, 90)
