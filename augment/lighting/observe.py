@@ -83,6 +83,21 @@ def extend_facades(depth_m: np.ndarray, sky: np.ndarray) -> tuple[np.ndarray, np
 
 
 
+def fill_structure_columns(depth_m: np.ndarray, sky: np.ndarray) -> np.ndarray:
+    """Depth (H, W) with every non-sky pixel of unknown depth set to its column's highest known depth.
+
+    For the seen-surface mesh: what :func:`extend_facades` leaves unknown lies above a sky gap (tree crowns
+    between patches of sky); at the depth of the structure below it the mesh reproduces it exactly from the
+    camera's own centre and approximately from nearby points (the volume can only blur it).
+    """
+    finite = np.isfinite(depth_m)
+    has = finite.any(axis=0)
+    top = np.where(has, finite.argmax(axis=0), 0)
+    top_depth = depth_m[top, np.arange(depth_m.shape[1])]
+    fill = ~finite & ~sky & has[None, :]
+    return np.where(fill, np.broadcast_to(top_depth[None, :], depth_m.shape), depth_m)
+
+
 def canyon_depth(K: np.ndarray, width: int, height: int, T_vol_from_cam: np.ndarray,
                  half_width_m: float = CANYON_HALF_WIDTH_M) -> np.ndarray:
     """Camera-z depth (H, W) float32 of a street canyon without LiDAR: the ground z = 0 and two vertical walls
@@ -147,7 +162,8 @@ def observe_view(view: CameraView, T_vol_from_cam: np.ndarray, exposure_ratio: f
         channel=view.channel, points=p_vol, radiance=hdr[near], view_dirs=view_dirs, capped=capped,
         far_dirs=d_far, far_radiance=hdr[far], far_is_sky=sky[far], far_saturated=ldr_max[far] >= SATURATED_LDR,
         camera_centre=centre, ego_forward=ego_forward_vol(view, T_vol_from_cam),
-        depth_view=DepthView(view.channel, depth.astype(np.float32), hdr, Ks, np.asarray(T_vol_from_cam, np.float64)),
+        depth_view=DepthView(view.channel, fill_structure_columns(depth, sky).astype(np.float32), hdr, Ks,
+                             np.asarray(T_vol_from_cam, np.float64)),
     )
 
 

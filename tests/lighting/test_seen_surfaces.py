@@ -41,7 +41,8 @@ def rays_to(origin: np.ndarray, targets: np.ndarray) -> tuple[np.ndarray, np.nda
     return np.repeat(origin[None], len(targets), axis=0), d / np.linalg.norm(d, axis=1, keepdims=True)
 
 
-def test_layer_reproduces_the_texture_from_a_new_viewpoint():
+def test_layer_reproduces_the_texture_from_a_new_viewpoint(monkeypatch):
+    monkeypatch.setattr(ss, "DEPTH_UNCERTAINTY", 0.0)  # exact depth: no reprojection blur
     layer = SeenSurfaces.from_views([fronto_view(np.full((H, W), 10.0))])
     y, z = np.meshgrid(np.linspace(-5, 5, 30), np.linspace(-2, 5, 30))
     targets = np.stack([np.full(y.size, 10.0), y.ravel(), z.ravel()], axis=1)
@@ -52,6 +53,21 @@ def test_layer_reproduces_the_texture_from_a_new_viewpoint():
     assert np.allclose(t, np.linalg.norm(targets - origin, axis=1), atol=1e-3)
     err = np.abs(rgb - wall_texture(targets[:, 1], targets[:, 2]))
     assert err.max() < 0.01, err.max()  # a one-pixel shift of the texture would be ~0.09
+
+
+def test_texture_blur_grows_with_the_distance_from_the_camera():
+    """From the camera's own centre the hit takes its pixel exactly; 4 m away, a blurred copy (sigma
+    f * DEPTH_UNCERTAINTY * 4 / t px) whose values are nearer the texture's local mean."""
+    u, v = np.meshgrid(np.arange(W, dtype=float), np.arange(H, dtype=float))
+    stripes = np.where((u.astype(int) // 2) % 2 == 0, 1.0, 0.0)[..., None] * np.ones(3)
+    layer = SeenSurfaces.from_views([DepthView("CAM_FRONT", np.full((H, W), 10.0, np.float32),
+                                               stripes.astype(np.float32), K, T_VOL_FROM_CAM)])
+    y = np.linspace(-3.0, 3.0, 200)
+    targets = np.stack([np.full(y.size, 10.0), y, np.full(y.size, 1.5)], axis=1)
+    _, _, own = layer.trace(*rays_to(CENTRE, targets))
+    _, _, far = layer.trace(*rays_to(CENTRE + np.array([0.0, 0.0, 4.0]), targets))
+    assert own[:, 0].min() < 0.05 and own[:, 0].max() > 0.95  # the stripes
+    assert np.abs(far[:, 0] - 0.5).max() < 0.3 < np.abs(own[:, 0] - 0.5).max()
 
 
 def _step_scene() -> DepthView:
