@@ -20,6 +20,7 @@ from .camera_look import jpeg_round_trip, motion_kernel
 from .footprint import PixelBox
 from .foreground import Foreground
 from .shadow import ShadowMap
+from .veil import Veil
 
 CAMERA_EFFECTS_MARGIN_PX = 96  # blur and noise are measured on the affected box grown by this much
 
@@ -151,8 +152,9 @@ class Composited:
 
 def composite_layers(image_rgb: np.ndarray, layers: ObjectLayers, camera: PinholeCamera, match_camera: bool,
                      ev: float, rng: np.random.Generator, motion_px: np.ndarray | None = None,
-                     jpeg_quality: int | None = None) -> Composited:
-    """Composite the layers into ``image_rgb`` (H, W, 3) uint8 (with ``match_camera``, blurred and noised
+                     jpeg_quality: int | None = None, veil: Veil | None = None) -> Composited:
+    """Composite the layers into ``image_rgb`` (H, W, 3) uint8 (with ``match_camera``, seen through the
+    image's ``veil`` (haze and veiling glare at the object's depth, :mod:`.veil`), blurred and noised
     like the image around the object, measured locally: blur and noise vary over an image; smeared along
     ``motion_px`` (2,) pixels, the object's image motion during the exposure; its JPEG blocks re-encoded at
     ``jpeg_quality``, the source file's)."""
@@ -172,9 +174,10 @@ def composite_layers(image_rgb: np.ndarray, layers: ObjectLayers, camera: Pinhol
     L = layers
     if effects is None:
         image[ub] = composite(image_rgb[ub], L.radiance_premult[ub], L.mask[ub], L.visibility[ub], L.ratio_rgb[ub], ev)
-    else:  # blur the visible object layer like the image, composite, then add the image's noise
-        obj_b, mask_b = blur_object_layer(L.radiance_premult[ub] * L.visibility[ub][..., None], L.mask[ub],
-                                          effects.blur_sigma_px)
+    else:  # the veil, blur the visible object layer like the image, composite, then add the image's noise
+        rad = L.radiance_premult[ub] if veil is None else veil.apply(L.radiance_premult[ub], L.coverage[ub],
+                                                                     L.depth_m[ub])
+        obj_b, mask_b = blur_object_layer(rad * L.visibility[ub][..., None], L.mask[ub], effects.blur_sigma_px)
         if kernel.size > 1:  # motion blur: a line kernel along the object's image motion
             smear = lambda a: cv2.filter2D(np.ascontiguousarray(a, np.float32), -1, kernel,  # noqa: E731
                                            borderType=cv2.BORDER_CONSTANT)

@@ -2,7 +2,8 @@
 
     prepare (BVH cached on the asset, bounce light) -> footprint (pixel boxes) -> render_shadow
       -> render_foreground (sees the shadow) -> object_layers (depth test) -> composite_layers
-      (matching the image's blur, noise, the object's motion blur and the JPEG quality; on by default)
+      (seen through the image's veil, matching its blur, noise, the object's motion blur and the JPEG
+      quality; on by default)
 """
 
 from __future__ import annotations
@@ -25,6 +26,7 @@ from .settings import RenderSettings, resolve_settings
 from .shade import ShadingContext
 from .shadow import GroundShadow, ShadowMap, car_ambient_radiance, render_shadow
 from .surface import PreparedAsset, prepare_asset
+from .veil import Veil, estimate_veil
 
 __all__ = ["Insertion", "render_insertion"]
 
@@ -101,7 +103,7 @@ def render_insertion(image_rgb: np.ndarray, K: np.ndarray, depth_m: np.ndarray, 
                      asset: Asset, T_cam_from_object: np.ndarray, ground_normal_cam: np.ndarray | None = None,
                      quality: str | RenderSettings = "default", ev: float = 0.0, seed: int = 0,
                      velocity_cam_mps: np.ndarray | None = None, exposure_s: float | None = None,
-                     jpeg_quality: int | None = None) -> Insertion:
+                     jpeg_quality: int | None = None, veil: Veil | None = None) -> Insertion:
     """Render ``asset`` at ``T_cam_from_object`` into ``image_rgb`` with its shadow and occlusion.
 
     Args:
@@ -121,6 +123,8 @@ def render_insertion(image_rgb: np.ndarray, K: np.ndarray, depth_m: np.ndarray, 
             by the image's median brightness (an assumption: nuScenes does not record it).
         jpeg_quality: the source file's JPEG quality (``camera_look.jpeg_quality_from_file``); with
             ``settings.match_camera`` the object's blocks are re-encoded at it (None: not re-encoded).
+        veil: the image's haze and veiling glare (:func:`~.veil.estimate_veil` of the image and ``depth_m``);
+            with ``settings.match_camera`` the object is seen through it (None: estimated here).
     """
     t_start = time.perf_counter()
     x = _check_inputs(image_rgb, K, depth_m, T_cam_from_object)
@@ -143,7 +147,10 @@ def render_insertion(image_rgb: np.ndarray, K: np.ndarray, depth_m: np.ndarray, 
     t0 = time.perf_counter()
     layers = object_layers(fg, sh, x.depth_m)
     motion = _image_motion(x, layers, velocity_cam_mps, exposure_s) if settings.match_camera else None
-    out = composite_layers(x.image_rgb, layers, x.camera, settings.match_camera, ev, rng, motion, jpeg_quality)
+    if settings.match_camera and veil is None:
+        veil = estimate_veil(x.image_rgb, x.depth_m, ev)
+    out = composite_layers(x.image_rgb, layers, x.camera, settings.match_camera, ev, rng, motion, jpeg_quality,
+                           veil)
     timing["composite"] = time.perf_counter() - t0
     timing["total"] = time.perf_counter() - t_start
     return Insertion(image=out.image, mask=layers.solid_mask, coverage=layers.solid_coverage,
