@@ -10,8 +10,10 @@ ground triangles -- all three vertices below ``GROUND_HEIGHT_M``, normal within 
 vertical -- since the ground is continuous but grazing far away) are dropped; sky pixels and pixels
 without depth are not in the mesh.
 
-A ray query (:meth:`SeenSurfaces.trace`) finds the closest hit over all cameras' meshes (Embree) and returns
-the owning camera's radiance sampled bilinearly at the interpolated pixel coordinate, from a copy of the
+A ray query (:meth:`SeenSurfaces.trace`) finds the closest hit in each camera's mesh (Embree); among the
+hits within ``SAME_SURFACE_FRACTION`` of the nearest (the same surface seen by several cameras) it takes the
+camera that saw it along the direction nearest to the ray's (least parallax; from a camera's own centre its own
+pixels), and returns that camera's radiance sampled bilinearly at the interpolated pixel coordinate, from a copy of the
 texture blurred by the hit's *reprojection uncertainty*: seen from a point ``b`` metres from the camera that
 took it, a surface at distance ``t`` whose depth is known to a fraction ``DEPTH_UNCERTAINTY`` moves by about
 ``f DEPTH_UNCERTAINTY b / t`` pixels in that camera's image, so that is the Gaussian sigma used (0 from the
@@ -41,6 +43,7 @@ MAX_DEPTH_M = 300.0
 T_MIN_M = 0.05  # hits nearer than this to the ray's origin are ignored (a point on the road)
 SEEN_SCHEMA = "streetaug.seen_surfaces/1"
 DEPTH_UNCERTAINTY = 0.05  # relative error of the densified depth (0.05 / 0.1 / 0.2 tried on scene-0916 keyframes 4, 12, 24)
+SAME_SURFACE_FRACTION = 0.05  # hits this much farther than the nearest (+ 0.1 m) are the same surface
 BLUR_LEVELS_PX = (0.0, 1.0, 2.0, 4.0, 8.0, 16.0)  # Gaussian sigmas of the texture copies
 
 
@@ -166,8 +169,13 @@ class SeenSurfaces:
                             np.array([0.5 * (v.K[0][0] + v.K[1][1]) for v in kept], np.float64))
 
     @functools.cached_property
-    def scene(self) -> RayScene:
-        return RayScene(self.vertices, self.faces)
+    def scenes(self) -> list[tuple[RayScene, np.ndarray]]:
+        """Per camera: its mesh as a ray scene and the scene's face indices into :attr:`faces`."""
+        out = []
+        for c in range(len(self.channels)):
+            idx = np.flatnonzero(self.face_camera == c)
+            out.append((RayScene(self.vertices, self.faces[idx]), idx))
+        return out
 
     @functools.cached_property
     def blurred(self) -> np.ndarray:
@@ -183,23 +191,43 @@ class SeenSurfaces:
 
         Returns (hit (N,) bool, t (N,) metres (inf on a miss), radiance (N, 3) float32 (0 on a miss)).
         """
-        hits = self.scene.intersect(origins, dirs, t_min)
-        rgb = np.zeros((len(hits.hit), 3), np.float32)
-        k = np.flatnonzero(hits.hit)
+        origins = np.asarray(origins, np.float64)
+        dirs = np.asarray(dirs, np.float64)
+        n = len(origins)
+        t_all = np.full((len(self.scenes), n), np.inf)
+        face_all = np.full((len(self.scenes), n), -1, np.int64)
+        bary_all = np.zeros((len(self.scenes), n, 2))
+        for c, (scene, idx) in enumerate(self.scenes):
+            h = scene.intersect(origins, dirs, t_min)
+            t_all[c], bary_all[c] = h.t, h.bary
+            face_all[c, h.hit] = idx[h.face[h.hit]]
+        t_near = t_all.min(axis=0)
+        best = np.argmin(t_all, axis=0)
+        if len(self.scenes) > 1:
+            same = t_all <= t_near * (1.0 + SAME_SURFACE_FRACTION) + 0.1
+            with np.errstate(invalid="ignore"):
+                to_hit = origins[None] + np.where(same, t_all, 0.0)[..., None] * dirs[None] - self.camera_centres[:, None]
+            cos = (to_hit * dirs[None]).sum(-1) / np.maximum(np.linalg.norm(to_hit, axis=-1), 1e-9)
+            best = np.where(np.isfinite(t_near), np.argmax(np.where(same, cos, -np.inf), axis=0), best)
+        rows = np.arange(n)
+        hit = np.isfinite(t_near)
+        t_best, face_best, bary_best = t_all[best, rows], face_all[best, rows], bary_all[best, rows]
+        rgb = np.zeros((n, 3), np.float32)
+        k = np.flatnonzero(hit)
         if len(k):
-            face = hits.face[k]
+            face = face_best[k]
             tri = self.faces[face]
-            bu, bv = hits.bary[k, :1], hits.bary[k, 1:]
+            bu, bv = bary_best[k, :1], bary_best[k, 1:]
             uv = (1 - bu - bv) * self.pixel_uv[tri[:, 0]] + bu * self.pixel_uv[tri[:, 1]] + bv * self.pixel_uv[tri[:, 2]]
             cam = self.face_camera[face].astype(np.int64)
-            baseline = np.linalg.norm(np.asarray(origins, np.float64)[k] - self.camera_centres[cam], axis=1)
-            sigma = self.focal_px[cam] * DEPTH_UNCERTAINTY * baseline / np.maximum(hits.t[k], 1.0)
+            baseline = np.linalg.norm(origins[k] - self.camera_centres[cam], axis=1)
+            sigma = self.focal_px[cam] * DEPTH_UNCERTAINTY * baseline / np.maximum(t_best[k], 1.0)
             levels = np.asarray(BLUR_LEVELS_PX)
             hi = np.clip(np.searchsorted(levels, sigma), 1, len(levels) - 1)
             w_hi = np.clip((sigma - levels[hi - 1]) / (levels[hi] - levels[hi - 1]), 0.0, 1.0)[:, None]
             rgb[k] = ((1 - w_hi) * bilinear(self.blurred, (hi - 1) * len(self.channels) + cam, uv)
                       + w_hi * bilinear(self.blurred, hi * len(self.channels) + cam, uv))
-        return hits.hit, hits.t, rgb
+        return hit, t_best, rgb
 
     @property
     def n_faces(self) -> int:
