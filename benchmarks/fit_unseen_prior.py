@@ -4,7 +4,8 @@ Usage: ``python benchmarks/fit_unseen_prior.py [--out benchmarks/results]``
 
 What no camera saw (other directions than the input camera's) is predicted by the model (sky model, shaded
 unseen surfaces, the street prior, the seen elevation bands) and then shrunk towards the seen mean colour in
-log space, keeping ``keep`` of the model (:func:`streetaug.augment.lighting.fill.shrink_unseen`). Score: the
+log space, keeping ``keep`` of the model (:func:`streetaug.augment.lighting.fill.shrink_unseen`; L1's unseen ground
+and its street symmetry have their own constants, fitted by ``bench_unseen_l1.py --fit``). Score: the
 lighting built from CAM_FRONT alone (with LiDAR, boxes) rendered into the 5 other cameras of the same instant
 (:mod:`streetaug.augment.evaluation.novel_view`), mean PSNR, at L1 and L2 (the default level's usual choice).
 Keyframes of ``../shared/data/nuscenes-seq`` with t = 0 mod 8 choose ``keep`` (train); t = 4 mod 8 report it

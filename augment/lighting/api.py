@@ -51,12 +51,18 @@ def _work(vi: ViewInputs):
     return vi.work if vi.work is not None else prepare_image(np.asarray(vi.view.image), vi.view.K, vi.up_cam)
 
 
+def _ego_forward_cam(view: CameraView) -> np.ndarray:
+    """(3,) the ego's forward axis (+x, the street's direction when driving) in the view's camera frame."""
+    return np.asarray(view.T_ego_from_cam, np.float64)[0, :3]
+
+
 def seen_estimate(est: LightingEstimate, vi: ViewInputs) -> LightingEstimate:
     """An L1 estimate whose map takes the image's radiance where the camera saw something
     (:func:`.image_dome.image_corrected_envmap`): on the image's scale in every direction it saw, the model's
     shape corrected per elevation elsewhere. The sun is unchanged."""
     t0 = time.perf_counter()
-    envmap, stats = image_corrected_envmap(est.light_cam.envmap, seen_pixels(_work(vi)), vi.up_cam)
+    envmap, stats = image_corrected_envmap(est.light_cam.envmap, seen_pixels(_work(vi)), vi.up_cam,
+                                           forward_cam=_ego_forward_cam(vi.view))
     timing = dict(est.timing_s) | {"image_envmap": time.perf_counter() - t0}
     return replace(est, light_cam=replace(est.light_cam, envmap=envmap),
                    params=json_clean(dict(est.params) | {"image_envmap": stats}), timing_s=timing,
@@ -86,7 +92,8 @@ def instant_estimates(per_view: dict[str, LightingEstimate], inputs: Sequence[Vi
     R_ref_from_global = np.asarray(ref_vi.view.T_cam_from_global)[:3, :3]
     pixels = [seen_pixels(_work(vi), R_ref_from_global @ np.asarray(vi.view.T_global_from_cam)[:3, :3],
                           1.0 / ratios[vi.view.channel]) for vi in inputs]
-    envmap, stats = image_corrected_envmap(ref.light_cam.envmap, pixels, ref_vi.up_cam)
+    envmap, stats = image_corrected_envmap(ref.light_cam.envmap, pixels, ref_vi.up_cam,
+                                           forward_cam=_ego_forward_cam(ref_vi.view))
     ref_light = replace(ref.light_cam, envmap=envmap)
     seconds = time.perf_counter() - t0
     note = (f"map: the {len(views)} cameras' radiance where seen ({100 * stats['seen_fraction']:.0f} % of the "

@@ -14,7 +14,12 @@ nothing and takes the image's radiance everywhere it saw something:
   interpolated between bands; above the highest band seen, the ratio of the seen sky (the zenith is sky),
   below the lowest, the lowest band's ratio (the road continues);
 * below the highest elevation seen, the unseen cells are then shrunk towards the seen mean colour
-  (:func:`.fill.shrink_unseen`: the band statistics of one street are a noisy guess of another direction's);
+  (:func:`.fill.shrink_unseen`: the band statistics of one street are a noisy guess of another direction's),
+  keeping ``keep`` of the corrected model above the horizon and ``GROUND_KEEP`` below it;
+* the street's mirror symmetry (:func:`street_mirror`): an unseen cell whose mirror image across the street's
+  planes (ahead <-> behind, left <-> right, gravity up, the ego's forward axis) was seen moves
+  ``SYMMETRY_WEIGHT`` of the way (log space) towards the smoothed seen radiance there: the road behind is
+  road-coloured, the facades behind facade-coloured, per elevation;
 * the two are blended over ``BLEND_DEG`` around what was seen (normalised convolution of the log ratio).
 
 Radiance is on the image's scale (contract response, EV 0), like the model it corrects. The sun (a separate
@@ -23,11 +28,11 @@ directional light) is unchanged.
 
 from __future__ import annotations
 
-import numpy as np
-
 from dataclasses import dataclass
-
 from functools import lru_cache
+
+import cv2
+import numpy as np
 
 from ..core import SATURATION_LDR, camera_envmap_directions, check_shape, ldr_to_hdr, luminance
 from .evidence import PreparedImage
@@ -41,6 +46,16 @@ MAX_LOG_GAIN = np.log(20.0)
 MIN_SKY_PIXELS = 20
 # where the response saturates: a clipped pixel's channels are "at least" this (core.clipped_to_lower_bound)
 _SATURATION_RADIANCE = ldr_to_hdr(np.full(3, SATURATION_LDR))
+# the street's mirror symmetry (what stands ahead stands behind, what stands left stands right): an unseen cell
+# whose mirror image was seen moves this far (log space) from the band statistics towards the seen radiance
+# there, smoothed over SYMMETRY_BLUR_DEG; fitted by benchmarks/bench_unseen_l1.py --fit (keyframe split of the
+# dev scene: results/unseen_l1_fit.json)
+SYMMETRY_WEIGHT = 0.5
+SYMMETRY_BLUR_DEG = 8.0
+# the unseen ground (below the horizon): this much of the corrected model's log-radiance, the rest the seen mean
+# colour (the model's ground, an assumed albedo under the fitted sky, scaled per band, does not carry to other
+# directions); fitted with the symmetry by benchmarks/bench_unseen_l1.py --fit
+GROUND_KEEP = 0.0
 
 
 @lru_cache(maxsize=4)
@@ -115,8 +130,59 @@ def band_log_gains(log_ratio_cells: np.ndarray, cell_elev_deg: np.ndarray, all_e
                      for c in range(3)], axis=1)
 
 
+def _wrapped_blur(x: np.ndarray, sigma_px: float) -> np.ndarray:
+    """Gaussian blur (sigma in map columns) of an (H, W[, C]) map, wrapping in longitude."""
+    pad = int(3 * sigma_px) + 1
+    widths = ((0, 0), (pad, pad)) + ((0, 0),) * (x.ndim - 2)
+    return cv2.GaussianBlur(np.pad(x, widths, mode="wrap"), (0, 0), sigma_px)[:, pad:-pad]
+
+
+def street_mirror(log_seen: np.ndarray, seen: np.ndarray, up: np.ndarray, forward: np.ndarray,
+                  blur_deg: float) -> tuple[np.ndarray, np.ndarray]:
+    """The seen log radiance (H, W, 3) of a camera-frame map carried to the cells whose mirror images across
+    the street's planes were seen: across the plane through up and the lateral axis (ahead <-> behind), through
+    up and ``forward`` (left <-> right) and both (gravity ``up`` and the street's horizontal ``forward`` (3,),
+    map frame).
+
+    The seen cells (``seen`` (H, W) bool) are smoothed first (normalised convolution, Gaussian of ``blur_deg``):
+    a mirror image says what kind of thing stands there, not where its edges are. Returns (log radiance
+    (H, W, 3), confidence (H, W) in [0, 1]: how much of each cell's mirror images was seen).
+    """
+    H, W = seen.shape
+    sig = blur_deg / 360.0 * W
+    w = _wrapped_blur(seen.astype(np.float64), sig)
+    smooth = _wrapped_blur(np.where(seen[..., None], log_seen, 0.0), sig) / np.maximum(w, 1e-9)[..., None]
+    conf_cells = np.clip(w / 0.5, 0.0, 1.0).reshape(-1)
+    smooth = smooth.reshape(-1, 3)
+    lateral = np.cross(up, forward)
+    d = _map_directions(H, W).reshape(-1, 3)
+    along, across = d @ forward, d @ lateral
+    num, den = np.zeros((H * W, 3)), np.zeros(H * W)
+    for a, b in ((2.0, 0.0), (0.0, 2.0), (2.0, 2.0)):
+        cell = map_cells(d - a * along[:, None] * forward - b * across[:, None] * lateral, H, W)
+        c = conf_cells[cell]
+        num += c[:, None] * smooth[cell]
+        den += c
+    log_mirror = num / np.maximum(den, 1e-9)[:, None]
+    return log_mirror.reshape(H, W, 3), np.clip(den, 0.0, 1.0).reshape(H, W)
+
+
+def horizontal_forward(forward_cam: np.ndarray | None, up: np.ndarray) -> np.ndarray:
+    """Unit (3,) horizontal street direction: ``forward_cam`` (default the camera's optical axis +z) with its
+    component along the unit ``up`` removed."""
+    f = np.array([0.0, 0.0, 1.0]) if forward_cam is None else np.asarray(forward_cam, np.float64)
+    f = f - (f @ up) * up
+    n = float(np.linalg.norm(f))
+    if n < 1e-6:  # looking straight up or down: any horizontal direction
+        f = np.cross(up, [1.0, 0.0, 0.0] if abs(up[0]) < 0.9 else [0.0, 1.0, 0.0])
+        n = float(np.linalg.norm(f))
+    return f / n
+
+
 def image_corrected_envmap(model_envmap: np.ndarray, pixels: SeenPixels | list[SeenPixels],
-                           up_cam: np.ndarray, keep: float = UNSEEN_KEEP) -> tuple[np.ndarray, dict]:
+                           up_cam: np.ndarray, keep: float = UNSEEN_KEEP, *,
+                           forward_cam: np.ndarray | None = None, ground_keep: float | None = None,
+                           symmetry_weight: float | None = None) -> tuple[np.ndarray, dict]:
     """The model map (H, W, 3) (camera-frame equirect, image scale, sun excluded) corrected by the image.
 
     Args:
@@ -127,8 +193,14 @@ def image_corrected_envmap(model_envmap: np.ndarray, pixels: SeenPixels | list[S
         up_cam: (3,) unit gravity up, the map's camera frame.
         keep: unseen cells below the highest seen elevation keep this much of the corrected model's
             log-radiance, the rest is the seen mean colour (:func:`.fill.shrink_unseen`).
+        forward_cam: (3,) the street's direction in the map's frame (the ego's forward axis), None: the map
+            camera's optical axis; the mirror symmetry's planes (:func:`street_mirror`).
+        ground_keep: ``keep`` of the unseen cells below the horizon; None: ``GROUND_KEEP``.
+        symmetry_weight: how far unseen cells whose street mirror images were seen move towards them (log space,
+            times the mirror's confidence); None: ``SYMMETRY_WEIGHT`` (0: the band statistics alone).
     Returns:
-        (envmap (H, W, 3) float32, stats: seen fraction of the sphere, band count, mean gain).
+        (envmap (H, W, 3) float32, stats: seen fraction of the sphere, band count, mean gain, the fraction of the
+        unseen cells whose mirror images were mostly seen).
     """
     check_shape(model_envmap, ("H", "W", 3), "model_envmap")
     H, W = model_envmap.shape[:2]
@@ -163,10 +235,19 @@ def image_corrected_envmap(model_envmap: np.ndarray, pixels: SeenPixels | list[S
     gains = band_log_gains(log_ratio, elev[unclipped], elev.reshape(-1), sky_gain)
     gains = np.clip(gains, -MAX_LOG_GAIN, MAX_LOG_GAIN).reshape(H, W, 3)
     corrected = model * np.exp(gains)
-    # below the highest elevation seen, what no camera saw is shrunk towards the seen mean colour (.fill); the
-    # sky above it stays the corrected model
-    below_sky = (elev <= np.percentile(elev[unclipped], 99.0))[..., None]  # robust top of what was seen
-    corrected = np.where(below_sky, shrink_unseen(corrected, mean_colour_radiance(rad), keep), corrected)
+    # below the highest elevation seen, what no camera saw is shrunk towards the seen mean colour (.fill), the
+    # ground below the horizon by GROUND_KEEP; the sky above it stays the corrected model
+    top = np.percentile(elev[unclipped], 99.0)  # robust top of what was seen
+    ground_keep = GROUND_KEEP if ground_keep is None else ground_keep
+    keep_map = np.where(elev <= top, np.where(elev < 0.0, ground_keep, keep), 1.0)[..., None]
+    corrected = shrink_unseen(corrected, mean_colour_radiance(rad), keep_map)
+    symmetry_weight = SYMMETRY_WEIGHT if symmetry_weight is None else symmetry_weight
+    if symmetry_weight > 0.0:  # unseen cells whose mirror images were seen: towards what was seen there
+        log_mirror, conf = street_mirror(np.log(np.maximum(mean_obs, 1e-9)), unclipped, up,
+                                         horizontal_forward(forward_cam, up), SYMMETRY_BLUR_DEG)
+        t = (symmetry_weight * conf)[..., None]
+        stats["mirrored_fraction"] = float((conf[~seen] >= 0.5).mean()) if (~seen).any() else 0.0
+        corrected = np.exp((1.0 - t) * np.log(corrected) + t * log_mirror)
     out = blend_observed(corrected, unclipped, mean_obs, BLEND_DEG)
     lum = np.maximum(luminance(out), 1e-12)
     out = out * np.maximum(1.0, floor / lum)[..., None]

@@ -59,7 +59,8 @@ def _behind(env, elev_deg):
 def test_unseen_directions_follow_the_seen_elevation_bands():
     img, K = _image(), _K()
     work = prepare_image(img, K, UP)
-    env, _ = image_corrected_envmap(_model(), seen_pixels(work), UP, keep=1.0)  # the bands alone, no shrinking
+    env, _ = image_corrected_envmap(_model(), seen_pixels(work), UP, keep=1.0, ground_keep=1.0,
+                                    symmetry_weight=0.0)  # the bands alone, no shrinking
     behind = lambda elev_deg: _behind(env, elev_deg)  # noqa: E731
     facade = ldr_to_hdr(np.array([70, 60, 50]) / 255.0)
     road = ldr_to_hdr(np.array([120, 120, 118]) / 255.0)
@@ -74,9 +75,10 @@ def test_unseen_directions_follow_the_seen_elevation_bands():
 def test_unseen_directions_below_the_sky_shrink_towards_the_seen_mean_colour():
     img, K = _image(), _K()
     work = prepare_image(img, K, UP)
-    env0, _ = image_corrected_envmap(_model(), seen_pixels(work), UP, keep=0.0)
-    env_half, _ = image_corrected_envmap(_model(), seen_pixels(work), UP, keep=0.5)
-    env1, _ = image_corrected_envmap(_model(), seen_pixels(work), UP, keep=1.0)
+    env0, _ = image_corrected_envmap(_model(), seen_pixels(work), UP, keep=0.0, ground_keep=0.0, symmetry_weight=0.0)
+    env_half, _ = image_corrected_envmap(_model(), seen_pixels(work), UP, keep=0.5, ground_keep=0.5,
+                                         symmetry_weight=0.0)
+    env1, _ = image_corrected_envmap(_model(), seen_pixels(work), UP, keep=1.0, ground_keep=1.0, symmetry_weight=0.0)
     mean_colour = ldr_to_hdr(img.reshape(-1, 3).mean(axis=0) / 255.0)
     assert np.allclose(_behind(env0, 0.0), mean_colour, rtol=0.1)  # keep 0: the seen mean colour
     assert np.allclose(_behind(env0, -40.0), mean_colour, rtol=0.1)
@@ -129,3 +131,55 @@ def test_band_gains_interpolate_and_extrapolate():
     assert np.allclose(np.exp(g[0]), 2.0) and np.allclose(np.exp(g[1]), 2.0)  # below: the lowest band
     assert 0.5 < np.exp(g[2, 0]) < 2.0  # between bands: interpolated
     assert np.allclose(np.exp(g[4]), 4.0)  # above the highest band: the sky's ratio
+
+
+def _road_image(w=640, h=360, seed=1):
+    """Bright sky (top third), a dark facade band, a reddish road (bottom third): the road unlike the mean."""
+    img = _image(w, h, seed)
+    img[2 * h // 3 :] = np.clip(np.array([150, 95, 80]) + (img[2 * h // 3 :].astype(int) - 120), 0, 254)
+    return img
+
+
+def test_the_street_symmetry_puts_the_road_colour_behind_the_camera():
+    img, K = _road_image(), _K()
+    work = prepare_image(img, K, UP)
+    px = seen_pixels(work)
+    plain, _ = image_corrected_envmap(_model(), px, UP, ground_keep=0.0, symmetry_weight=0.0)
+    full, _ = image_corrected_envmap(_model(), px, UP, ground_keep=0.0, symmetry_weight=1.0)
+    half, _ = image_corrected_envmap(_model(), px, UP, ground_keep=0.0, symmetry_weight=0.5)
+    road = ldr_to_hdr(np.array([150, 95, 80]) / 255.0)
+    mean_colour = ldr_to_hdr(img.reshape(-1, 3).mean(axis=0) / 255.0)
+    # 20 deg below the horizon behind the camera: the mirror image of the road seen ahead (smoothed over
+    # SYMMETRY_BLUR_DEG, so a little of the facade band above it mixes in)
+    assert np.allclose(_behind(plain, -20.0), mean_colour, rtol=0.1)  # without the symmetry: the mean colour
+    assert np.allclose(_behind(full, -20.0), road, rtol=0.2)
+    assert _behind(full, -20.0)[0] / _behind(full, -20.0)[2] > 3.0  # red: road, not the grey mean
+    log_gap = lambda env: np.abs(np.log(_behind(env, -20.0) / road)).mean()  # noqa: E731
+    assert log_gap(half) < 0.7 * log_gap(plain)  # halfway in log
+    # behind at the facade band's elevation: darker than the road below it and the sky above it
+    lum = lambda env, e: float(luminance(_behind(env, e)))  # noqa: E731
+    assert lum(full, 0.0) < 0.8 * lum(full, -20.0) and lum(full, 0.0) < 0.5 * lum(full, 15.0)
+    assert lum(full, 0.0) < 0.6 * lum(plain, 0.0)  # the plain map: the mean colour there
+    # to the side (90 deg, no mirror image seen) the symmetry changes nothing
+    side = lonlat_to_camera_dir(np.array([np.pi / 2]), np.radians(np.array([-20.0])))
+    assert np.allclose(DistantLight(full).radiance(np.zeros((1, 3)), side),
+                       DistantLight(plain).radiance(np.zeros((1, 3)), side), rtol=1e-3)
+    # what was seen is unchanged (the map's seen cells are the image's)
+    rays = work.rays_cam[20:-20, 20:-20].reshape(-1, 3)[::97]
+    assert np.allclose(DistantLight(full).radiance(np.zeros_like(rays), rays),
+                       DistantLight(plain).radiance(np.zeros_like(rays), rays), rtol=1e-4, atol=1e-6)
+
+
+def test_the_street_axis_sets_the_mirror():
+    """A camera looking across the street (forward = its x axis): ahead <-> behind the camera is left <-> right
+    of the street, still mirrored; straight along the street (the camera's +-x) no mirror image was seen."""
+    img, K = _road_image(), _K()
+    px = seen_pixels(prepare_image(img, K, UP))
+    across, _ = image_corrected_envmap(_model(), px, UP, ground_keep=0.0, symmetry_weight=1.0,
+                                       forward_cam=np.array([1.0, 0.0, 0.0]))
+    plain, _ = image_corrected_envmap(_model(), px, UP, ground_keep=0.0, symmetry_weight=0.0)
+    road = ldr_to_hdr(np.array([150, 95, 80]) / 255.0)
+    assert np.allclose(_behind(across, -20.0), road, rtol=0.2)
+    side = lonlat_to_camera_dir(np.array([np.pi / 2]), np.radians(np.array([-20.0])))
+    assert np.allclose(DistantLight(across).radiance(np.zeros((1, 3)), side),
+                       DistantLight(plain).radiance(np.zeros((1, 3)), side), rtol=1e-3)
