@@ -205,9 +205,9 @@ class SeenSurfaces:
         best = np.argmin(t_all, axis=0)
         if len(self.scenes) > 1:
             same = t_all <= t_near * (1.0 + SAME_SURFACE_FRACTION) + 0.1
-            with np.errstate(invalid="ignore"):
+            with np.errstate(invalid="ignore", divide="ignore"):
                 to_hit = origins[None] + np.where(same, t_all, 0.0)[..., None] * dirs[None] - self.camera_centres[:, None]
-            cos = (to_hit * dirs[None]).sum(-1) / np.maximum(np.linalg.norm(to_hit, axis=-1), 1e-9)
+                cos = (to_hit * dirs[None]).sum(-1) / np.maximum(np.linalg.norm(to_hit, axis=-1), 1e-9)
             best = np.where(np.isfinite(t_near), np.argmax(np.where(same, cos, -np.inf), axis=0), best)
         rows = np.arange(n)
         hit = np.isfinite(t_near)
