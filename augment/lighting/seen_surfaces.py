@@ -15,7 +15,7 @@ hits within ``SAME_SURFACE_FRACTION`` of the nearest (the same surface seen by s
 camera that saw it along the direction nearest to the ray's (least parallax; from a camera's own centre its own
 pixels), and returns that camera's radiance sampled bilinearly at the interpolated pixel coordinate, from a copy of the
 texture blurred by the hit's *reprojection uncertainty*: seen from a point ``b`` metres from the camera that
-took it, a surface at distance ``t`` whose depth is known to a fraction ``DEPTH_UNCERTAINTY`` moves by about
+took it (across the ray: moving along the ray causes no parallax), a surface at distance ``t`` whose depth is known to a fraction ``DEPTH_UNCERTAINTY`` moves by about
 ``f DEPTH_UNCERTAINTY b / t`` pixels in that camera's image, so that is the Gaussian sigma used (0 from the
 camera's own centre: its image exactly; between the precomputed ``BLUR_LEVELS_PX``, linearly). The radiance is a
 constant (not a function of the volume's parameters).
@@ -42,7 +42,7 @@ GROUND_MAX_TILT_DEG = 25.0
 MAX_DEPTH_M = 300.0
 T_MIN_M = 0.05  # hits nearer than this to the ray's origin are ignored (a point on the road)
 SEEN_SCHEMA = "streetaug.seen_surfaces/1"
-DEPTH_UNCERTAINTY = 0.05  # relative error of the densified depth (0.05 / 0.1 / 0.2 tried on scene-0916 keyframes 4, 12, 24)
+DEPTH_UNCERTAINTY = 0.1  # relative error of the densified depth (0.05 / 0.1 / 0.2 tried on scene-0916 keyframes 4, 12, 24)
 SAME_SURFACE_FRACTION = 0.05  # hits this much farther than the nearest (+ 0.1 m) are the same surface
 BLUR_LEVELS_PX = (0.0, 1.0, 2.0, 4.0, 8.0, 16.0)  # Gaussian sigmas of the texture copies
 
@@ -220,7 +220,8 @@ class SeenSurfaces:
             bu, bv = bary_best[k, :1], bary_best[k, 1:]
             uv = (1 - bu - bv) * self.pixel_uv[tri[:, 0]] + bu * self.pixel_uv[tri[:, 1]] + bv * self.pixel_uv[tri[:, 2]]
             cam = self.face_camera[face].astype(np.int64)
-            baseline = np.linalg.norm(origins[k] - self.camera_centres[cam], axis=1)
+            b = origins[k] - self.camera_centres[cam]
+            baseline = np.linalg.norm(b - (b * dirs[k]).sum(axis=1, keepdims=True) * dirs[k], axis=1)  # across the ray
             sigma = self.focal_px[cam] * DEPTH_UNCERTAINTY * baseline / np.maximum(t_best[k], 1.0)
             levels = np.asarray(BLUR_LEVELS_PX)
             hi = np.clip(np.searchsorted(levels, sigma), 1, len(levels) - 1)
