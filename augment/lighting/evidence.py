@@ -21,7 +21,7 @@ from functools import cached_property, lru_cache
 
 import cv2
 import numpy as np
-from shapely.geometry import MultiPoint
+import shapely
 from shapely.ops import unary_union
 
 from ...datasets.sample import Box
@@ -143,16 +143,22 @@ def box_shadow_evidence(work: PreparedImage, T_cam_from_global: np.ndarray, boxe
     lum = luminance(work.hdr)
     sun = sun_dir_global / np.linalg.norm(sun_dir_global)
     shadows, silhouettes, items = [], np.zeros((h, w), np.uint8), []
+    R, t = T_cam_from_global[:3, :3], T_cam_from_global[:3, 3]
     for box in boxes:
-        corners = box.corners()
         if box.wlh[2] < 1.0:
             continue
-        c_cam = (T_cam_from_global[:3, :3] @ corners.T).T + T_cam_from_global[:3, 3]
+        # every corner's depth is within half the box's diagonal of its centre's: far outside the depth window
+        # (no corner can pass the test below) the corners are not worked out
+        depth, reach = float(R[2] @ box.center + t[2]), 0.5 * float(np.linalg.norm(box.wlh))
+        if depth + reach < 4.0 or depth - reach > 40.0:
+            continue
+        corners = box.corners()
+        c_cam = (R @ corners.T).T + t
         if np.any(c_cam[:, 2] < 1.0) or not 4.0 <= np.median(c_cam[:, 2]) <= 40.0:
             continue
         z0 = corners[:, 2].min()
         ground = corners - sun[None] * ((corners[:, 2] - z0) / sun[2])[:, None]
-        shadow = MultiPoint([tuple(p) for p in ground[:, :2]]).convex_hull
+        shadow = shapely.multipoints(ground[:, :2]).convex_hull
         uv = (c_cam @ work.K.T)[:, :2] / c_cam[:, 2:3]
         hull = cv2.convexHull(np.round(uv).astype(np.int32))
         cv2.fillConvexPoly(silhouettes, hull, 1)

@@ -52,6 +52,7 @@ _SATURATION_RADIANCE = ldr_to_hdr(np.full(3, SATURATION_LDR))
 # dev scene: results/unseen_l1_fit.json)
 SYMMETRY_WEIGHT = 0.5
 SYMMETRY_BLUR_DEG = 8.0
+MIRROR_SCALE = 2  # the mirror is worked out on a map this many times coarser (it is smoothed over the blur anyway)
 # the unseen ground (below the horizon): this much of the corrected model's log-radiance, the rest the seen mean
 # colour (the model's ground, an assumed albedo under the fitted sky, scaled per band, does not carry to other
 # directions); fitted with the symmetry by benchmarks/bench_unseen_l1.py --fit
@@ -149,22 +150,28 @@ def street_mirror(log_seen: np.ndarray, seen: np.ndarray, up: np.ndarray, forwar
     (H, W, 3), confidence (H, W) in [0, 1]: how much of each cell's mirror images was seen).
     """
     H, W = seen.shape
-    sig = blur_deg / 360.0 * W
-    w = _wrapped_blur(seen.astype(np.float64), sig)
-    smooth = _wrapped_blur(np.where(seen[..., None], log_seen, 0.0), sig) / np.maximum(w, 1e-9)[..., None]
-    conf_cells = np.clip(w / 0.5, 0.0, 1.0).reshape(-1)
+    h, w = H // MIRROR_SCALE, W // MIRROR_SCALE  # smooth by construction: worked out at a coarser resolution
+    area = lambda x: cv2.resize(x, (w, h), interpolation=cv2.INTER_AREA)  # noqa: E731
+    sig = blur_deg / 360.0 * w
+    weight = _wrapped_blur(area(seen.astype(np.float64)), sig)
+    smooth = _wrapped_blur(area(np.where(seen[..., None], log_seen, 0.0)), sig) / np.maximum(weight, 1e-9)[..., None]
+    conf_cells = np.clip(weight / 0.5, 0.0, 1.0).reshape(-1)
     smooth = smooth.reshape(-1, 3)
     lateral = np.cross(up, forward)
-    d = _map_directions(H, W).reshape(-1, 3)
+    d = _map_directions(h, w).reshape(-1, 3)
     along, across = d @ forward, d @ lateral
-    num, den = np.zeros((H * W, 3)), np.zeros(H * W)
+    num, den = np.zeros((h * w, 3)), np.zeros(h * w)
     for a, b in ((2.0, 0.0), (0.0, 2.0), (2.0, 2.0)):
-        cell = map_cells(d - a * along[:, None] * forward - b * across[:, None] * lateral, H, W)
+        cell = map_cells(d - a * along[:, None] * forward - b * across[:, None] * lateral, h, w)
         c = conf_cells[cell]
         num += c[:, None] * smooth[cell]
         den += c
-    log_mirror = num / np.maximum(den, 1e-9)[:, None]
-    return log_mirror.reshape(H, W, 3), np.clip(den, 0.0, 1.0).reshape(H, W)
+    low = np.concatenate([num / np.maximum(den, 1e-9)[:, None], np.clip(den, 0.0, 1.0)[:, None]], 1).reshape(h, w, 4)
+    # back to the map's resolution (bilinear, wrapping in longitude)
+    k = MIRROR_SCALE
+    up_res = cv2.resize(np.pad(low, ((0, 0), (1, 1), (0, 0)), mode="wrap"), ((w + 2) * k, H),
+                        interpolation=cv2.INTER_LINEAR)[:, k : k + W]
+    return up_res[..., :3], up_res[..., 3]
 
 
 def horizontal_forward(forward_cam: np.ndarray | None, up: np.ndarray) -> np.ndarray:

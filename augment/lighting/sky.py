@@ -28,6 +28,8 @@ Model:
 
 from __future__ import annotations
 
+from functools import lru_cache
+
 import numpy as np
 
 from ..core import ConventionError, camera_envmap_directions, check_shape, luminance
@@ -175,6 +177,16 @@ def _hemisphere_quadrature(n_theta: int = 48, n_phi: int = 96) -> tuple[np.ndarr
 _QUAD_DIRS, _QUAD_W = _hemisphere_quadrature()
 
 
+@lru_cache(maxsize=64)
+def _clear_shape_irradiance(shape_dir: tuple[float, float, float], turbidity: float) -> tuple[float, np.ndarray]:
+    """The clear-sky shape's horizontal irradiance (luminance, and (3,) RGB) for a shape sun direction (cached: one
+    L1 estimate asks for the same sun several times)."""
+    shape_q = _clear_sky_shape(_QUAD_DIRS, np.asarray(shape_dir), turbidity)
+    rgb = (shape_q * _QUAD_W[:, None]).sum(axis=0)
+    rgb.flags.writeable = False
+    return float(luminance(shape_q) @ _QUAD_W), rgb
+
+
 def _sky_components(sun_dir: np.ndarray, turbidity: float, cloud_cover: float):
     """Per-call constants: shape sun direction, clear-sky gain, overcast zenith radiance, sky horizontal irradiance."""
     elevation = float(np.arcsin(np.clip(sun_dir[2], -1.0, 1.0)))
@@ -189,12 +201,12 @@ def _sky_components(sun_dir: np.ndarray, turbidity: float, cloud_cover: float):
     toa_horizontal = SOLAR_CONSTANT_W_M2 * _effective_sin_elevation(elevation)
     t_lum = float(luminance(SUN_TOA_RGB * _beam_transmittance(max(elevation, 0.0), turbidity)))
     clear_target = DOWN_SCATTER * (1.0 - t_lum) * toa_horizontal  # W m^-2 horizontal (luminance)
-    shape_q = _clear_sky_shape(_QUAD_DIRS, shape_dir, turbidity)
-    clear_gain = clear_target / max(float(luminance(shape_q) @ _QUAD_W), 1e-12)
+    shape_lum_e, shape_e = _clear_shape_irradiance(tuple(float(v) for v in shape_dir), float(turbidity))
+    clear_gain = clear_target / max(shape_lum_e, 1e-12)
     overcast_target = OVERCAST_FRACTION * toa_horizontal
     overcast_zenith = overcast_target * 9.0 / (7.0 * np.pi)
     # Horizontal sky irradiance per channel (for the ground), blended like the radiance.
-    clear_e = clear_gain * (shape_q * _QUAD_W[:, None]).sum(axis=0)
+    clear_e = clear_gain * shape_e
     overcast_e = overcast_target * OVERCAST_RGB
     sky_e = (1.0 - cloud_cover) * clear_e + cloud_cover * overcast_e
     return shape_dir, clear_gain, overcast_zenith, sky_e
