@@ -151,10 +151,11 @@ def street_mirror(log_seen: np.ndarray, seen: np.ndarray, up: np.ndarray, forwar
     """
     H, W = seen.shape
     h, w = H // MIRROR_SCALE, W // MIRROR_SCALE  # smooth by construction: worked out at a coarser resolution
-    area = lambda x: cv2.resize(x, (w, h), interpolation=cv2.INTER_AREA)  # noqa: E731
     sig = blur_deg / 360.0 * w
-    weight = _wrapped_blur(area(seen.astype(np.float64)), sig)
-    smooth = _wrapped_blur(area(np.where(seen[..., None], log_seen, 0.0)), sig) / np.maximum(weight, 1e-9)[..., None]
+    seen_low = cv2.resize(seen.astype(np.float64), (w, h), interpolation=cv2.INTER_AREA)
+    log_low = cv2.resize(np.where(seen[..., None], log_seen, 0.0), (w, h), interpolation=cv2.INTER_AREA)
+    weight = _wrapped_blur(seen_low, sig)
+    smooth = _wrapped_blur(log_low, sig) / np.maximum(weight, 1e-9)[..., None]
     conf_cells = np.clip(weight / 0.5, 0.0, 1.0).reshape(-1)
     smooth = smooth.reshape(-1, 3)
     lateral = np.cross(up, forward)
@@ -198,8 +199,8 @@ def image_corrected_envmap(model_envmap: np.ndarray, pixels: SeenPixels | list[S
             instant give one map); the sky pixels' image/model ratio continues above the highest seen band (the
             zenith is sky).
         up_cam: (3,) unit gravity up, the map's camera frame.
-        keep: unseen cells below the highest seen elevation keep this much of the corrected model's
-            log-radiance, the rest is the seen mean colour (:func:`.fill.shrink_unseen`).
+        keep: unseen cells between the horizon and the highest seen elevation keep this much of the corrected
+            model's log-radiance, the rest is the seen mean colour (:func:`.fill.shrink_unseen`).
         forward_cam: (3,) the street's direction in the map's frame (the ego's forward axis), None: the map
             camera's optical axis; the mirror symmetry's planes (:func:`street_mirror`).
         ground_keep: ``keep`` of the unseen cells below the horizon; None: ``GROUND_KEEP``.
