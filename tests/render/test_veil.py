@@ -102,3 +102,17 @@ def test_inserted_car_gets_the_veil_of_its_neighbours():
     assert abs(after - neighbours) < abs(before - neighbours)
     y_before, y_after = clear.image[inner].mean(axis=1), veiled.image[inner].mean(axis=1)
     assert y_after.std() / y_after.mean() < y_before.std() / y_before.mean()
+
+
+def test_without_the_camera_look_the_veil_changes_nothing():
+    """The veil is part of the camera look: with ``match_camera`` off (the Mitsuba reference benchmark's
+    setting) the composite is byte-identical whatever veil is given."""
+    J, depth, ev = textured_scene(4)
+    image = hazy(J, depth, 0.006, 0.01, ev)
+    T = pose_camera_to_transform(0.0, 1.5, 20.0, 60.0)
+    off = dataclasses.replace(QUALITY_PRESETS["draft"], match_camera=False)
+    strong = Veil(np.array([0.0, 100.0]), np.array([0.3, 0.3]), np.ones(3))
+    a = render_insertion(image, K, depth, sunny_light(), primitive_car(), T, quality=off, ev=ev, seed=0)
+    b = render_insertion(image, K, depth, sunny_light(), primitive_car(), T, quality=off, ev=ev, seed=0, veil=strong)
+    assert a.coverage.sum() > 500
+    np.testing.assert_array_equal(a.image, b.image)
