@@ -65,12 +65,12 @@ def sedan_spec() -> BodySpec:
     L, H = 4.60, 1.45
     return BodySpec(
         length=L, width=1.80, height=H, wheel_radius=0.32, front_overhang=0.92, rear_overhang=1.00,
-        belt_front=0.90, belt_rear=0.98, d_ws=1.55, d_roof_front=2.25, d_roof_back=3.20, d_rear=3.85,
+        belt_front=0.90, belt_rear=0.98, d_ws=1.45, d_roof_front=2.35, d_roof_back=3.05, d_rear=3.95,
         pillars=(2.75,),
-        top=((0.0, 0.66), (0.04, 0.74), (0.25, 0.80), (1.55, 0.90), (2.25, H - 0.02), (2.60, H), (3.20, H - 0.03),
-             (3.85, 1.00), (4.45, 0.98), (4.57, 0.93), (L, 0.86)),
+        top=((0.0, 0.66), (0.04, 0.74), (0.25, 0.80), (1.45, 0.90), (2.35, H - 0.02), (2.65, H), (3.05, H - 0.03),
+             (3.95, 1.00), (4.45, 0.98), (4.57, 0.93), (L, 0.86)),
         bottom=((0.0, 0.36), (0.10, 0.27), (0.55, 0.20), (L - 0.6, 0.21), (L - 0.12, 0.30), (L, 0.40)),
-        tumblehome=0.22, plan_exponent=3.0, nose_m=0.55, tail_m=0.40,
+        tumblehome=0.28, plan_exponent=2.6, nose_m=0.80, tail_m=0.60,
     )
 
 
@@ -78,12 +78,12 @@ def hatchback_spec() -> BodySpec:
     L, H = 4.10, 1.50
     return BodySpec(
         length=L, width=1.75, height=H, wheel_radius=0.31, front_overhang=0.82, rear_overhang=0.68,
-        belt_front=0.92, belt_rear=1.00, d_ws=1.35, d_roof_front=2.00, d_roof_back=3.25, d_rear=3.92,
+        belt_front=0.92, belt_rear=1.00, d_ws=1.35, d_roof_front=2.00, d_roof_back=3.10, d_rear=3.92,
         pillars=(2.55,),
-        top=((0.0, 0.66), (0.04, 0.74), (0.25, 0.80), (1.35, 0.92), (2.00, H - 0.02), (2.50, H), (3.25, H - 0.05),
+        top=((0.0, 0.66), (0.04, 0.74), (0.25, 0.80), (1.35, 0.92), (2.00, H - 0.02), (2.50, H), (3.10, H - 0.04),
              (3.92, 1.02), (4.04, 0.97), (L, 0.88)),
         bottom=((0.0, 0.36), (0.10, 0.27), (0.50, 0.20), (L - 0.5, 0.22), (L - 0.10, 0.32), (L, 0.42)),
-        tumblehome=0.20, plan_exponent=3.0, nose_m=0.50, tail_m=0.35,
+        tumblehome=0.26, plan_exponent=2.6, nose_m=0.75, tail_m=0.45,
     )
 
 
@@ -91,12 +91,12 @@ def suv_spec() -> BodySpec:
     L, H = 4.70, 1.75
     return BodySpec(
         length=L, width=1.90, height=H, wheel_radius=0.37, front_overhang=0.92, rear_overhang=0.98,
-        belt_front=1.08, belt_rear=1.14, d_ws=1.40, d_roof_front=2.10, d_roof_back=4.35, d_rear=4.62,
+        belt_front=1.08, belt_rear=1.14, d_ws=1.40, d_roof_front=2.10, d_roof_back=4.25, d_rear=4.62,
         pillars=(2.75, 3.75),
-        top=((0.0, 0.80), (0.05, 0.90), (0.30, 0.98), (1.40, 1.08), (2.10, H - 0.02), (2.60, H), (4.35, H - 0.03),
+        top=((0.0, 0.80), (0.05, 0.90), (0.30, 0.98), (1.40, 1.08), (2.10, H - 0.02), (2.60, H), (4.25, H - 0.03),
              (4.62, 1.10), (L, 1.02)),
         bottom=((0.0, 0.52), (0.15, 0.36), (0.60, 0.28), (L - 0.6, 0.30), (L - 0.12, 0.38), (L, 0.52)),
-        tumblehome=0.17, plan_exponent=3.5, nose_m=0.55, tail_m=0.35,
+        tumblehome=0.22, plan_exponent=2.8, nose_m=0.75, tail_m=0.45,
     )
 
 
@@ -109,7 +109,7 @@ def van_spec() -> BodySpec:
         top=((0.0, 0.72), (0.06, 0.88), (0.25, 0.98), (0.85, 1.10), (1.70, H - 0.03), (2.30, H), (4.85, H - 0.02),
              (4.97, H - 0.12), (L, H - 0.30)),
         bottom=((0.0, 0.48), (0.15, 0.32), (0.55, 0.24), (L - 0.55, 0.26), (L - 0.12, 0.34), (L, 0.48)),
-        tumblehome=0.10, plan_exponent=4.0, nose_m=0.50, tail_m=0.30,
+        tumblehome=0.14, plan_exponent=3.0, nose_m=0.65, tail_m=0.35,
     )
 
 
@@ -202,6 +202,16 @@ def _profile_curves(spec: BodySpec) -> tuple[PchipInterpolator, PchipInterpolato
     return PchipInterpolator(*np.array(spec.top).T), PchipInterpolator(*np.array(spec.bottom).T)
 
 
+def side_window_limits(spec: BodySpec, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """d of the side glass's front and rear edges at height z: from :func:`side_window_edges` at the belt
+    line, leaning back / forward with the windscreen and rear window towards the roof."""
+    e = side_window_edges(spec)
+    belt = 0.5 * (spec.belt_front + spec.belt_rear)
+    f = np.clip((z - belt) / (spec.height - _RAIL - belt), 0.0, 1.0)
+    return (e[0] + 0.8 * f * (spec.d_roof_front - spec.d_ws),
+            e[1] - 0.5 * f * (spec.d_rear - spec.d_roof_back))
+
+
 def body_profiles(spec: BodySpec, d: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Roof line z_top, underbody z_bot (with arches), plan half width and belt height at stations d."""
     top_curve, bot_curve = _profile_curves(spec)
@@ -224,7 +234,7 @@ def body_profiles(spec: BodySpec, d: np.ndarray) -> tuple[np.ndarray, np.ndarray
 # Rows per half section, bottom to top: underbody, lower side up to the bumper line, up to the belt
 # line, side glass, roof (or windscreen / bonnet).  Row edges lie on those lines at every station, so
 # material boundaries along them are straight, not staircased.
-_SEG_ROWS = (3, 3, 6, 4, 6)
+_SEG_ROWS = (3, 3, 6, 6, 6)
 _RAIL = 0.07  # roof rail height above the side glass (m)
 _ROOF_F = (0.78, 0.56, 0.34, 0.12)  # roof rows: fractions of the roof edge's half width
 CREASE_DEG = 35.0  # faces meeting at more than this angle get separate (hard) vertex normals
@@ -259,20 +269,22 @@ def section_rows(spec: BodySpec, d: np.ndarray) -> tuple[np.ndarray, np.ndarray]
         return np.minimum(m, 0.3 * hw)
 
     zsh = be - 0.11
-    z = [bot, bot, bot, bot + 0.025, bot + 0.075]
+    z = [bot, bot, bot, bot + 0.03, bot + 0.08]
     z.append(0.5 * (z[-1] + zb))
     z += [np.full_like(bot, zb), zb + 0.4 * (zsh - zb), zb + 0.75 * (zsh - zb), zsh, be - 0.04, be]
     zr = be + 0.006 + w * (top - _RAIL - be - 0.006)
-    z += [be + 0.006, be + 0.006 + (zr - be - 0.006) / 3, be + 0.006 + 2 * (zr - be - 0.006) / 3, zr]
-    crown = 0.025 * w + 0.015 * (1.0 - w)
+    t_glass = np.linspace(0.0, 1.0, _SEG_ROWS[3])
+    z += [be + 0.006 + t * (zr - be - 0.006) for t in t_glass]
+    crown = 0.045 * w + 0.02 * (1.0 - w)
     z += [zr + 0.02 * w, top - np.maximum(0.012 * w, 0.8 * crown)]
     z += [top - crown * f**2 for f in _ROOF_F]
-    gb = hw - o(0.065)
+    gb = hw - o(0.085)
     gt = gb - w * spec.tumblehome * 0.85 * hw
     edge = np.maximum(gt - 0.035 * w - o(0.04) * (1.0 - w), 0.0)
-    y = [np.zeros_like(hw), 0.55 * hw, hw - o(0.10), hw - o(0.035), hw - o(0.014), hw - o(0.006), hw - o(0.003),
-         hw, hw, hw, hw - o(0.012), hw - o(0.04), gb, gb + (gt - gb) / 3, gb + 2 * (gt - gb) / 3, gt,
-         gt - 0.008 * w, edge]
+    y = [np.zeros_like(hw), 0.55 * hw, hw - o(0.14), hw - o(0.075), hw - o(0.04), hw - o(0.02), hw - o(0.01),
+         hw - o(0.003), hw, hw - o(0.004), hw - o(0.025), hw - o(0.06)]
+    y += [gb + t * (gt - gb) for t in t_glass]
+    y += [gt - 0.008 * w, edge]
     y += [f * edge for f in _ROOF_F]
     Z = np.clip(np.stack(z, axis=1), bot[:, None], top[:, None])
     Z = np.maximum.accumulate(Z, axis=1)  # rows never go down (squeezed sections: arches, nose, tail)
@@ -345,7 +357,9 @@ def body_materials(spec: BodySpec, V: np.ndarray, tri_a: np.ndarray, tri_b: np.n
     # Greenhouse: side glass = the glass rows between the window edges; windscreen / rear window =
     # forward / backward facing quads above the belt, inside the pillars (measured from the full width).
     e = side_window_edges(spec)
-    in_side_x = (d > e[0]) & (d < e[1])
+    # The side glass's front / rear edges lean with the windscreen / rear window (A and C pillars).
+    e0, e1 = side_window_limits(spec, z)
+    in_side_x = (d > e0) & (d < e1)
     for dp in spec.pillars:
         in_side_x &= np.abs(d - dp) > 0.06
     side = (kind == 3) & (kind_hi == 3) & in_side_x & (np.abs(n[:, 1]) > 0.3)
@@ -363,10 +377,13 @@ def body_materials(spec: BodySpec, V: np.ndarray, tri_a: np.ndarray, tri_b: np.n
     # Behind the B pillar (rear doors, rear quarter) and the rear window: the (often tinted) rear glass.
     mat[(side & (d > spec.pillars[0])) | rear] = GLASS_REAR
     # Black window surround: the frame above the side glass, the belt seal under it and the B pillar.
-    cabin = (cabin_weight(top_d, belt) > 0.5) & (d > e[0] - 0.02) & (d < e[1] + 0.02) & (np.abs(n[:, 1]) > 0.3)
+    cabin = (cabin_weight(top_d, belt) > 0.5) & (d > e0 - 0.03) & (d < e1 + 0.03) & (np.abs(n[:, 1]) > 0.3)
     frame = cabin & (((kind == 3) & (kind_hi == 4)) | ((kind == 2) & (row == _SEG_ROWS[2] - 1) & (kind_hi == 3)))
     b_pillar = (kind == 3) & (kind_hi == 3) & (np.abs(d - spec.pillars[0]) <= 0.06) & (np.abs(n[:, 1]) > 0.3)
-    mat[frame | b_pillar] = TRIM
+    # Estates (SUVs, vans): the D pillar between the rear side glass and the tailgate glass is black too.
+    d_pillar = ((kind == 3) & (kind_hi == 3) & (d > e1) & (np.abs(n[:, 1]) > 0.3) & (mat == PAINT)
+                & (len(spec.pillars) > 1))
+    mat[frame | b_pillar | d_pillar] = TRIM
 
     # Panel gaps: thin dark strips at the cut lines (door shut lines on the sides below the belt line,
     # bonnet and boot edges on top).
@@ -426,5 +443,5 @@ __all__ = [
     "HEADLIGHT", "INTERIOR", "N_SLOTS", "PAINT", "PAINT_LOWER", "PLATE_BAND", "PLATE_FRONT", "PLATE_INK",
     "PLATE_REAR", "REFLECTOR", "RIM", "TAILLIGHT", "TRIM", "TYRE", "axle_distances", "body_materials", "body_part",
     "body_profiles", "cabin_weight", "hatchback_spec", "jitter_spec", "loft_stations", "panel_gaps", "section_half_width",
-    "section_rows", "sedan_spec", "side_window_edges", "suv_spec", "tumblehome_taper", "van_spec",
+    "section_rows", "sedan_spec", "side_window_edges", "side_window_limits", "suv_spec", "tumblehome_taper", "van_spec",
 ]
