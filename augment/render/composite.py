@@ -90,6 +90,7 @@ class ObjectLayers:
         box: the union of the object's and the shadow's boxes (everything outside is untouched), or None.
         solid_coverage, solid_mask: (H, W) float32 the object's extent before / after occlusion (its glass
             counts as the object: ``Foreground.solid``), for labels and for occluding other objects.
+        scene_depth_m: (H, W) the scene's camera-z depth the object was occluded by (the shadow's veil).
     """
 
     coverage: np.ndarray
@@ -101,6 +102,7 @@ class ObjectLayers:
     box: PixelBox | None
     solid_coverage: np.ndarray | None = None
     solid_mask: np.ndarray | None = None
+    scene_depth_m: np.ndarray | None = None
 
 
 def object_layers(fg: Foreground | None, sh: ShadowMap | None, scene_depth_m: np.ndarray) -> ObjectLayers:
@@ -130,7 +132,8 @@ def object_layers(fg: Foreground | None, sh: ShadowMap | None, scene_depth_m: np
     if sh is not None:
         ratio[sh.box.slices] = sh.ratio_rgb
         box = sh.box if box is None else box.union(sh.box)
-    return ObjectLayers(coverage, vis_full, mask, obj_depth, rad_premult, ratio, box, solid_coverage, solid_mask)
+    return ObjectLayers(coverage, vis_full, mask, obj_depth, rad_premult, ratio, box, solid_coverage, solid_mask,
+                        scene_depth_m)
 
 
 @dataclass(frozen=True)
@@ -182,7 +185,10 @@ def composite_layers(image_rgb: np.ndarray, layers: ObjectLayers, camera: Pinhol
             smear = lambda a: cv2.filter2D(np.ascontiguousarray(a, np.float32), -1, kernel,  # noqa: E731
                                            borderType=cv2.BORDER_CONSTANT)
             obj_b, mask_b = smear(obj_b), np.clip(smear(mask_b), 0.0, 1.0)
-        image[ub] = composite(image_rgb[ub], obj_b, mask_b, np.ones_like(mask_b), L.ratio_rgb[ub], ev)
+        ratio = L.ratio_rgb[ub]
+        if veil is not None and L.scene_depth_m is not None:  # the haze in front of the ground is not shadowed
+            ratio = veil.shadow_ratio(ratio, image_rgb[ub], L.scene_depth_m[ub], ev)
+        image[ub] = composite(image_rgb[ub], obj_b, mask_b, np.ones_like(mask_b), ratio, ev)
         image[ub] = add_object_noise(image[ub], mask_b, effects.noise_sigma, rng)
         if jpeg_quality is not None:
             touched = np.zeros((H, W), bool)

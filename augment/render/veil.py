@@ -72,6 +72,22 @@ class Veil:
         cov = np.asarray(coverage, np.float64)[..., None]
         return (radiance_premult * (1.0 - haze) + self.airlight_rgb * haze * cov).astype(np.float32)
 
+    def shadow_ratio(self, ratio_rgb: np.ndarray, image_rgb: np.ndarray, depth_m: np.ndarray, ev: float = 0.0) -> np.ndarray:
+        """(h, w, 3) shadow ratio acting on the whole pixel such that only the scene behind the veil is shadowed:
+        ``I' = (I - V) S + V``, i.e. ``S' = S + (1 - S) min(V / I, 1)``, V the veil at the scene's ``depth_m``.
+
+        Args:
+            ratio_rgb: (h, w, 3) shadow ratio S (1 = unchanged); image_rgb: (h, w, 3) uint8 the scene;
+            depth_m: (h, w) its camera-z (inf: sky, no veil is kept).
+        """
+        S = np.asarray(ratio_rgb, np.float64)
+        if not np.any(S < 1.0):
+            return ratio_rgb
+        V = self.haze_at(depth_m)[..., None] * self.airlight_rgb
+        I = ldr_uint8_to_hdr(np.arange(256, dtype=np.uint8), ev).astype(np.float64)[image_rgb]
+        share = np.clip(V / np.maximum(I, 1e-9), 0.0, 1.0)
+        return (S + (1.0 - S) * share).astype(np.float32)
+
 
 def dark_channel_blocks(image_rgb: np.ndarray) -> np.ndarray:
     """(H // 4, W // 4) uint8 dark channel: min over RGB, 4 x 4 blocks and a 3 x 3-block patch."""

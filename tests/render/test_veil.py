@@ -116,3 +116,38 @@ def test_without_the_camera_look_the_veil_changes_nothing():
     b = render_insertion(image, K, depth, sunny_light(), primitive_car(), T, quality=off, ev=ev, seed=0, veil=strong)
     assert a.coverage.sum() > 500
     np.testing.assert_array_equal(a.image, b.image)
+
+
+def test_shadow_darkens_only_what_is_behind_the_veil():
+    veil = Veil(np.array([0.0, 100.0]), np.array([0.0, 0.1]), np.ones(3))  # V = 0.02 at 20 m
+    image = np.full((2, 2, 3), 128, np.uint8)
+    I = float(ldr_uint8_to_hdr(np.array([128], np.uint8))[0])
+    depth = np.array([[20.0, 20.0], [np.inf, 20.0]])
+    S = np.array([[0.2, 1.0], [0.2, 0.5]])[..., None] * np.ones(3)
+    out = veil.shadow_ratio(S, image, depth)
+    np.testing.assert_allclose(out[0, 0] * I, (I - 0.02) * 0.2 + 0.02, rtol=1e-5)
+    np.testing.assert_allclose(out[0, 1], 1.0)
+    np.testing.assert_allclose(out[1, 0], 0.2, rtol=1e-6)  # the sky: no veil kept
+    np.testing.assert_allclose(out[1, 1] * I, (I - 0.02) * 0.5 + 0.02, rtol=1e-5)
+
+
+def test_inserted_shadow_keeps_the_veil_of_its_ground():
+    """In a hazy image the car's shadow core is no darker than the veil at its depth (it was, without it)."""
+    J, depth, ev = textured_scene(5)
+    J = np.where(np.isfinite(depth)[..., None], 0.3, J)  # a plain ground: the shadow alone makes it dark
+    J[np.isfinite(depth) & (np.arange(W)[None, :] % 97 < 3)] = 0.0  # a few black stripes give the dark channel
+    image = hazy(J, depth, 0.006, 0.01, ev)
+    T = pose_camera_to_transform(0.0, 1.5, 20.0, 60.0)
+    quality = dataclasses.replace(QUALITY_PRESETS["draft"], match_camera=True)
+    veil = estimate_veil(image, depth, ev)
+    clear = render_insertion(image, K, depth, sunny_light(), primitive_car(), T, quality=quality, ev=ev, seed=0,
+                             veil=Veil.none())
+    veiled = render_insertion(image, K, depth, sunny_light(), primitive_car(), T, quality=quality, ev=ev, seed=0,
+                              veil=veil)
+    core = (clear.shadow_ratio < 0.3) & (clear.coverage == 0) & (J.max(axis=2) > 0)
+    assert core.sum() > 50
+    V = veil.haze_at(depth[core])[:, None] * veil.airlight_rgb
+    lin_clear = ldr_uint8_to_hdr(clear.image, ev)[core]
+    lin_veiled = ldr_uint8_to_hdr(veiled.image, ev)[core]
+    assert np.median(lin_clear.min(axis=1) / V.min(axis=1)) < 0.9
+    assert np.median(lin_veiled.min(axis=1) / V.min(axis=1)) > 0.95
