@@ -99,7 +99,8 @@ def main(argv=None) -> None:
         b = np.array([s[k] for s in stats["real"] if k in s])
         summary[k] = {"inserted_median": float(np.median(a)) if a.size else None,
                       "real_median": float(np.median(b)) if b.size else None}
-        print(f"  {k:24s} {summary[k]['inserted_median'] or float('nan'):9.2f} {summary[k]['real_median'] or float('nan'):9.2f}")
+        med_i, med_r = (np.nan if v is None else v for v in summary[k].values())
+        print(f"  {k:24s} {med_i:9.2f} {med_r:9.2f}")
     for name in ("real", "inserted"):
         d = np.array([s["distance_m"] for s in stats[name]])
         k = np.array([s.get("car_dark2", np.nan) for s in stats[name]])

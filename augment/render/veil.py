@@ -72,7 +72,8 @@ class Veil:
         cov = np.asarray(coverage, np.float64)[..., None]
         return (radiance_premult * (1.0 - haze) + self.airlight_rgb * haze * cov).astype(np.float32)
 
-    def shadow_ratio(self, ratio_rgb: np.ndarray, image_rgb: np.ndarray, depth_m: np.ndarray, ev: float = 0.0) -> np.ndarray:
+    def shadow_ratio(self, ratio_rgb: np.ndarray, image_rgb: np.ndarray, depth_m: np.ndarray,
+                     ev: float = 0.0) -> np.ndarray:
         """(h, w, 3) shadow ratio acting on the whole pixel such that only the scene behind the veil is shadowed:
         ``I' = (I - V) S + V``, i.e. ``S' = S + (1 - S) min(V / I, 1)``, V the veil at the scene's ``depth_m``.
 

@@ -41,7 +41,8 @@ def test_recovers_known_haze_and_glare(beta, glare):
     for d in (10.0, 20.0, 30.0, 40.0):
         # the veil's share of the airlight at d: (1 - t) + glare (the glare counts as airlight)
         expected = 1.0 - np.exp(-beta * d) + glare
-        assert abs(float(veil.haze_at(np.array(d))) - expected) < 0.25 * expected + 0.004, (d, veil.haze_at(d), expected)
+        got = float(veil.haze_at(np.array(d)))
+        assert abs(got - expected) < 0.25 * expected + 0.004, (d, got, expected)
 
 
 def test_clear_air_has_no_veil():
