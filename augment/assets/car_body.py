@@ -16,8 +16,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.interpolate import PchipInterpolator
 
-from .mesh_parts import MeshPart, crease_normals, grid_faces, signed_volume, weld_vertices
-from .validate import face_normals
+from .mesh_parts import MeshPart, grid_faces, signed_volume, weld_vertices
+from .validate import face_normals, smooth_vertex_normals
 
 # Material slots of a procedural car (indices into its material table).  The first seven are the
 # original body / wheel slots; the rest are the details (:mod:`.car_details`, :mod:`.car_interior`,
@@ -56,21 +56,19 @@ class BodySpec:
     top: tuple[tuple[float, float], ...]
     bottom: tuple[tuple[float, float], ...]
     tumblehome: float  # fraction by which the roof is narrower than the belt line
-    plan_exponent: float  # superellipse exponent of the plan view's rounded ends (larger = squarer corners)
-    nose_m: float = 0.55  # length over which the plan view rounds off at the front ...
-    tail_m: float = 0.45  # ... and at the rear (the sides between are straight)
+    plan_exponent: float  # superellipse exponent of the plan view (larger = squarer corners)
 
 
 def sedan_spec() -> BodySpec:
     L, H = 4.60, 1.45
     return BodySpec(
         length=L, width=1.80, height=H, wheel_radius=0.32, front_overhang=0.92, rear_overhang=1.00,
-        belt_front=0.90, belt_rear=0.98, d_ws=1.45, d_roof_front=2.35, d_roof_back=3.05, d_rear=3.95,
+        belt_front=0.90, belt_rear=0.98, d_ws=1.55, d_roof_front=2.25, d_roof_back=3.20, d_rear=3.85,
         pillars=(2.75,),
-        top=((0.0, 0.66), (0.04, 0.74), (0.25, 0.80), (1.45, 0.90), (2.35, H - 0.02), (2.65, H), (3.05, H - 0.03),
-             (3.95, 1.00), (4.45, 0.98), (4.57, 0.93), (L, 0.86)),
-        bottom=((0.0, 0.36), (0.10, 0.27), (0.55, 0.20), (L - 0.6, 0.21), (L - 0.12, 0.30), (L, 0.40)),
-        tumblehome=0.28, plan_exponent=2.6, nose_m=0.80, tail_m=0.60,
+        top=((0.0, 0.58), (0.06, 0.70), (0.30, 0.78), (1.55, 0.90), (2.25, H - 0.02), (2.60, H), (3.20, H - 0.03),
+             (3.85, 1.00), (4.45, 0.98), (4.56, 0.90), (L, 0.72)),
+        bottom=((0.0, 0.42), (0.12, 0.28), (0.55, 0.20), (L - 0.6, 0.21), (L - 0.12, 0.30), (L, 0.45)),
+        tumblehome=0.22, plan_exponent=4.0,
     )
 
 
@@ -78,12 +76,12 @@ def hatchback_spec() -> BodySpec:
     L, H = 4.10, 1.50
     return BodySpec(
         length=L, width=1.75, height=H, wheel_radius=0.31, front_overhang=0.82, rear_overhang=0.68,
-        belt_front=0.92, belt_rear=1.00, d_ws=1.35, d_roof_front=2.00, d_roof_back=3.10, d_rear=3.92,
+        belt_front=0.92, belt_rear=1.00, d_ws=1.35, d_roof_front=2.00, d_roof_back=3.25, d_rear=3.92,
         pillars=(2.55,),
-        top=((0.0, 0.66), (0.04, 0.74), (0.25, 0.80), (1.35, 0.92), (2.00, H - 0.02), (2.50, H), (3.10, H - 0.04),
-             (3.92, 1.02), (4.04, 0.97), (L, 0.88)),
-        bottom=((0.0, 0.36), (0.10, 0.27), (0.50, 0.20), (L - 0.5, 0.22), (L - 0.10, 0.32), (L, 0.42)),
-        tumblehome=0.26, plan_exponent=2.6, nose_m=0.75, tail_m=0.45,
+        top=((0.0, 0.58), (0.06, 0.70), (0.28, 0.79), (1.35, 0.92), (2.00, H - 0.02), (2.50, H), (3.25, H - 0.05),
+             (3.92, 1.02), (4.04, 0.95), (L, 0.78)),
+        bottom=((0.0, 0.42), (0.12, 0.28), (0.50, 0.20), (L - 0.5, 0.22), (L - 0.10, 0.32), (L, 0.48)),
+        tumblehome=0.20, plan_exponent=4.0,
     )
 
 
@@ -91,12 +89,12 @@ def suv_spec() -> BodySpec:
     L, H = 4.70, 1.75
     return BodySpec(
         length=L, width=1.90, height=H, wheel_radius=0.37, front_overhang=0.92, rear_overhang=0.98,
-        belt_front=1.08, belt_rear=1.14, d_ws=1.40, d_roof_front=2.10, d_roof_back=4.25, d_rear=4.62,
+        belt_front=1.08, belt_rear=1.14, d_ws=1.40, d_roof_front=2.10, d_roof_back=4.35, d_rear=4.62,
         pillars=(2.75, 3.75),
-        top=((0.0, 0.80), (0.05, 0.90), (0.30, 0.98), (1.40, 1.08), (2.10, H - 0.02), (2.60, H), (4.25, H - 0.03),
-             (4.62, 1.10), (L, 1.02)),
+        top=((0.0, 0.72), (0.06, 0.88), (0.30, 0.98), (1.40, 1.08), (2.10, H - 0.02), (2.60, H), (4.35, H - 0.03),
+             (4.62, 1.10), (L, 0.95)),
         bottom=((0.0, 0.52), (0.15, 0.36), (0.60, 0.28), (L - 0.6, 0.30), (L - 0.12, 0.38), (L, 0.52)),
-        tumblehome=0.22, plan_exponent=2.8, nose_m=0.75, tail_m=0.45,
+        tumblehome=0.17, plan_exponent=5.0,
     )
 
 
@@ -109,7 +107,7 @@ def van_spec() -> BodySpec:
         top=((0.0, 0.72), (0.06, 0.88), (0.25, 0.98), (0.85, 1.10), (1.70, H - 0.03), (2.30, H), (4.85, H - 0.02),
              (4.97, H - 0.12), (L, H - 0.30)),
         bottom=((0.0, 0.48), (0.15, 0.32), (0.55, 0.24), (L - 0.55, 0.26), (L - 0.12, 0.34), (L, 0.48)),
-        tumblehome=0.14, plan_exponent=3.0, nose_m=0.65, tail_m=0.35,
+        tumblehome=0.10, plan_exponent=6.0,
     )
 
 
@@ -136,7 +134,7 @@ def jitter_spec(spec: BodySpec, rng: np.random.Generator) -> BodySpec:
         d_ws=spec.d_ws * sl, d_roof_front=spec.d_roof_front * sl, d_roof_back=spec.d_roof_back * sl,
         d_rear=spec.d_rear * sl, pillars=tuple(p * sl for p in spec.pillars),
         top=scale_pts(spec.top), bottom=scale_pts(spec.bottom),
-        tumblehome=spec.tumblehome, plan_exponent=spec.plan_exponent, nose_m=spec.nose_m * sl, tail_m=spec.tail_m * sl,
+        tumblehome=spec.tumblehome, plan_exponent=spec.plan_exponent,
     )
 
 
@@ -151,8 +149,6 @@ def loft_stations(spec: BodySpec) -> np.ndarray:
     t = np.linspace(0.0, 1.0, 29)
     d = [L * (1 - np.cos(np.pi * t)) / 2]  # cosine spacing: dense at both ends
     d.append(np.linspace(0.0, L, 34))
-    bend = 1.0 - np.cos(np.linspace(0.0, np.pi / 2, 7))  # the plan view's rounded ends
-    d += [spec.nose_m * bend, L - spec.tail_m * bend]
     ra = spec.wheel_radius + 0.05
     for dw in axle_distances(spec):
         d.append(dw + ra * np.cos(np.linspace(np.pi, 0.0, 13)))
@@ -196,12 +192,6 @@ def side_window_edges(spec: BodySpec) -> list[float]:
     return edges
 
 
-@functools.lru_cache(maxsize=64)
-def _profile_curves(spec: BodySpec) -> tuple[PchipInterpolator, PchipInterpolator]:
-    """The roof line and underbody curves z(d) of a spec (cached: the details query them often)."""
-    return PchipInterpolator(*np.array(spec.top).T), PchipInterpolator(*np.array(spec.bottom).T)
-
-
 def side_window_limits(spec: BodySpec, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """d of the side glass's front and rear edges at height z: from :func:`side_window_edges` at the belt
     line, leaning back / forward with the windscreen and rear window towards the roof."""
@@ -210,6 +200,12 @@ def side_window_limits(spec: BodySpec, z: np.ndarray) -> tuple[np.ndarray, np.nd
     f = np.clip((z - belt) / (spec.height - _RAIL - belt), 0.0, 1.0)
     return (e[0] + 0.8 * f * (spec.d_roof_front - spec.d_ws),
             e[1] - 0.5 * f * (spec.d_rear - spec.d_roof_back))
+
+
+@functools.lru_cache(maxsize=64)
+def _profile_curves(spec: BodySpec) -> tuple[PchipInterpolator, PchipInterpolator]:
+    """The roof line and underbody curves z(d) of a spec (cached: the details query them often)."""
+    return PchipInterpolator(*np.array(spec.top).T), PchipInterpolator(*np.array(spec.bottom).T)
 
 
 def body_profiles(spec: BodySpec, d: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -223,91 +219,78 @@ def body_profiles(spec: BodySpec, d: np.ndarray) -> tuple[np.ndarray, np.ndarray
         arch = r + np.sqrt(np.clip(ra**2 - (d - dw) ** 2, 0.0, None))
         bot = np.where(inside, np.maximum(bot, arch), bot)
     bot = np.minimum(bot, top - 0.08)
-    # Plan view: straight sides, ends rounded as superellipse quadrants nose_m / tail_m long.
-    xi = np.clip(np.maximum((spec.nose_m - d) / spec.nose_m, (d - spec.length + spec.tail_m) / spec.tail_m), 0.0, 1.0)
+    xi = np.clip(np.abs(2.0 * d / spec.length - 1.0), 0.0, 1.0)
     p = spec.plan_exponent
     half_w = 0.5 * spec.width * (1.0 - xi**p) ** (1.0 / p)
     belt = np.interp(d, [spec.d_ws, spec.d_rear], [spec.belt_front, spec.belt_rear])
     return top, bot, half_w, belt
 
 
+# Superellipse exponents of the cross-section: lower half boxier, upper half rounder.
+_N_LOW, _N_UP = 5.0, 3.2
 # Rows per half section, bottom to top: underbody, lower side up to the bumper line, up to the belt
 # line, side glass, roof (or windscreen / bonnet).  Row edges lie on those lines at every station, so
 # material boundaries along them are straight, not staircased.
-_SEG_ROWS = (3, 3, 6, 6, 6)
+_SEG_ROWS = (3, 3, 6, 4, 6)
 _RAIL = 0.07  # roof rail height above the side glass (m)
-_ROOF_F = (0.78, 0.56, 0.34, 0.12)  # roof rows: fractions of the roof edge's half width
-CREASE_DEG = 35.0  # faces meeting at more than this angle get separate (hard) vertex normals
 
 
 def _bumper_line(spec: BodySpec) -> float:
     return 0.47 * spec.belt_front
 
 
-def cabin_weight(top: np.ndarray, belt: np.ndarray) -> np.ndarray:
-    """0 where the section has no cabin (bonnet, boot deck), 1 under the full greenhouse, per station."""
-    return np.clip((top - belt - 0.05) / 0.15, 0.0, 1.0)
+def _angle_for_height(z: np.ndarray, zc: np.ndarray, hz: np.ndarray) -> np.ndarray:
+    """Superellipse angle in [-pi/2, pi/2] of the section point at height z."""
+    f = np.clip((z - zc) / hz, -1.0, 1.0)
+    n = np.where(f > 0, _N_UP, _N_LOW)
+    return np.sign(f) * np.arcsin(np.abs(f) ** (n / 2.0))
 
 
-def section_rows(spec: BodySpec, d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Half section points (|y|, z), each (S, 22), bottom centre -> roof edge (the roof centre excluded).
+def _section_angles(spec: BodySpec, top, bot, belt) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Angles (S, K) of one half section from the bottom centre (-pi/2) up to (excluding) the top,
+    with the segment id (K,) and row position in its segment (K,) of every row."""
+    zc, hz = (top + bot) / 2, (top - bot) / 2
+    eps = 1e-3
+    a_q = np.full_like(top, -np.pi / 4)
+    a_bump = np.clip(_angle_for_height(np.full_like(top, _bumper_line(spec)), zc, hz), -np.pi / 4 + eps, None)
+    a_belt = np.clip(_angle_for_height(belt, zc, hz), a_bump + eps, np.pi / 2 - 3 * eps)
+    a_rail = np.clip(_angle_for_height(np.maximum(top - _RAIL, belt), zc, hz), a_belt + eps, np.pi / 2 - eps)
+    a_top = np.full_like(top, np.pi / 2)
 
-    A polygon with planes and crisp creases, not a blob: flat underbody; rounded sill whose top (row 4)
-    is a crease; a near-vertical flat side up to the shoulder (character) line (row 9); the shoulder
-    rounds in to the belt line (row 11); the side glass stands 6.5 cm inboard (the belt ledge, rows
-    11-12), flat and leaning in by the tumblehome up to the window frame (rows 15-16); a narrow rail to
-    the roof edge (row 17) and a gently crowned roof.  Where there is no cabin (bonnet, boot deck)
-    the glass rows collapse onto the ledge and the roof rows become the (flat, crowned) lid.
-    Offsets shrink with the plan width near the ends, so sections there stay valid.
-    """
-    top, bot, hw, belt = body_profiles(spec, d)
-    be = np.minimum(belt, top - 0.015)
-    w = cabin_weight(top, belt)
-    zb = _bumper_line(spec)
+    def lin(a0, a1, n):
+        t = np.linspace(0.0, 1.0, n, endpoint=False)
+        return a0[:, None] + (a1 - a0)[:, None] * t[None, :]
 
-    def o(m):  # an inward offset (m), at most 30 % of the half width
-        return np.minimum(m, 0.3 * hw)
-
-    zsh = be - 0.11
-    z = [bot, bot, bot, bot + 0.03, bot + 0.08]
-    z.append(0.5 * (z[-1] + zb))
-    z += [np.full_like(bot, zb), zb + 0.4 * (zsh - zb), zb + 0.75 * (zsh - zb), zsh, be - 0.04, be]
-    zr = be + 0.006 + w * (top - _RAIL - be - 0.006)
-    t_glass = np.linspace(0.0, 1.0, _SEG_ROWS[3])
-    z += [be + 0.006 + t * (zr - be - 0.006) for t in t_glass]
-    crown = 0.045 * w + 0.02 * (1.0 - w)
-    z += [zr + 0.02 * w, top - np.maximum(0.012 * w, 0.8 * crown)]
-    z += [top - crown * f**2 for f in _ROOF_F]
-    gb = hw - o(0.085)
-    gt = gb - w * spec.tumblehome * 0.85 * hw
-    edge = np.maximum(gt - 0.035 * w - o(0.04) * (1.0 - w), 0.0)
-    y = [np.zeros_like(hw), 0.55 * hw, hw - o(0.14), hw - o(0.075), hw - o(0.04), hw - o(0.02), hw - o(0.01),
-         hw - o(0.003), hw, hw - o(0.004), hw - o(0.025), hw - o(0.06)]
-    y += [gb + t * (gt - gb) for t in t_glass]
-    y += [gt - 0.008 * w, edge]
-    y += [f * edge for f in _ROOF_F]
-    Z = np.clip(np.stack(z, axis=1), bot[:, None], top[:, None])
-    Z = np.maximum.accumulate(Z, axis=1)  # rows never go down (squeezed sections: arches, nose, tail)
-    Y = np.clip(np.stack(y, axis=1), 0.0, hw[:, None])
-    return Y, Z
+    r = _SEG_ROWS
+    lower = np.concatenate([lin(-a_top, a_q, r[0]), lin(a_q, a_bump, r[1])], axis=1)
+    aligned = np.concatenate([lin(a_bump, a_belt, r[2]), lin(a_belt, a_rail, r[3]), lin(a_rail, a_top, r[4])], axis=1)
+    uniform = lin(a_bump, a_top, aligned.shape[1])
+    w = np.clip((top - belt - 0.05) / 0.15, 0.0, 1.0)[:, None]  # no cabin (bonnet, boot): even rows
+    angles = np.concatenate([lower, w * aligned + (1.0 - w) * uniform], axis=1)
+    seg = np.concatenate([np.full(n, k) for k, n in enumerate(r)])
+    pos = np.concatenate([np.arange(n) for n in r])
+    return angles, seg, pos
 
 
 def body_part(spec: BodySpec) -> MeshPart:
     d = loft_stations(spec)
-    top = body_profiles(spec, d)[0]
-    Yh, Zh = section_rows(spec, d)  # bottom centre -> roof edge, |y|
-    n_half = Yh.shape[1]
-    seg = np.concatenate([np.full(n, k) for k, n in enumerate(_SEG_ROWS)])
-    pos = np.concatenate([np.arange(n) for n in _SEG_ROWS])
+    top, bot, half_w, belt = body_profiles(spec, d)
+    zc, hz = (top + bot) / 2, (top - bot) / 2
+    right, seg, pos = _section_angles(spec, top, bot, belt)  # y < 0 side, bottom -> top
     # Full loop: bottom centre -> right side (y < 0) -> top centre -> left side (y > 0) -> back.
-    y = np.concatenate([-Yh, np.zeros((len(d), 1)), Yh[:, ::-1][:, :-1]], axis=1)
-    z = np.concatenate([Zh, top[:, None], Zh[:, ::-1][:, :-1]], axis=1)
+    phi = np.concatenate([right, np.full((len(d), 1), np.pi / 2), np.pi - right[:, ::-1][:, :-1]], axis=1)
     seg = np.concatenate([seg, [len(_SEG_ROWS) - 1], seg[::-1][:-1]])
     pos = np.concatenate([pos, [_SEG_ROWS[-1]], pos[::-1][:-1]])
-    assert len(seg) == 2 * n_half
+    c, s = np.cos(phi), np.sin(phi)
+    n_exp = np.where(s > 0, _N_UP, _N_LOW)
+    ys = -np.sign(c) * np.abs(c) ** (2.0 / n_exp)
+    zs = np.sign(s) * np.abs(s) ** (2.0 / n_exp)
+    z = zc[:, None] + hz[:, None] * zs
+    taper = tumblehome_taper(spec, z, belt[:, None])
+    y = half_w[:, None] * ys * taper
     x = spec.length / 2 - d
     V = np.stack([np.broadcast_to(x[:, None], y.shape), y, z], axis=-1).reshape(-1, 3)
-    n_sec = y.shape[1]
+    n_sec = phi.shape[1]
     F = grid_faces(len(d), n_sec, wrap_cols=True)
     n_quads = len(F) // 2
     quad_mat = body_materials(spec, V, F[:n_quads], F[n_quads:], seg, pos, n_sec)
@@ -316,14 +299,13 @@ def body_part(spec: BodySpec) -> MeshPart:
     fm = fm[keep]
     if signed_volume(V, F) < 0:
         F = F[:, ::-1].copy()
-    V, F, N = crease_normals(V, F, CREASE_DEG)
-    return MeshPart(V, F, fm, N)
+    return MeshPart(V, F, fm, smooth_vertex_normals(V, F))
 
 
 def tumblehome_taper(spec: BodySpec, z: np.ndarray, belt: np.ndarray) -> np.ndarray:
-    """Tumblehome: width factor (<= 1) of the cabin at height z over the belt line (the glass leans in)."""
-    cabin_h = spec.height - _RAIL - 0.5 * (spec.belt_front + spec.belt_rear)
-    return 1.0 - spec.tumblehome * 0.85 * np.clip((z - belt) / cabin_h, 0.0, 1.0)
+    """Tumblehome: width factor (<= 1) of the section at height z (the cabin leans inwards)."""
+    cabin_h = spec.height - 0.5 * (spec.belt_front + spec.belt_rear)
+    return 1.0 - spec.tumblehome * np.clip((z - belt) / cabin_h, 0.0, 1.0) ** 1.1
 
 
 def body_materials(spec: BodySpec, V: np.ndarray, tri_a: np.ndarray, tri_b: np.ndarray, seg: np.ndarray,
@@ -343,7 +325,7 @@ def body_materials(spec: BodySpec, V: np.ndarray, tri_a: np.ndarray, tri_b: np.n
     outward = np.sign(np.einsum("ij,ij->i", n[:, 1:], np.stack([y, z - 0.7], 1)) + 1e-12)
     n = n * outward[:, None]
     d = spec.length / 2 - x
-    top_d, _, plan_hw, belt = body_profiles(spec, d)
+    _, _, half_w_d, belt = body_profiles(spec, d)
     ay = np.abs(y)
     c0 = tri_a[:, 0] % n_sec
     c1 = (c0 + 1) % n_sec
@@ -363,27 +345,20 @@ def body_materials(spec: BodySpec, V: np.ndarray, tri_a: np.ndarray, tri_b: np.n
     for dp in spec.pillars:
         in_side_x &= np.abs(d - dp) > 0.06
     side = (kind == 3) & (kind_hi == 3) & in_side_x & (np.abs(n[:, 1]) > 0.3)
-    d_mid = np.full_like(d, 0.5 * (spec.d_roof_front + spec.d_roof_back))
-    full_hw = section_half_width(spec, d_mid, z)  # the cabin's width at this height, mid-roof
+    full_hw = 0.5 * spec.width * tumblehome_taper(spec, z, belt)
     above_belt = kind >= 3
-    windscreen = (above_belt & (n[:, 0] > 0.3) & (ay < full_hw - 0.12)
+    windscreen = (above_belt & (n[:, 0] > 0.3) & (ay < full_hw - 0.13)
                   & (d > spec.d_ws - 0.02) & (d < spec.d_roof_front + 0.02))
     # The rear window: inside D / C pillars measured from the section's own (plan-rounded) half width,
     # so it does not wrap round the rear corners.
-    local_hw = plan_hw * tumblehome_taper(spec, z, belt)
-    rear = (above_belt & (n[:, 0] < -0.3) & (ay < np.minimum(full_hw - 0.15, local_hw - 0.12))
+    local_hw = half_w_d * tumblehome_taper(spec, z, belt)
+    rear = (above_belt & (n[:, 0] < -0.3) & (ay < np.minimum(full_hw - 0.16, local_hw - 0.12))
             & (d > spec.d_roof_back - 0.02) & (z > belt + 0.04))
     mat[side | windscreen] = GLASS
     # Behind the B pillar (rear doors, rear quarter) and the rear window: the (often tinted) rear glass.
     mat[(side & (d > spec.pillars[0])) | rear] = GLASS_REAR
-    # Black window surround: the frame above the side glass, the belt seal under it and the B pillar.
-    cabin = (cabin_weight(top_d, belt) > 0.5) & (d > e0 - 0.03) & (d < e1 + 0.03) & (np.abs(n[:, 1]) > 0.3)
-    frame = cabin & (((kind == 3) & (kind_hi == 4)) | ((kind == 2) & (row == _SEG_ROWS[2] - 1) & (kind_hi == 3)))
-    b_pillar = (kind == 3) & (kind_hi == 3) & (np.abs(d - spec.pillars[0]) <= 0.06) & (np.abs(n[:, 1]) > 0.3)
-    # Estates (SUVs, vans): the D pillar between the rear side glass and the tailgate glass is black too.
-    d_pillar = ((kind == 3) & (kind_hi == 3) & (d > e1) & (np.abs(n[:, 1]) > 0.3) & (mat == PAINT)
-                & (len(spec.pillars) > 1))
-    mat[frame | b_pillar | d_pillar] = TRIM
+    # The B pillar between the side windows: black.
+    mat[(kind == 3) & (kind_hi == 3) & (np.abs(d - spec.pillars[0]) <= 0.06) & (np.abs(n[:, 1]) > 0.3)] = TRIM
 
     # Panel gaps: thin dark strips at the cut lines (door shut lines on the sides below the belt line,
     # bonnet and boot edges on top).
@@ -402,8 +377,7 @@ def body_materials(spec: BodySpec, V: np.ndarray, tri_a: np.ndarray, tri_b: np.n
     bumper = (kind <= 1) & ((d < d_front - ra - 0.02) | (d > d_rear_axle + ra + 0.02))
     front = (d < 0.45) & (n[:, 0] > 0.25)
     grille = front & (kind == 2) & (row <= 1) & (ay < 0.22 * spec.width)
-    sill = (kind == 1) & (row == 0) & (d > d_front + ra) & (d < d_rear_axle - ra)  # the dark rocker under the doors
-    mat[under | bumper | grille | sill] = TRIM
+    mat[under | bumper | grille] = TRIM
 
     # Lights: head lights in the lowest rows above the bumper line at the front corners,
     # tail lights just under the belt line at the rear corners.
@@ -422,26 +396,20 @@ def body_materials(spec: BodySpec, V: np.ndarray, tri_a: np.ndarray, tri_b: np.n
 
 def section_half_width(spec: BodySpec, d: np.ndarray, z: np.ndarray) -> np.ndarray:
     """Half width (m) of the body's outer surface at distance from the nose ``d`` and height ``z``
-    (same shapes, broadcast); 0 above the roof or below the underbody.  Linear between the rows of
-    :func:`section_rows` (the shell's own polygon)."""
+    (same shapes, broadcast); 0 above the roof or below the underbody."""
     d, z = np.broadcast_arrays(np.asarray(d, dtype=np.float64), np.asarray(z, dtype=np.float64))
-    zq = z.ravel()
-    top = body_profiles(spec, d.ravel())[0]
-    Y, Z = section_rows(spec, d.ravel())
-    Y = np.concatenate([Y, np.zeros((len(zq), 1))], axis=1)
-    Z = np.concatenate([Z, top[:, None]], axis=1)
-    k = np.clip((Z <= zq[:, None]).sum(axis=1), 1, Z.shape[1] - 1)
-    i = np.arange(len(zq))
-    z0, z1, y0, y1 = Z[i, k - 1], Z[i, k], Y[i, k - 1], Y[i, k]
-    t = np.clip((zq - z0) / np.maximum(z1 - z0, 1e-9), 0.0, 1.0)
-    out = np.where((zq >= Z[:, 0]) & (zq <= top), y0 + t * (y1 - y0), 0.0)
-    return out.reshape(d.shape)
+    top, bot, half_w, belt = body_profiles(spec, d.ravel())
+    zc, hz = (top + bot) / 2, (top - bot) / 2
+    f = (z.ravel() - zc) / hz
+    n = np.where(f > 0, _N_UP, _N_LOW)
+    ys = np.where(np.abs(f) < 1.0, np.clip(1.0 - np.abs(np.clip(f, -1, 1)) ** n, 0.0, 1.0) ** (1.0 / n), 0.0)
+    return (half_w * ys * tumblehome_taper(spec, z.ravel(), belt)).reshape(d.shape)
 
 
 __all__ = [
     "BODY_SPECS", "BODY_WEIGHTS", "BRAKE", "BodySpec", "CHROME", "DASH", "GAP", "GAP_HALF_M", "GLASS", "GLASS_REAR",
     "HEADLIGHT", "INTERIOR", "N_SLOTS", "PAINT", "PAINT_LOWER", "PLATE_BAND", "PLATE_FRONT", "PLATE_INK",
     "PLATE_REAR", "REFLECTOR", "RIM", "TAILLIGHT", "TRIM", "TYRE", "axle_distances", "body_materials", "body_part",
-    "body_profiles", "cabin_weight", "hatchback_spec", "jitter_spec", "loft_stations", "panel_gaps", "section_half_width",
-    "section_rows", "sedan_spec", "side_window_edges", "side_window_limits", "suv_spec", "tumblehome_taper", "van_spec",
+    "body_profiles", "hatchback_spec", "jitter_spec", "loft_stations", "panel_gaps", "section_half_width",
+    "sedan_spec", "side_window_edges", "side_window_limits", "suv_spec", "tumblehome_taper", "van_spec",
 ]

@@ -79,37 +79,6 @@ def weld_vertices(V: np.ndarray, F: np.ndarray, tol: float = 1e-7) -> tuple[np.n
     return V[first], F[ok], ok
 
 
-def crease_normals(V: np.ndarray, F: np.ndarray, crease_deg: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Vertex normals smooth within a panel, hard across creases: returns (V', F', N').
-
-    A corner of face f at vertex v gets the area-weighted mean normal of the faces around v whose normal
-    is within ``crease_deg`` of f's; vertices are split where their corners' normals differ (so V' has
-    the positions of V, some repeated, and F' the same triangles).  Shapes: V (V, 3), F (F, 3) int.
-    """
-    V = np.asarray(V, dtype=np.float64)
-    F = np.asarray(F, dtype=np.int64)
-    tri = V[F]
-    cross = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])  # length = 2 * area
-    unit = cross / np.maximum(np.linalg.norm(cross, axis=1, keepdims=True), 1e-20)
-    cv = F.ravel()
-    cf = np.repeat(np.arange(len(F)), 3)
-    order = np.argsort(cv, kind="stable")
-    counts = np.bincount(cv, minlength=len(V))
-    start = np.concatenate([[0], np.cumsum(counts)[:-1]])
-    slot = np.arange(len(cv)) - start[cv[order]]
-    around = np.full((len(V), int(counts.max())), -1, dtype=np.int64)  # faces around each vertex
-    around[cv[order], slot] = cf[order]
-    nb = around[cv]  # (3F, M)
-    ok = nb >= 0
-    nbf = np.where(ok, nb, 0)
-    same = ok & (np.einsum("ck,cmk->cm", unit[cf], unit[nbf]) > np.cos(np.radians(crease_deg)))
-    N = np.einsum("cm,cmk->ck", same.astype(np.float64), cross[nbf])
-    N /= np.maximum(np.linalg.norm(N, axis=1, keepdims=True), 1e-20)
-    key = np.concatenate([cv[:, None], np.round(N * 1e4).astype(np.int64)], axis=1)
-    _, first, inverse = np.unique(key, axis=0, return_index=True, return_inverse=True)
-    return V[cv[first]], inverse.reshape(-1, 3).astype(np.int64), N[first]
-
-
 def box_mesh(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """An axis-aligned box: 24 vertices (flat-shaded faces), 12 outward triangles."""
     corners = np.array([[i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)], dtype=np.float64)
@@ -127,5 +96,5 @@ def box_mesh(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return V, F
 
 
-__all__ = ["MeshPart", "box_mesh", "crease_normals", "grid_faces", "merge_parts", "orient_outward", "signed_volume", "target_wlh",
+__all__ = ["MeshPart", "box_mesh", "grid_faces", "merge_parts", "orient_outward", "signed_volume", "target_wlh",
            "weld_vertices"]

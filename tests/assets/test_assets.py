@@ -16,7 +16,7 @@ from streetaug.augment.assets.asset import Asset, Material
 from streetaug.augment.assets.car_body import body_part, sedan_spec, van_spec
 from streetaug.augment.assets.car_wheels import wheel
 from streetaug.augment.assets.loader import axis_rotation, list_assets, load_asset
-from streetaug.augment.assets.mesh_parts import signed_volume, weld_vertices
+from streetaug.augment.assets.mesh_parts import signed_volume
 from streetaug.augment.assets.procedural import paint_palette, procedural_car, procedural_car_variants
 from streetaug.augment.assets.references import read_gltf_json
 from streetaug.augment.assets.select import select_assets
@@ -499,8 +499,7 @@ def test_procedural_body_and_tyres_are_closed_surfaces():
     for spec in (sedan_spec(), van_spec()):
         part = body_part(spec)
         tyre = wheel(np.array([0.0, 0.8, 0.3]), 1.0, 0.3, 0.2)[0]
-        # The body's vertices are split at creases (hard normals): closed by position, not by index.
-        for F in (weld_vertices(part.vertices, part.faces)[1], tyre.faces):
+        for F in (part.faces, tyre.faces):
             edges = np.sort(np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]), axis=1)
             _, counts = np.unique(edges, axis=0, return_counts=True)
             assert (counts == 2).all()  # every edge shared by exactly two triangles: watertight
