@@ -11,6 +11,7 @@ from streetaug.augment.lighting.skynet.dome import angle_deg, camera_from_angles
 from streetaug.augment.lighting.skynet.sun_cues import (
     clear_sky_log_rgb,
     detect_sun_disc,
+    glare_centre_cam,
     glare_extent_deg,
     in_view_sky_loglik,
     sky_fit_loglik,
@@ -108,6 +109,19 @@ def test_detector_ignores_blown_out_sky_and_sky_between_buildings(cloud_cover, o
     assert detect_sun_disc(bright, K, up) is None
 
 
+@pytest.mark.parametrize("sun_az, sun_el", [(43, 15), (46, 25)])
+def test_detector_ignores_the_glare_of_a_sun_just_beyond_the_border(sun_az, sun_el):
+    """A sun a few degrees beyond the image's left edge clips a blob there whose inscribed disc (not bounded
+    by the border) is centred on the border: that is not a sun in view (its centre would be off by more
+    than the reported cone)."""
+    image, K, up, sun_cam = _render(_sun(sun_az, sun_el), 0, 10)
+    uv = K @ sun_cam
+    assert uv[2] > 0 and uv[0] / uv[2] < 0  # beyond the left edge
+    hot = image.max(axis=-1) >= 250
+    assert hot[:, 0].any()  # its glare clips pixels at the border
+    assert detect_sun_disc(image, K, up) is None
+
+
 # ----------------------------------------------------------------------------- sun out of view
 
 
@@ -172,6 +186,22 @@ def test_glare_extent_is_the_radius_of_the_clipped_region_under_the_direction():
     assert band is not None and band > 30.0  # the band spans ~70 deg: the sun could be anywhere along it
     assert glare_extent_deg(image, K, rays[10, 120]) is None  # unclipped sky
     assert glare_extent_deg(image, K, -rays[30, 40]) is None  # behind the camera
+
+
+@pytest.mark.parametrize("sun_az, sun_el", [(10, 20), (-15, 12), (5, 8)])
+def test_glare_centre_is_near_a_sun_whose_glare_is_too_large_for_a_disc(sun_az, sun_el):
+    """Over-exposed by 1.5x, the sun's glare clips a region of 15-35 deg radius (no disc is detected); from a
+    direction near its edge the region's centre is within 3.5 deg of the sun."""
+    image, K, up, sun_cam = _render(_sun(sun_az, sun_el), 0, 10)
+    image = np.clip(image.astype(np.float64) * 1.5, 0, 255).astype(np.uint8)
+    assert detect_sun_disc(image, K, up) is None
+    assert 15.0 < glare_extent_deg(image, K, sun_cam) < 35.0
+    edge = sun_cam + np.array([0.12, -0.05, 0.0])
+    edge /= np.linalg.norm(edge)
+    assert glare_extent_deg(image, K, edge) is not None  # still in the clipped region, ~7 deg off
+    centre = glare_centre_cam(image, K, edge)
+    assert angle_deg(centre, sun_cam) < 3.5
+    assert glare_centre_cam(image, K, -edge) is None  # behind the camera
 
 
 def test_sky_fit_without_sky_says_nothing():

@@ -35,7 +35,7 @@ from ..light import DistantLight, SunLight
 from .dome import dome_directions, dome_pixel_size_rad, dome_solid_angles, heading_from_camera, sample_dome
 from .inputs import VIEW_SIZE, quantize_ldr, resize_view, view_rays
 from .model import direction_cone_deg
-from .sun_cues import detect_sun_disc, glare_extent_deg, in_view_sky_loglik, sky_fit_loglik
+from .sun_cues import detect_sun_disc, glare_centre_cam, glare_extent_deg, in_view_sky_loglik, sky_fit_loglik
 from .weights import load_light_model, load_sky_model
 
 VISIBILITY_MIN = 0.3  # below: no sun is reported (overcast, night, hidden)
@@ -49,6 +49,7 @@ IN_VIEW_PENALTY = 8.0  # log-likelihood penalty of a sun on bright unclipped pix
 GLARE_MAX_UNCERTAINTY_DEG = 15.0  # a fitted sun in a clipped region, this sure (cone >= its radius), is seen ...
 GLARE_VISIBILITY = 0.5  # ... with at least this visibility (the network underrates suns in view)
 GLARE_MIN_ELEVATION_DEG = 4.0  # ... unless it is lower (a clipped twilight glow on the horizon is not a sun)
+GLARE_CENTRE_MAX_DEG = 35.0  # a fitted sun in a clipped region of at most this radius moves to the region's centre
 REFINE_MAX_PIXELS = 3000
 SATURATED_LDR = 0.97
 
@@ -256,8 +257,10 @@ def predict_sky(image_rgb: np.ndarray, K: np.ndarray, up_cam: np.ndarray | None 
             is multiplied by the clear-sky fit's likelihood and by the "not on bright unclipped pixels
             in view" term.  If the posterior's direction lands in a clipped region of the image, the
             68 % cone is at least that region's angular radius (the sun can be anywhere under the
-            glare); a cone still <= ``GLARE_MAX_UNCERTAINTY_DEG`` there counts as a seen sun
-            (visibility >= ``GLARE_VISIBILITY``).  False: the network alone.
+            glare) and, if that radius is <= ``GLARE_CENTRE_MAX_DEG`` (a sun's glare, not a blown-out sky),
+            the direction moves to the region's centre (:func:`.sun_cues.glare_centre_cam`); a cone still
+            <= ``GLARE_MAX_UNCERTAINTY_DEG`` there counts as a seen sun (visibility >= ``GLARE_VISIBILITY``).
+            False: the network alone.
     """
     image_rgb = np.asarray(image_rgb)
     check_shape(image_rgb, ("H", "W", 3), "image_rgb")
@@ -299,6 +302,9 @@ def predict_sky(image_rgb: np.ndarray, K: np.ndarray, up_cam: np.ndarray | None 
         if glare is not None:
             unc = max(unc, glare)
             cue += f", in a clipped region of radius {glare:.0f} deg"
+            if glare <= GLARE_CENTRE_MAX_DEG:  # a sun's glare, not a blown-out sky: its middle, not its edge
+                direction = R @ glare_centre_cam(small, Ks, R.T @ direction)
+                cue += " (its centre)"
         if glare is not None and unc <= GLARE_MAX_UNCERTAINTY_DEG and \
                 direction[2] >= np.sin(np.radians(GLARE_MIN_ELEVATION_DEG)):
             vis_used = max(vis, GLARE_VISIBILITY)  # the fitted sun sits in a compact clipped glare: seen

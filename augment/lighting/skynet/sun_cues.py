@@ -37,6 +37,7 @@ DISC_MIN_RADIUS_DEG = 1.0  # smaller clipped blobs: lamps, glints, sky between l
 DISC_MAX_RADIUS_DEG = 12.0  # a clipped blob with a larger inscribed disc is a blown-out sky, not the sun
 DISC_MIN_FALLOFF = 0.08  # glare ring minus the sky beyond it (LDR luminance)
 DISC_MIN_ELEVATION_DEG = -1.0  # the disc centre is above this elevation
+DISC_MIN_BORDER_R = 0.25  # the disc centre is at least this many radii inside the image border
 FIT_TURBIDITIES = (2.0, 3.0, 5.0, 8.0)
 FIT_MIN_ELEVATION_DEG = 3.0  # sky pixels below this (haze, horizon glare) are not fitted
 FIT_MAX_PIXELS = 300
@@ -89,7 +90,10 @@ def detect_sun_disc(image_rgb: np.ndarray, K: np.ndarray, up_cam: np.ndarray) ->
       luminance 0.5: glare, not the edge of a tree or a building);
     * it glows: the ring [1.2 r + 0.3 deg, 2 r + 1 deg] is brighter than the open sky beyond it
       ([2 r + 4 deg, 2 r + 16 deg], sky pixels), on average by ``DISC_MIN_FALLOFF`` and in at least
-      3/4 of its sectors.
+      3/4 of its sectors;
+    * the disc's centre is at least ``DISC_MIN_BORDER_R`` r inside the image border: a clipped blob whose
+      inscribed disc (the border does not bound it) is centred on the border is the glare of a sun beyond
+      it as often as a sun.
 
     Among suns the one with the largest r wins.
 
@@ -125,6 +129,9 @@ def detect_sun_disc(image_rgb: np.ndarray, K: np.ndarray, up_cam: np.ndarray) ->
             continue
         r_px = float(dist[m].max())
         core = m & (dist >= 0.7 * r_px)
+        ys, xs = np.nonzero(core)
+        if min(xs.mean(), ys.mean(), w - 1 - xs.mean(), h - 1 - ys.mean()) < DISC_MIN_BORDER_R * r_px:
+            continue  # the disc's centre is at the border: the glare of a sun beyond it, as often as a sun
         d = rays[core].sum(axis=0)
         d /= np.linalg.norm(d)
         r = r_px * px_rad * float(d[2]) ** 2  # pixels shrink (in angle) away from the centre
@@ -135,7 +142,6 @@ def detect_sun_disc(image_rgb: np.ndarray, K: np.ndarray, up_cam: np.ndarray) ->
         halo = _glare_halo(rays, hot, lum, sky, m, d, r)
         if halo is None:
             continue
-        ys, xs = np.nonzero(core)
         clipped = bool(xs.min() == 0 or ys.min() == 0 or xs.max() == w - 1 or ys.max() == h - 1)
         if best is None or r > best[0]:
             best = (r, d, halo, clipped, core)
@@ -356,14 +362,10 @@ def in_view_sky_loglik(sun_dirs_h: np.ndarray, R_heading_from_cam: np.ndarray, K
     return np.where(hit, -penalty, 0.0)
 
 
-def glare_extent_deg(image_small: np.ndarray, K_small: np.ndarray, d_cam: np.ndarray) -> float | None:
-    """Angular radius (deg) of the clipped region the camera-frame direction ``d_cam`` (3,) falls in, or None.
-
-    The 8-connected clipped region (max channel >= ``SATURATED``) of ``image_small`` (h, w, 3) uint8
-    (intrinsics ``K_small``) at the projected pixel (or within one pixel of it); its radius is the largest
-    angle between ``d_cam`` and the rays of its pixels.  A sun placed inside a clipped glare is only known
-    to within that region: a compact blob pins it, a long band of horizon glow does not.
-    """
+def _clipped_region_at(image_small: np.ndarray, K_small: np.ndarray, d_cam: np.ndarray) -> np.ndarray | None:
+    """(h, w) bool: the 8-connected clipped region (max channel >= ``SATURATED``) of ``image_small`` (h, w, 3)
+    uint8 (intrinsics ``K_small``) at the projected pixel of the camera-frame direction ``d_cam`` (3,) (or within
+    one pixel of it); None if it is behind the camera, out of the image or not on a clipped pixel."""
     d = np.asarray(d_cam, dtype=np.float64)
     if d[2] <= 1e-3:
         return None
@@ -376,7 +378,38 @@ def glare_extent_deg(image_small: np.ndarray, K_small: np.ndarray, d_cam: np.nda
     _, labels = cv2.connectedComponents(hot, connectivity=8)
     patch = labels[max(v - 1, 0):v + 2, max(u - 1, 0):u + 2]
     ids = np.unique(patch[patch > 0])
-    if len(ids) == 0:
+    return np.isin(labels, ids) if len(ids) else None
+
+
+def glare_extent_deg(image_small: np.ndarray, K_small: np.ndarray, d_cam: np.ndarray) -> float | None:
+    """Angular radius (deg) of the clipped region the camera-frame direction ``d_cam`` (3,) falls in, or None.
+
+    The region is :func:`_clipped_region_at`'s; its radius is the largest angle between ``d_cam`` and the rays
+    of its pixels.  A sun placed inside a clipped glare is only known to within that region: a compact blob
+    pins it, a long band of horizon glow does not.
+    """
+    region = _clipped_region_at(image_small, K_small, d_cam)
+    if region is None:
         return None
-    rays = PinholeCamera(K_small, w, h).rays()[np.isin(labels, ids)]
+    h, w = image_small.shape[:2]
+    d = np.asarray(d_cam, dtype=np.float64)
+    rays = PinholeCamera(K_small, w, h).rays()[region]
     return float(np.degrees(np.arccos(np.clip(rays @ (d / np.linalg.norm(d)), -1.0, 1.0)).max()))
+
+
+def glare_centre_cam(image_small: np.ndarray, K_small: np.ndarray, d_cam: np.ndarray) -> np.ndarray | None:
+    """Unit camera-frame direction (3,) of the centre of the clipped region ``d_cam`` falls in, or None.
+
+    The centre of the region's largest inscribed disc (distance transform; the image border does not bound
+    it), as :func:`detect_sun_disc` takes it: the mean ray of the pixels at >= 0.7 x the largest distance.
+    A sun in view whose glare clips a region too large or too ragged to pass as a disc sits near its
+    middle (the glare falls off with the angle from the sun), nearer than a sky fit places it.
+    """
+    region = _clipped_region_at(image_small, K_small, d_cam)
+    if region is None:
+        return None
+    h, w = image_small.shape[:2]
+    dist = cv2.distanceTransform(region.astype(np.uint8), cv2.DIST_L2, 5)
+    core = dist >= 0.7 * dist.max()
+    c = PinholeCamera(K_small, w, h).rays()[core].sum(axis=0)
+    return c / np.linalg.norm(c)
