@@ -8,8 +8,11 @@ at any distance some things are nearly black (tyres, the ground under cars, foli
 records only the veil.  Per depth bin, the :data:`FLOOR_PERCENTILE` percentile of the dark channel (the
 minimum over RGB and a patch, linear) of the pixels at that depth is an upper bound on the veil at that
 depth (a bin without dark things only bounds it from above); the veil can only grow with distance, so the
-bins are made non-decreasing by a running minimum from the far end.  It is capped at
-:data:`MAX_VEIL_FRACTION` of the image's median luminance (a scene with nothing dark is not a fog).
+bins are made non-decreasing by a running minimum from the far end.  Only a bin whose dark things are markedly
+darker than its typical pixel (its floor at most :data:`EVIDENCE_RATIO` of its median luminance) measures the
+veil; the veil is capped at the largest floor of such bins (a flat grey road or wall bounds it but does not show
+it: without any such bin there is no veil), and at :data:`MAX_VEIL_FRACTION` of the image's median luminance
+(a scene with nothing dark is not a fog).
 
 The airlight colour is the mean colour of the brightest dark-channel pixels (He et al.: the haze-opaque sky);
 the veil of colour channel c at depth d is ``A_c (1 - t(d))`` with ``1 - t(d) = floor(d) / min_c A_c``.
@@ -33,6 +36,7 @@ FLOOR_PERCENTILE = 1.0
 MIN_BIN_BLOCKS = 150  # a depth bin with fewer blocks gives no bound
 AIRLIGHT_FRACTION = 0.001  # the brightest 0.1 % of the dark channel give the airlight colour
 MAX_VEIL_FRACTION = 0.15
+EVIDENCE_RATIO = 0.5  # a bin measures the veil when its dark floor is at most this share of its median luminance
 
 
 @dataclass(frozen=True)
@@ -113,17 +117,20 @@ def estimate_veil(image_rgb: np.ndarray, depth_m: np.ndarray, ev: float = 0.0) -
     depth = np.asarray(depth_m, np.float32)[c : h * REDUCE_PX : REDUCE_PX, c : w * REDUCE_PX : REDUCE_PX]
     edges = np.asarray(DEPTH_EDGES_M)
     centres = 0.5 * (edges[:-1] + np.minimum(edges[1:], 1.5 * edges[-2]))
+    lin = table[image_rgb[c::REDUCE_PX, c::REDUCE_PX][:h, :w]]
+    lum = luminance(lin)
     bound = np.full(len(centres), np.inf)
+    evidence = np.zeros(len(centres), dtype=bool)
     for k in range(len(centres)):
         sel = (depth >= edges[k]) & (depth < edges[k + 1])
         if sel.sum() >= MIN_BIN_BLOCKS:
             bound[k] = np.percentile(dark[sel], FLOOR_PERCENTILE)
-    if not np.isfinite(bound).any():
+            evidence[k] = bound[k] <= EVIDENCE_RATIO * float(np.median(lum[sel]))
+    if not evidence.any():
         return Veil.none()
     floor = np.minimum.accumulate(bound[::-1])[::-1]  # non-decreasing with depth
     floor = np.where(np.isfinite(floor), floor, floor[np.isfinite(floor)].max())
-    lin = table[image_rgb[c::REDUCE_PX, c::REDUCE_PX][:h, :w]]
-    floor = np.minimum(floor, MAX_VEIL_FRACTION * float(np.median(luminance(lin))))
+    floor = np.minimum(floor, min(float(floor[evidence].max()), MAX_VEIL_FRACTION * float(np.median(lum))))
     top = dark_u8 >= np.quantile(dark_u8, 1.0 - AIRLIGHT_FRACTION)
     airlight = lin[top].mean(axis=0).astype(np.float64)
     airlight = np.maximum(airlight, max(float(floor.max()), 1e-6))

@@ -63,6 +63,20 @@ def test_veil_never_decreases_with_depth_and_is_capped():
     assert veil.floor.max() <= MAX_VEIL_FRACTION * median * 1.05
 
 
+def test_a_scene_with_nothing_dark_shows_no_veil():
+    """A flat grey road and a grey wall (no dark things at any depth) bound the veil but do not show it: the
+    dark channel there is the grey content, not haze (the Mitsuba reference scene is such a ground plane)."""
+    J, depth, ev = textured_scene(3)
+    J = np.where(np.isfinite(depth)[..., None], np.array([0.2, 0.2, 0.2]), AIRLIGHT)
+    veil = estimate_veil(hazy(J, depth, 0.0, 0.0, ev), depth, ev)
+    assert float(np.max(veil.haze_at(np.array([5.0, 20.0, 60.0])))) == 0.0
+    # the same grey scene with a few dark things in it does show the haze it is seen through
+    J2, _, _ = textured_scene(3)
+    J2 = np.where((J2.max(axis=2, keepdims=True) == 0.0), 0.0, J)
+    veil = estimate_veil(hazy(J2, depth, 0.004, 0.0, ev), depth, ev)
+    assert float(veil.haze_at(np.array(20.0))) > 0.5 * (1.0 - np.exp(-0.004 * 20.0))
+
+
 def test_dark_channel_blocks_is_the_block_minimum():
     img = np.random.default_rng(0).integers(0, 256, (40, 64, 3), dtype=np.uint8)
     dc = dark_channel_blocks(img)
