@@ -23,8 +23,8 @@ from .frames import (invert_transform, make_transform, pose_camera_to_transform,
                      rotate_vectors, rotation_to_quat, transform_points, transform_to_pose_camera, yaw_to_quat)
 from .io import (atomic_path, encode_image_rgb, read_exr, read_image_rgb, read_json, write_bytes_atomic, write_exr,
                  write_image_rgb, write_json_atomic)
-from .response import (GAMMA, SATURATION_LDR, SOFTCLIP_TAU, clipped_to_lower_bound, hdr_to_ldr, hdr_to_ldr_uint8,
-                       inverse_softclip, ldr_to_hdr, ldr_uint8_to_hdr, luminance, softclip)
+from .response import (GAMMA, SATURATION_LDR, SATURATION_RADIANCE, SOFTCLIP_TAU, clipped_to_lower_bound, hdr_to_ldr,
+                       hdr_to_ldr_uint8, inverse_softclip, ldr_to_hdr, ldr_uint8_to_hdr, luminance, softclip)
 
 __all__ = [
     "PinholeCamera", "intrinsics_from_fov", "pixel_rays", "project_points", "scale_intrinsics", "unproject_depth",
@@ -36,5 +36,5 @@ __all__ = [
     "atomic_path", "encode_image_rgb", "read_exr", "read_image_rgb", "read_json", "write_bytes_atomic", "write_exr",
     "write_image_rgb", "write_json_atomic",
     "GAMMA", "SOFTCLIP_TAU", "hdr_to_ldr", "hdr_to_ldr_uint8", "inverse_softclip", "ldr_to_hdr", "ldr_uint8_to_hdr",
-    "luminance", "softclip", "SATURATION_LDR", "clipped_to_lower_bound",
+    "luminance", "softclip", "SATURATION_LDR", "SATURATION_RADIANCE", "clipped_to_lower_bound",
 ]

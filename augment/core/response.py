@@ -6,6 +6,8 @@ floats in [0, 1] (divide uint8 by 255).
 
 from __future__ import annotations
 
+from functools import lru_cache
+
 import numpy as np
 
 GAMMA = 2.2
@@ -15,8 +17,10 @@ SOFTCLIP_TAU = 0.95
 def softclip(x: np.ndarray, tau: float = SOFTCLIP_TAU) -> np.ndarray:
     """The paper's soft clip: identity up to tau, then an exponential shoulder towards 1."""
     x = np.asarray(x, dtype=np.float64)
-    shoulder = 1.0 - (1.0 - tau) * np.exp(-(np.maximum(x, tau) - tau) / (1.0 - tau))
-    return np.where(x <= tau, x, shoulder)
+    out = x.copy()
+    high = x > tau  # the shoulder is worked out only where it acts
+    out[high] = 1.0 - (1.0 - tau) * np.exp(-(x[high] - tau) / (1.0 - tau))
+    return out
 
 
 def inverse_softclip(y: np.ndarray, tau: float = SOFTCLIP_TAU) -> np.ndarray:
@@ -37,9 +41,20 @@ def ldr_to_hdr(ldr: np.ndarray, ev: float = 0.0) -> np.ndarray:
     return inverse_softclip(ldr) ** GAMMA / 2.0**ev
 
 
+@lru_cache(maxsize=16)
+def _uint8_table(ev: float) -> np.ndarray:
+    """(256,) read-only float32 linear HDR of every 8-bit level at exposure ``ev``."""
+    table = ldr_to_hdr(np.arange(256, dtype=np.float64) / 255.0, ev).astype(np.float32)
+    table.flags.writeable = False
+    return table
+
+
 def ldr_uint8_to_hdr(image: np.ndarray, ev: float = 0.0) -> np.ndarray:
-    """uint8 (H, W, 3) image -> float32 linear HDR (H, W, 3)."""
-    return ldr_to_hdr(np.asarray(image, dtype=np.float64) / 255.0, ev).astype(np.float32)
+    """uint8 (H, W, 3) image -> float32 linear HDR (H, W, 3) (a 256-entry table for uint8 input)."""
+    image = np.asarray(image)
+    if image.dtype == np.uint8:
+        return _uint8_table(float(ev))[image]
+    return ldr_to_hdr(image.astype(np.float64) / 255.0, ev).astype(np.float32)
 
 
 def hdr_to_ldr_uint8(hdr: np.ndarray, ev: float = 0.0) -> np.ndarray:
@@ -54,6 +69,7 @@ def luminance(rgb: np.ndarray) -> np.ndarray:
 
 
 SATURATION_LDR = 0.97  # LDR values at or above this (any channel) are clipped
+SATURATION_RADIANCE = ldr_to_hdr(np.full(3, SATURATION_LDR))  # (3,) the radiance where the response saturates
 
 
 def clipped_to_lower_bound(hdr: np.ndarray, ldr: np.ndarray) -> np.ndarray:
@@ -62,6 +78,5 @@ def clipped_to_lower_bound(hdr: np.ndarray, ldr: np.ndarray) -> np.ndarray:
     The inverse response of an LDR 1.0 is the soft clip's far tail (~2.4x that level), not a measurement."""
     hdr = np.asarray(hdr, dtype=np.float64)
     clipped = np.asarray(ldr).max(axis=-1) >= SATURATION_LDR
-    floor = ldr_to_hdr(np.full(3, SATURATION_LDR))
-    return np.where(clipped[..., None], np.minimum(hdr, floor), hdr)
+    return np.where(clipped[..., None], np.minimum(hdr, SATURATION_RADIANCE), hdr)
 

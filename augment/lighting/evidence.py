@@ -85,9 +85,7 @@ def downscale_image(image_rgb: np.ndarray, K: np.ndarray, max_width: int) -> tup
     return small, scale_intrinsics(K, w / W, h / H)
 
 
-# the contract's inverse response of every uint8 value (what ldr_uint8_to_hdr computes per pixel)
-_UINT8_TO_HDR = ldr_uint8_to_hdr(np.arange(256, dtype=np.uint8)).astype(np.float64)
-_UINT8_TO_LDR = np.arange(256, dtype=np.float64) / 255.0
+_UINT8_TO_LDR = np.arange(256, dtype=np.float64) / 255.0  # each uint8 level as an LDR float (a table: no division)
 
 
 @lru_cache(maxsize=16)
@@ -121,7 +119,8 @@ def prepare_image(image_rgb: np.ndarray, K: np.ndarray, up_cam: np.ndarray,
         pts = pts[np.linalg.norm(pts, axis=1) >= SURFACE_MIN_RANGE_M]
         uv, _ = project_points(Ks, pts)
         surface_uv = uv[np.isfinite(uv).all(axis=1)]
-    return PreparedImage(_UINT8_TO_HDR[small], _UINT8_TO_LDR[small], rays, elevation, Ks, surface_uv)
+    return PreparedImage(ldr_uint8_to_hdr(small).astype(np.float64), _UINT8_TO_LDR[small], rays, elevation, Ks,
+                         surface_uv)
 
 
 def box_shadow_evidence(work: PreparedImage, T_cam_from_global: np.ndarray, boxes: list[Box],

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..core import GAMMA, SOFTCLIP_TAU, ldr_to_hdr, softclip
+from ..core import hdr_to_ldr, ldr_to_hdr
 
 
 def street_axis_xy(forward_vol: np.ndarray | None) -> np.ndarray:
@@ -83,10 +83,7 @@ def mean_colour_radiance(radiance: np.ndarray) -> np.ndarray:
     r = np.asarray(radiance, dtype=np.float64).reshape(-1, 3)
     if not len(r):
         return np.zeros(3)
-    ldr = np.maximum(r, 0.0) ** (1.0 / GAMMA)  # hdr_to_ldr, its soft clip applied only where it acts
-    high = ldr > SOFTCLIP_TAU
-    ldr[high] = softclip(ldr[high])
-    return np.maximum(ldr_to_hdr(np.clip(ldr, 0.0, 1.0).mean(axis=0)), 1e-9)
+    return np.maximum(ldr_to_hdr(np.clip(hdr_to_ldr(r), 0.0, 1.0).mean(axis=0)), 1e-9)
 
 
 def shrink_unseen(radiance: np.ndarray, anchor_rgb: np.ndarray, keep: float = UNSEEN_KEEP) -> np.ndarray:

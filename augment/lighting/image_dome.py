@@ -34,7 +34,7 @@ from functools import lru_cache
 import cv2
 import numpy as np
 
-from ..core import SATURATION_LDR, camera_envmap_directions, check_shape, ldr_to_hdr, luminance
+from ..core import SATURATION_RADIANCE, camera_envmap_directions, check_shape, luminance
 from .evidence import PreparedImage
 from .fill import UNSEEN_KEEP, mean_colour_radiance, shrink_unseen
 from .skydome import blend_observed
@@ -44,8 +44,6 @@ MIN_BAND_CELLS = 3  # a band needs this many seen map cells to carry a ratio
 BLEND_DEG = 8.0
 MAX_LOG_GAIN = np.log(20.0)
 MIN_SKY_PIXELS = 20
-# where the response saturates: a clipped pixel's channels are "at least" this (core.clipped_to_lower_bound)
-_SATURATION_RADIANCE = ldr_to_hdr(np.full(3, SATURATION_LDR))
 # the street's mirror symmetry (what stands ahead stands behind, what stands left stands right): an unseen cell
 # whose mirror image was seen moves this far (log space) from the band statistics towards the seen radiance
 # there, smoothed over SYMMETRY_BLUR_DEG; fitted by benchmarks/bench_unseen_l1.py --fit (keyframe split of the
@@ -104,7 +102,8 @@ def seen_pixels(work: PreparedImage, R_map_from_cam: np.ndarray | None = None, g
     clipped = work.clipped.reshape(-1)
     is_sky = (work.sky if sky is None else np.asarray(sky, bool)).reshape(-1)
     rad = work.hdr.reshape(-1, 3) * float(gain)  # a copy: the clipped pixels are lowered in place
-    rad[clipped] = np.minimum(rad[clipped], _SATURATION_RADIANCE * float(gain))  # clipped: a lower bound
+    # clipped: a lower bound (core.clipped_to_lower_bound, in place on the copy)
+    rad[clipped] = np.minimum(rad[clipped], SATURATION_RADIANCE * float(gain))
     return SeenPixels(rays, rad, clipped, is_sky)
 
 

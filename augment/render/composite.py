@@ -68,7 +68,7 @@ def composite(image_rgb: np.ndarray, radiance_premult: np.ndarray, mask: np.ndar
     if not touched.any():
         return out
     ys, xs = np.nonzero(touched)
-    I = ldr_uint8_to_hdr(np.arange(256, dtype=np.uint8), ev).astype(np.float64)[image_rgb[ys, xs]]  # 256-entry table
+    I = ldr_uint8_to_hdr(image_rgb[ys, xs], ev).astype(np.float64)
     M = mask[ys, xs].astype(np.float64)[:, None]
     obj = visibility[ys, xs].astype(np.float64)[:, None] * radiance_premult[ys, xs]
     edit = obj + (1.0 - M) * I * ratio_rgb[ys, xs]

@@ -89,7 +89,7 @@ class Veil:
         if not np.any(S < 1.0):
             return ratio_rgb
         V = self.haze_at(depth_m)[..., None] * self.airlight_rgb
-        I = ldr_uint8_to_hdr(np.arange(256, dtype=np.uint8), ev).astype(np.float64)[image_rgb]
+        I = ldr_uint8_to_hdr(image_rgb, ev).astype(np.float64)
         share = np.clip(V / np.maximum(I, 1e-9), 0.0, 1.0)
         return (S + (1.0 - S) * share).astype(np.float32)
 
@@ -109,15 +109,14 @@ def estimate_veil(image_rgb: np.ndarray, depth_m: np.ndarray, ev: float = 0.0) -
     H, W = image_rgb.shape[:2]
     if H < 4 * REDUCE_PX or W < 4 * REDUCE_PX:
         return Veil.none()
-    table = ldr_uint8_to_hdr(np.arange(256, dtype=np.uint8), ev)  # (256,) linear value of each 8-bit level
     dark_u8 = dark_channel_blocks(image_rgb)
     h, w = dark_u8.shape
-    dark = table[dark_u8]
+    dark = ldr_uint8_to_hdr(dark_u8, ev)
     c = REDUCE_PX // 2
     depth = np.asarray(depth_m, np.float32)[c : h * REDUCE_PX : REDUCE_PX, c : w * REDUCE_PX : REDUCE_PX]
     edges = np.asarray(DEPTH_EDGES_M)
     centres = 0.5 * (edges[:-1] + np.minimum(edges[1:], 1.5 * edges[-2]))
-    lin = table[image_rgb[c::REDUCE_PX, c::REDUCE_PX][:h, :w]]
+    lin = ldr_uint8_to_hdr(image_rgb[c::REDUCE_PX, c::REDUCE_PX][:h, :w], ev)
     lum = luminance(lin)
     bound = np.full(len(centres), np.inf)
     evidence = np.zeros(len(centres), dtype=bool)
