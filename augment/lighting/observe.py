@@ -66,11 +66,8 @@ def extend_facades(depth_m: np.ndarray, sky: np.ndarray) -> tuple[np.ndarray, np
 
     Vertical-facade prior: for a level camera, a vertical wall has the same camera-z all the way up.
     """
-    finite = np.isfinite(depth_m)
     H, W = depth_m.shape
-    has = finite.any(axis=0)
-    top = np.where(has, finite.argmax(axis=0), H)
-    top_depth = depth_m[np.minimum(top, H - 1), np.arange(W)]
+    has, top, top_depth = column_tops(depth_m)
     rows = np.arange(H)[:, None]
     above = (rows < top[None, :]) & ~sky & has[None, :]
     # stop at the first sky pixel met going up from the top depth
@@ -82,6 +79,15 @@ def extend_facades(depth_m: np.ndarray, sky: np.ndarray) -> tuple[np.ndarray, np
     return out, capped
 
 
+def column_tops(depth_m: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per column of a depth (H, W): (W,) bool whether it has a finite depth, (W,) the row of its highest one
+    (H where none) and (W,) that depth."""
+    finite = np.isfinite(depth_m)
+    H, W = depth_m.shape
+    has = finite.any(axis=0)
+    top = np.where(has, finite.argmax(axis=0), H)
+    return has, top, depth_m[np.minimum(top, H - 1), np.arange(W)]
+
 
 def fill_structure_columns(depth_m: np.ndarray, sky: np.ndarray) -> np.ndarray:
     """Depth (H, W) with every non-sky pixel of unknown depth set to its column's highest known depth.
@@ -90,11 +96,8 @@ def fill_structure_columns(depth_m: np.ndarray, sky: np.ndarray) -> np.ndarray:
     between patches of sky); at the depth of the structure below it the mesh reproduces it exactly from the
     camera's own centre and approximately from nearby points (the volume can only blur it).
     """
-    finite = np.isfinite(depth_m)
-    has = finite.any(axis=0)
-    top = np.where(has, finite.argmax(axis=0), 0)
-    top_depth = depth_m[top, np.arange(depth_m.shape[1])]
-    fill = ~finite & ~sky & has[None, :]
+    has, _, top_depth = column_tops(depth_m)
+    fill = ~np.isfinite(depth_m) & ~sky & has[None, :]
     return np.where(fill, np.broadcast_to(top_depth[None, :], depth_m.shape), depth_m)
 
 

@@ -31,7 +31,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from ..core import InputError, check_shape, transform_points, write_bytes_atomic
+from ..core import InputError, check_shape, transform_points, unproject_depth, write_bytes_atomic
 from ..core.raycast import RayScene
 
 GEOMETRY_STEP_PX = 2  # 480 px radiance -> 240 px geometry
@@ -80,9 +80,8 @@ def depth_mesh(view: DepthView, step: int = GEOMETRY_STEP_PX) -> tuple[np.ndarra
     d = depth[np.ix_(rows, cols)]
     d = np.where(d <= MAX_DEPTH_M, d, np.inf)
     uv = np.stack([u, v], axis=-1).reshape(-1, 2)
-    rays = np.concatenate([uv, np.ones((len(uv), 1))], axis=1) @ np.linalg.inv(np.asarray(view.K, np.float64)).T
     finite = np.isfinite(d).reshape(-1)
-    p_cam = rays * np.where(finite, d.reshape(-1), 0.0)[:, None]
+    p_cam = unproject_depth(view.K, uv, np.where(finite, d.reshape(-1), 0.0))
     vertices = transform_points(np.asarray(view.T_vol_from_cam, np.float64), p_cam)
     h, w = d.shape
     idx = np.arange(h * w).reshape(h, w)
