@@ -11,6 +11,7 @@ from streetaug.augment.lighting.skynet.dome import angle_deg, camera_from_angles
 from streetaug.augment.lighting.skynet.sun_cues import (
     clear_sky_log_rgb,
     detect_sun_disc,
+    clipped_region_at,
     glare_centre_cam,
     glare_extent_deg,
     in_view_sky_loglik,
@@ -180,12 +181,16 @@ def test_glare_extent_is_the_radius_of_the_clipped_region_under_the_direction():
     image[(xx - 40) ** 2 + (yy - 30) ** 2 <= 4] = 255  # a compact blob (radius ~2 px ~ 1 deg)
     image[60:66, :] = 255  # a band of clipped horizon glow across the whole image
     rays = PinholeCamera(K, 160, 96).rays()
-    blob = glare_extent_deg(image, K, rays[30, 40])
-    band = glare_extent_deg(image, K, rays[62, 80])
+    def extent(d):
+        region = clipped_region_at(image, K, d)
+        return None if region is None else glare_extent_deg(region, K, d)
+
+    blob = extent(rays[30, 40])
+    band = extent(rays[62, 80])
     assert blob is not None and blob < 3.0
     assert band is not None and band > 30.0  # the band spans ~70 deg: the sun could be anywhere along it
-    assert glare_extent_deg(image, K, rays[10, 120]) is None  # unclipped sky
-    assert glare_extent_deg(image, K, -rays[30, 40]) is None  # behind the camera
+    assert clipped_region_at(image, K, rays[10, 120]) is None  # unclipped sky
+    assert clipped_region_at(image, K, -rays[30, 40]) is None  # behind the camera
 
 
 @pytest.mark.parametrize("sun_az, sun_el", [(10, 20), (-15, 12), (5, 8)])
@@ -195,13 +200,14 @@ def test_glare_centre_is_near_a_sun_whose_glare_is_too_large_for_a_disc(sun_az, 
     image, K, up, sun_cam = _render(_sun(sun_az, sun_el), 0, 10)
     image = np.clip(image.astype(np.float64) * 1.5, 0, 255).astype(np.uint8)
     assert detect_sun_disc(image, K, up) is None
-    assert 15.0 < glare_extent_deg(image, K, sun_cam) < 35.0
+    assert 15.0 < glare_extent_deg(clipped_region_at(image, K, sun_cam), K, sun_cam) < 35.0
     edge = sun_cam + np.array([0.12, -0.05, 0.0])
     edge /= np.linalg.norm(edge)
-    assert glare_extent_deg(image, K, edge) is not None  # still in the clipped region, ~7 deg off
-    centre = glare_centre_cam(image, K, edge)
+    region = clipped_region_at(image, K, edge)
+    assert region is not None  # still in the clipped region, ~7 deg off
+    centre = glare_centre_cam(region, K)
     assert angle_deg(centre, sun_cam) < 3.5
-    assert glare_centre_cam(image, K, -edge) is None  # behind the camera
+    assert clipped_region_at(image, K, -edge) is None  # behind the camera
 
 
 def test_sky_fit_without_sky_says_nothing():

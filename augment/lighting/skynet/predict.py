@@ -35,7 +35,8 @@ from ..light import DistantLight, SunLight
 from .dome import dome_directions, dome_pixel_size_rad, dome_solid_angles, heading_from_camera, sample_dome
 from .inputs import VIEW_SIZE, quantize_ldr, resize_view, view_rays
 from .model import direction_cone_deg
-from .sun_cues import detect_sun_disc, glare_centre_cam, glare_extent_deg, in_view_sky_loglik, sky_fit_loglik
+from .sun_cues import (clipped_region_at, detect_sun_disc, glare_centre_cam, glare_extent_deg, in_view_sky_loglik,
+                       sky_fit_loglik)
 from .weights import load_light_model, load_sky_model
 
 VISIBILITY_MIN = 0.3  # below: no sun is reported (overcast, night, hidden)
@@ -298,12 +299,13 @@ def predict_sky(image_rgb: np.ndarray, K: np.ndarray, up_cam: np.ndarray | None 
             cue = "network x clear-sky fit"
         unc = direction_cone_deg(p, bins, direction)
         # a fitted sun inside a clipped region of the image is known only to within that region's radius
-        glare = glare_extent_deg(small, Ks, R.T @ direction) if use_cues else None
+        region = clipped_region_at(small, Ks, R.T @ direction) if use_cues else None
+        glare = glare_extent_deg(region, Ks, R.T @ direction) if region is not None else None
         if glare is not None:
             unc = max(unc, glare)
             cue += f", in a clipped region of radius {glare:.0f} deg"
             if glare <= GLARE_CENTRE_MAX_DEG:  # a sun's glare, not a blown-out sky: its middle, not its edge
-                direction = R @ glare_centre_cam(small, Ks, R.T @ direction)
+                direction = R @ glare_centre_cam(region, Ks)
                 cue += " (its centre)"
         if glare is not None and unc <= GLARE_MAX_UNCERTAINTY_DEG and \
                 direction[2] >= np.sin(np.radians(GLARE_MIN_ELEVATION_DEG)):

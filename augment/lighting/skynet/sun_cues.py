@@ -14,7 +14,7 @@ unknown exposure and white balance, which every fit here is invariant to).
   log space, with a free offset per channel and elevation band (exposure, white balance, haze: any
   vertical profile) and the turbidity profiled out and a robust (Cauchy) loss against clouds; returns a
   log-likelihood over candidate sun directions.
-* :func:`glare_extent_deg` — how far a clipped region under a direction reaches (a sun placed in it is
+* :func:`clipped_region_at`, :func:`glare_extent_deg` — the clipped region under a direction and how far it reaches (a sun placed in it is
   known only to within that).
 * :func:`in_view_sky_loglik` — no disc found: directions that project onto bright but unclipped
   pixels of the image cannot hold the sun.
@@ -362,7 +362,7 @@ def in_view_sky_loglik(sun_dirs_h: np.ndarray, R_heading_from_cam: np.ndarray, K
     return np.where(hit, -penalty, 0.0)
 
 
-def _clipped_region_at(image_small: np.ndarray, K_small: np.ndarray, d_cam: np.ndarray) -> np.ndarray | None:
+def clipped_region_at(image_small: np.ndarray, K_small: np.ndarray, d_cam: np.ndarray) -> np.ndarray | None:
     """(h, w) bool: the 8-connected clipped region (max channel >= ``SATURATED``) of ``image_small`` (h, w, 3)
     uint8 (intrinsics ``K_small``) at the projected pixel of the camera-frame direction ``d_cam`` (3,) (or within
     one pixel of it); None if it is behind the camera, out of the image or not on a clipped pixel."""
@@ -381,34 +381,29 @@ def _clipped_region_at(image_small: np.ndarray, K_small: np.ndarray, d_cam: np.n
     return np.isin(labels, ids) if len(ids) else None
 
 
-def glare_extent_deg(image_small: np.ndarray, K_small: np.ndarray, d_cam: np.ndarray) -> float | None:
-    """Angular radius (deg) of the clipped region the camera-frame direction ``d_cam`` (3,) falls in, or None.
+def glare_extent_deg(region: np.ndarray, K_small: np.ndarray, d_cam: np.ndarray) -> float:
+    """Angular radius (deg) of the clipped ``region`` (h, w) bool (:func:`clipped_region_at` of ``d_cam``).
 
-    The region is :func:`_clipped_region_at`'s; its radius is the largest angle between ``d_cam`` and the rays
-    of its pixels.  A sun placed inside a clipped glare is only known to within that region: a compact blob
-    pins it, a long band of horizon glow does not.
+    The largest angle between the camera-frame direction ``d_cam`` (3,) and the rays of the region's pixels
+    (intrinsics ``K_small``).  A sun placed inside a clipped glare is only known to within that region: a
+    compact blob pins it, a long band of horizon glow does not.
     """
-    region = _clipped_region_at(image_small, K_small, d_cam)
-    if region is None:
-        return None
-    h, w = image_small.shape[:2]
+    h, w = region.shape
     d = np.asarray(d_cam, dtype=np.float64)
     rays = PinholeCamera(K_small, w, h).rays()[region]
     return float(np.degrees(np.arccos(np.clip(rays @ (d / np.linalg.norm(d)), -1.0, 1.0)).max()))
 
 
-def glare_centre_cam(image_small: np.ndarray, K_small: np.ndarray, d_cam: np.ndarray) -> np.ndarray | None:
-    """Unit camera-frame direction (3,) of the centre of the clipped region ``d_cam`` falls in, or None.
+def glare_centre_cam(region: np.ndarray, K_small: np.ndarray) -> np.ndarray:
+    """Unit camera-frame direction (3,) of the centre of the clipped ``region`` (h, w) bool (intrinsics
+    ``K_small``; :func:`clipped_region_at`).
 
     The centre of the region's largest inscribed disc (distance transform; the image border does not bound
     it), as :func:`detect_sun_disc` takes it: the mean ray of the pixels at >= 0.7 x the largest distance.
     A sun in view whose glare clips a region too large or too ragged to pass as a disc sits near its
     middle (the glare falls off with the angle from the sun), nearer than a sky fit places it.
     """
-    region = _clipped_region_at(image_small, K_small, d_cam)
-    if region is None:
-        return None
-    h, w = image_small.shape[:2]
+    h, w = region.shape
     dist = cv2.distanceTransform(region.astype(np.uint8), cv2.DIST_L2, 5)
     core = dist >= 0.7 * dist.max()
     c = PinholeCamera(K_small, w, h).rays()[core].sum(axis=0)
