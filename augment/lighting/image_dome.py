@@ -34,7 +34,8 @@ from functools import lru_cache
 import cv2
 import numpy as np
 
-from ..core import SATURATION_RADIANCE, camera_envmap_directions, check_shape, luminance
+from ..core import (SATURATION_RADIANCE, camera_dir_to_lonlat, camera_envmap_directions, check_shape, lonlat_to_uv,
+                    luminance)
 from .evidence import PreparedImage
 from .fill import UNSEEN_KEEP, mean_colour_radiance, shrink_unseen
 from .skydome import blend_observed
@@ -67,10 +68,9 @@ def _map_directions(H: int, W: int) -> np.ndarray:
 
 def map_cells(rays: np.ndarray, H: int, W: int) -> np.ndarray:
     """(N,) flat index (row * W + col) of the camera-frame equirect cell holding each unit ray (N, 3)."""
-    lon = np.arctan2(rays[:, 0], rays[:, 2])
-    lat = np.arcsin(np.clip(-rays[:, 1], -1.0, 1.0))
-    col = np.clip(((lon / (2 * np.pi) + 0.5) * W).astype(np.int64), 0, W - 1)
-    row = np.clip(((0.5 - lat / np.pi) * H).astype(np.int64), 0, H - 1)
+    u, v = lonlat_to_uv(*camera_dir_to_lonlat(rays), H, W)
+    col = np.clip(u.astype(np.int64), 0, W - 1)
+    row = np.clip(v.astype(np.int64), 0, H - 1)
     return row * W + col
 
 
