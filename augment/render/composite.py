@@ -16,7 +16,7 @@ import numpy as np
 
 from ..core import PinholeCamera, hdr_to_ldr_uint8, ldr_uint8_to_hdr, luminance
 from .camera_effects import CameraEffects, add_object_noise, blur_object_layer, estimate_camera_effects
-from .camera_look import jpeg_round_trip, motion_kernel
+from .camera_look import jpeg_noise_survival, jpeg_round_trip, motion_kernel
 from .footprint import PixelBox
 from .foreground import Foreground
 from .shadow import ShadowMap
@@ -189,7 +189,11 @@ def composite_layers(image_rgb: np.ndarray, layers: ObjectLayers, camera: Pinhol
         if veil is not None and L.scene_depth_m is not None:  # the haze in front of the ground is not shadowed
             ratio = veil.shadow_ratio(ratio, image_rgb[ub], L.scene_depth_m[ub], ev)
         image[ub] = composite(image_rgb[ub], obj_b, mask_b, np.ones_like(mask_b), ratio, ev)
-        image[ub] = add_object_noise(image[ub], mask_b, effects.noise_sigma, rng)
+        sigma = effects.noise_sigma
+        if jpeg_quality is not None:  # the re-encoding below removes part of the added noise: add more
+            for _ in range(3):
+                sigma = effects.noise_sigma / jpeg_noise_survival(jpeg_quality, sigma)
+        image[ub] = add_object_noise(image[ub], mask_b, sigma, rng)
         if jpeg_quality is not None:
             touched = np.zeros((H, W), bool)
             touched[ub] = mask_b > 1.0 / 255.0

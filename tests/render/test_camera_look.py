@@ -119,3 +119,25 @@ def test_motion_stays_bounded_near_the_camera_plane_and_for_wild_speeds():
     k = motion_kernel(np.array([1.3e5, 2.0e4]))  # a wild input gives a bounded kernel
     assert k.shape[0] <= 2 * (int(np.ceil(MAX_MOTION_PX / 2)) + 1) + 1 and abs(k.sum() - 1) < 1e-5
     assert motion_kernel(np.array([np.nan, 1.0])).shape == (1, 1)
+
+
+def test_jpeg_noise_survival_compensates_the_round_trip():
+    """Noise of std target / survival, re-encoded at the same quality, measures about the target (the
+    photo's noise was measured after its own JPEG); the uncompensated noise measures well below it."""
+    import numpy as np
+
+    from streetaug.augment.render.camera_look import jpeg_noise_survival, jpeg_round_trip
+
+    q, target = 90, 2.0 / 255.0
+    s = target
+    for _ in range(3):
+        s = target / jpeg_noise_survival(q, s)
+    rng = np.random.default_rng(1)
+    touched = np.ones((96, 96), bool)
+
+    def measured(sigma):
+        img = np.clip(np.round(120.0 + rng.normal(0.0, sigma * 255.0, (96, 96, 3))), 0, 255).astype(np.uint8)
+        return jpeg_round_trip(img, touched, q).astype(np.float64).std() / 255.0
+
+    assert abs(measured(s) - target) < 0.2 * target
+    assert measured(target) < 0.75 * target
