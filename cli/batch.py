@@ -6,18 +6,16 @@ from pathlib import Path
 
 import click
 
-from streetaug.augment.batch import BatchConfig, RunOptions, default_workers, format_summary, merge as merge_shards
-from streetaug.augment.batch import parse_shard, run_batch
-from streetaug.datasets.bundled import BUNDLED_VERSION, bundled_dataroot
-
-from streetaug.augment.batch.layout import LOG_FILE, PLAN_FILE, shard_dir
-
+# The batch machinery (placement, the dataset reader, scipy, shapely) is imported in the command bodies:
+# `streetaug --help` and the other commands must not pay for it.
 from .common import (LEVEL_HELP, LIGHT_LEVELS, YAW_SIGMA_RANGE, asset_options, exit_if_failed, limit_options,
                      render_options, runtime_errors)
 
 
 def _dataroot(dataroot: Path | None, version: str | None) -> tuple[str, str]:
     """(absolute dataroot, version) of the options; the bundled sample scenes without ``--dataroot``."""
+    from streetaug.datasets.bundled import BUNDLED_VERSION, bundled_dataroot
+
     if dataroot is None:
         return str(bundled_dataroot().resolve()), version or BUNDLED_VERSION
     if version is None:
@@ -85,6 +83,9 @@ def batch(dataroot, version, out, cameras, limit, n_objects, tracks, sweeps, yaw
     (nothing augmented: e.g. --out inside the source, a broken asset, another run
     writing into --out); 2 bad arguments.
     """
+    from streetaug.augment.batch import BatchConfig, RunOptions, default_workers, format_summary, parse_shard, run_batch
+    from streetaug.augment.batch.layout import LOG_FILE, PLAN_FILE, shard_dir
+
     if scheduler and dask_local:
         raise click.UsageError("give --scheduler ADDRESS or --dask-local N, not both")
     if dry_run and shard:
@@ -138,6 +139,9 @@ def merge(out, allow_incomplete, contact_sheet, debug):
     Example:
       streetaug merge --out /shared/aug
     """
+    from streetaug.augment.batch import format_summary, merge as merge_shards
+    from streetaug.augment.batch.layout import LOG_FILE
+
     summary = merge_shards(out, allow_incomplete, contact_sheet, echo=lambda msg: click.echo(msg, err=True))
     click.echo(format_summary(summary))
     exit_if_failed(summary, out / LOG_FILE)

@@ -14,16 +14,17 @@ import sys
 from dataclasses import fields
 import traceback
 from pathlib import Path
-from typing import Callable
+from typing import TYPE_CHECKING, Callable
 
 import click
 import numpy as np
 
 from streetaug.augment.core import InputError, intrinsics_from_fov
 from streetaug.augment.core.limits import ResourceLimits
-from streetaug.datasets.bundled import BUNDLED_VERSION, bundled_dataroot
-from streetaug.datasets.nuscenes import NuScenesReader
-from streetaug.datasets.sample import CameraView, Sample
+
+if TYPE_CHECKING:  # the dataset modules load shapely and scipy: imported where a command reads a dataset
+    from streetaug.datasets.nuscenes import NuScenesReader
+    from streetaug.datasets.sample import CameraView, Sample
 
 CAMERA_DEFAULT = "CAM_FRONT"
 # Lighting levels offered on the command line (see streetaug.augment.lighting.api).
@@ -137,6 +138,9 @@ def dataset_options(func: Callable) -> Callable:
 
 def open_dataset(dataroot: Path | None, version: str | None) -> NuScenesReader:
     """The reader of ``--dataroot``/``--version`` (the bundled sample scenes without ``--dataroot``)."""
+    from streetaug.datasets.bundled import BUNDLED_VERSION, bundled_dataroot
+    from streetaug.datasets.nuscenes import NuScenesReader
+
     if dataroot is None:
         return NuScenesReader(bundled_dataroot(), version or BUNDLED_VERSION)
     if version is None:

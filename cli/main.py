@@ -13,8 +13,6 @@ import numpy as np
 
 from streetaug.augment.core.paths import refuse_output_inside, refuse_overwriting_inputs
 
-from .batch import batch, merge
-from .bench import bench
 from .common import (
     FOV_RANGE,
     INTRINSICS_CHECK,
@@ -35,11 +33,23 @@ from .common import (
     resolve_sample,
     runtime_errors,
 )
-from .stability import stability
-from .train import train_light, train_sky
+from .lazy_group import LazyGroup
+
+# Commands in their own modules (one command or a few each), imported only when looked up: running one
+# command does not import the others, and none imports its library code (torch, scipy, the batch
+# machinery) until it runs.
+LAZY_COMMANDS = {
+    "batch": "streetaug.cli.batch:batch",
+    "bench": "streetaug.cli.bench:bench",
+    "merge": "streetaug.cli.batch:merge",
+    "stability": "streetaug.cli.stability:stability",
+    "train-light": "streetaug.cli.train:train_light",
+    "train-sky": "streetaug.cli.train:train_sky",
+}
 
 
-@click.group(context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100})
+@click.group(cls=LazyGroup, lazy_commands=LAZY_COMMANDS,
+             context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100})
 @click.version_option(package_name="streetaug")
 def main() -> None:
     """streetaug: insert physically lit, shadowed 3D cars into driving datasets, with exact 3D labels.
@@ -265,16 +275,6 @@ def make_samples(out, scenes, sequence, sweeps, width, height, seed, debug):
     paths = make_sample_scenes(out, names=names, width=1600 if width is None else width,
                                 height=900 if height is None else height, seed=seed)
     click.echo(f"wrote {len(paths)} scene(s) into {out}")
-
-
-# ----------------------------------------------------------------------------- commands in their own modules
-# Each module defines one click command (or a few) and is registered here.
-main.add_command(batch)
-main.add_command(bench)
-main.add_command(merge)
-main.add_command(stability)
-main.add_command(train_sky)
-main.add_command(train_light)
 
 
 if __name__ == "__main__":

@@ -15,16 +15,19 @@ from __future__ import annotations
 import functools
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import shapely
-from scipy.spatial import cKDTree
 from shapely.geometry import MultiPolygon, Polygon, box
 from shapely.strtree import STRtree
 
 from streetaug.augment.core import read_json
 
 from .errors import DatasetError
+
+if TYPE_CHECKING:  # scipy (~0.2 s to import) only when a lane look-up builds its tree
+    from scipy.spatial import cKDTree
 
 
 def map_expansion_path(dataroot: str | Path, location: str) -> Path:
@@ -188,6 +191,8 @@ class LaneCenterlines:
 
     @functools.cached_property
     def _tree(self) -> cKDTree:
+        from scipy.spatial import cKDTree
+
         return cKDTree(self.points_xy)
 
     def __len__(self) -> int:
