@@ -19,7 +19,9 @@ For every keyframe *t* that has a *t* + 3 (1.5 s later; every ``--stride``-th):
 * the **constant-colour baseline** for every target: the source images' mean LDR colour everywhere.
 
 Medians over keyframes (and over cameras where a row has several) are reported next to the paper's figures
-(monocular 14.49 / 15.35, 6-view 17.96 / 18.45). The one-north keyframe: the same monocular and six-view
+(monocular 14.49 / 15.35, 6-view 17.96 / 18.45). A target that was not an input (another camera, a later time)
+is predicted at its camera's auto-exposure (:mod:`streetaug.augment.lighting.predicted_view`: the inputs' mean
+image value); ``psnr_reference_exposure`` is the same prediction at the reference camera's exposure. The one-north keyframe: the same monocular and six-view
 scores at its single instant (no *t* + 3): self and other cameras. Also the time per estimate (wall, one
 thread, decode excluded). Writes ``real_lighting.json``.
 """
@@ -34,6 +36,7 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
 import argparse  # noqa: E402
 import platform  # noqa: E402
 import time  # noqa: E402
+from dataclasses import replace  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
@@ -44,9 +47,14 @@ from streetaug.augment.evaluation.novel_view import (  # noqa: E402
     constant_colour_scores,
     paper_pairs,
     real_view,
-    score_lighting,
+    view_scores,
 )
 from streetaug.augment.lighting.api import estimate_views_lighting  # noqa: E402
+from streetaug.augment.lighting.predicted_view import (  # noqa: E402
+    auto_exposure_target,
+    exposed_to_mean_ldr,
+    predicted_radiance,
+)
 from streetaug.datasets.nuscenes import NuScenesReader  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -70,10 +78,16 @@ def lighting(sample, cameras, level):
 
 
 def scored(sl, target, source_images) -> dict:
-    """Scores of ``sl`` rendered into ``target`` and of the constant-colour baseline, one flat row."""
-    s = score_lighting(sl, target)
-    c = constant_colour_scores(source_images, real_view(target))
-    return {"psnr": s["psnr"], "si_psnr": s["si_psnr"], "const_psnr": c["psnr"], "const_si_psnr": c["si_psnr"]}
+    """Scores of ``sl`` rendered into ``target`` (:func:`predicted_radiance`: a target that was not an input at
+    its camera's auto-exposure) and of the constant-colour baseline, one flat row; ``psnr_reference_exposure``:
+    the same prediction at the reference camera's exposure instead (what the auto-exposure model adds)."""
+    truth = real_view(target)
+    raw = predicted_radiance(replace(sl, input_mean_ldr={}), target)
+    ae_target = None if sl.is_input(target) else auto_exposure_target(sl, target)
+    s = view_scores(raw if ae_target is None else exposed_to_mean_ldr(raw, ae_target), truth)
+    c = constant_colour_scores(source_images, truth)
+    return {"psnr": s["psnr"], "si_psnr": s["si_psnr"], "const_psnr": c["psnr"], "const_si_psnr": c["si_psnr"],
+            "psnr_reference_exposure": view_scores(raw, truth)["psnr"]}
 
 
 def mean_row(rows: list[dict]) -> dict:

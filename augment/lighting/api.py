@@ -185,7 +185,8 @@ def _model_l1(views: Sequence[CameraView], location: str | None, level: str, lid
     base = SampleLighting("L0", "L0: constant dome of each image's mean linear radiance", ref.channel, {},
                           {v.channel: 1.0 for v in views}, None, volume_frame(ref), {"location": location}, timing,
                           view_keys={v.channel: view_key(v) for v in views},
-                          T_global_from_ref_cam=np.asarray(ref.T_global_from_cam))
+                          T_global_from_ref_cam=np.asarray(ref.T_global_from_cam),
+                          input_mean_ldr={v.channel: float(np.asarray(v.image)[::4, ::4].mean()) / 255.0 for v in views})
     if level == "L0":
         per_view = {v.channel: l0_estimate(np.asarray(v.image), {}) for v in views}
         timing["total"] = time.perf_counter() - t0

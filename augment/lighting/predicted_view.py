@@ -8,6 +8,12 @@ EV 0, reproduces the image's colours where the camera saw something.
   reference camera's distant light turned into its frame (reference exposure);
 * L2/L3: the volume's radiance traced from the camera's centre (lifted out of solid voxels) along each pixel's
   ray, sun excluded, times the camera's exposure ratio if it was an input.
+
+A camera that was *not* an input (another camera of the instant, or the same camera at another time) has an
+exposure no input measured: its auto-exposure sets it. Auto-exposure holds an image's mean brightness steady
+(the 246 camera images of scene-0916 have mean values 0.31-0.46, half of them within 0.39-0.43, whatever the
+scene's brightness), so the prediction is exposed like that camera would expose it
+(:func:`auto_exposure_target`, :func:`exposed_to_mean_ldr`): a scale per view, taken from the inputs only.
 """
 
 from __future__ import annotations
@@ -43,6 +49,29 @@ def observed_ldr(view: CameraView, width: int = PREDICTED_WIDTH_PX) -> np.ndarra
     return cv2.resize(np.asarray(view.image), (width, h), interpolation=cv2.INTER_AREA).astype(np.float64) / 255.0
 
 
+def auto_exposure_target(lighting: SampleLighting, view: CameraView) -> float | None:
+    """The mean image value in [0, 1] the camera of ``view`` would expose to: that camera's own input image if it
+    was an input channel (at another time), else the mean over the input images; None if unknown."""
+    means = lighting.input_mean_ldr
+    if view.channel in means:
+        return float(means[view.channel])
+    return float(np.mean(list(means.values()))) if means else None
+
+
+def exposed_to_mean_ldr(radiance: np.ndarray, target_ldr: float, iters: int = 48) -> np.ndarray:
+    """``radiance`` (..., 3) times the exposure whose image through the contract's response at EV 0 has the mean
+    value ``target_ldr`` (bisection in log exposure over +-16 stops; the mean grows monotonically with it)."""
+    rad = np.asarray(radiance, dtype=np.float64)
+    lo, hi = -16.0 * np.log(2.0), 16.0 * np.log(2.0)
+    for _ in range(iters):
+        mid = 0.5 * (lo + hi)
+        if float(hdr_to_ldr(rad * np.exp(mid)).mean()) < target_ldr:
+            lo = mid
+        else:
+            hi = mid
+    return rad * np.exp(0.5 * (lo + hi))
+
+
 def predicted_radiance(lighting: SampleLighting, view: CameraView, width: int = PREDICTED_WIDTH_PX) -> np.ndarray:
     """Linear radiance (h, width, 3) that ``lighting`` predicts for ``view`` (see module doc); nothing is
     fitted to the view's image."""
@@ -55,14 +84,21 @@ def predicted_radiance(lighting: SampleLighting, view: CameraView, width: int = 
             ref = lighting.per_view[lighting.reference]
             R = np.asarray(view.T_cam_from_global)[:3, :3] @ np.asarray(lighting.T_global_from_ref_cam)[:3, :3]
             light = ref.light_cam.rotated(R)
-        return light.radiance(np.zeros_like(rays), rays).reshape(h, width, 3)
+        rad = light.radiance(np.zeros_like(rays), rays).reshape(h, width, 3)
+        return rad if same else _auto_exposed(lighting, view, rad)
     T = invert_transform(lighting.T_global_from_vol) @ np.asarray(view.T_global_from_cam)
     centre = lighting.hybrid.lift_out_of_solid(T[:3, 3])
     dirs = rays @ T[:3, :3].T
     with torch.no_grad():
         rad = lighting.hybrid.radiance(np.repeat(centre[None], len(dirs), axis=0), dirs, include_sun=False).numpy()
-    ratio = float(lighting.exposure_ratio.get(view.channel, 1.0)) if same else 1.0
-    return rad.reshape(h, width, 3) * ratio
+    rad = rad.reshape(h, width, 3)
+    return rad * float(lighting.exposure_ratio.get(view.channel, 1.0)) if same else _auto_exposed(lighting, view, rad)
+
+
+def _auto_exposed(lighting: SampleLighting, view: CameraView, radiance: np.ndarray) -> np.ndarray:
+    """A non-input view's prediction at its camera's auto-exposure (the reference exposure if that is unknown)."""
+    target = auto_exposure_target(lighting, view)
+    return radiance if target is None else exposed_to_mean_ldr(radiance, target)
 
 
 def predicted_ldr(lighting: SampleLighting, view: CameraView, width: int = PREDICTED_WIDTH_PX) -> np.ndarray:

@@ -187,6 +187,8 @@ class SampleLighting:
         sun_source: the reference camera's sun source (shared by the sample's volume).
         sun_visibility: the reference camera's sun visibility.
         T_global_from_ref_cam: (4, 4) the reference camera -> global.
+        input_mean_ldr: channel -> the mean value in [0, 1] of each input image (what a camera's auto-exposure
+            holds steady: :func:`.predicted_view.auto_exposure_target`).
     """
 
     level: Level
@@ -202,6 +204,7 @@ class SampleLighting:
     sun_source: SunSource = "none"
     sun_visibility: float = 0.0
     T_global_from_ref_cam: np.ndarray | None = None
+    input_mean_ldr: dict[str, float] = field(default_factory=dict)
 
     def is_input(self, view: CameraView) -> bool:
         """Whether ``view`` is one of the views this lighting was estimated from."""

@@ -157,3 +157,34 @@ def test_pooled_metadata_matches_the_light(sample):
         assert e.fit.scale == pytest.approx(ref.fit.scale * k, rel=1e-9)
         assert e.params["cloud_cover"] == ref.params["cloud_cover"]
         assert "own_fit" in e.params
+
+
+def test_exposed_to_mean_ldr_hits_the_target():
+    """The exposure search brings a view's mean LDR value to the target, from far under or over it."""
+    from streetaug.augment.core import hdr_to_ldr
+    from streetaug.augment.lighting.predicted_view import exposed_to_mean_ldr
+    rng = np.random.default_rng(0)
+    rad = rng.lognormal(-1.0, 1.2, size=(30, 40, 3))
+    for scale, target in ((1e-3, 0.42), (1e2, 0.30), (1.0, 0.55)):
+        out = exposed_to_mean_ldr(rad * scale, target)
+        assert abs(float(hdr_to_ldr(out).mean()) - target) < 1e-3
+        ratio = out / (rad * scale)
+        assert np.allclose(ratio, ratio.flat[0])  # one exposure for the whole view: the layout is kept
+
+
+def test_cameras_that_were_not_inputs_are_auto_exposed(reader, sample):
+    """A camera that was not an input (another camera of the instant; the input camera 1.5 s later) is predicted
+    at the exposure its auto-exposure holds (the inputs' mean image value); an input keeps its measured exposure."""
+    from streetaug.augment.core import hdr_to_ldr
+    from streetaug.augment.lighting.predicted_view import predicted_radiance
+    front = sample.cameras["CAM_FRONT"]
+    sl = estimate_views_lighting([front], sample.location, "L2", lidar=sample.lidar, boxes=sample.boxes)
+    target = float(np.asarray(front.image).mean()) / 255.0
+    assert abs(sl.input_mean_ldr["CAM_FRONT"] - target) < 0.01
+    later = reader.sample(reader.sample_tokens("scene-0916")[KEYFRAME + 3]).cameras["CAM_FRONT"]
+    for view in (sample.cameras["CAM_BACK"], later):
+        assert abs(float(hdr_to_ldr(predicted_radiance(sl, view)).mean()) - sl.input_mean_ldr["CAM_FRONT"]) < 2e-3
+    self_view = predicted_radiance(sl, front)
+    assert abs(float(hdr_to_ldr(self_view).mean()) - float(real_view(front).mean())) < 0.03  # measured, not forced
+    without = replace(sl, input_mean_ldr={})  # unknown: the reference exposure, as before
+    assert not np.allclose(predicted_radiance(without, later), predicted_radiance(sl, later))
