@@ -25,6 +25,7 @@ from .common import (
     camera_view,
     dataset_options,
     intrinsics_option,
+    library_imports,
     limit_options,
     open_dataset,
     parse_floats,
@@ -93,9 +94,10 @@ def predict_light(dataroot, version, scene, sample_token, camera, image, fov_deg
           --scene scene-0061 --camera CAM_FRONT --out out/light-real
       streetaug predict-light --image photo.jpg --fov-deg 70 --out out/light-photo
     """
-    from streetaug.augment.core import read_image_rgb
-    from streetaug.augment.lighting import estimate_lighting_from_image, write_lighting_outputs
-    from streetaug.augment.lighting.api import estimate_instant_lighting
+    with library_imports():
+        from streetaug.augment.core import read_image_rgb
+        from streetaug.augment.lighting import estimate_lighting_from_image, write_lighting_outputs
+        from streetaug.augment.lighting.api import estimate_instant_lighting
 
     at_cam = parse_floats(at, 3, "--at")
     if image is not None:
@@ -163,11 +165,11 @@ def insert(dataroot, version, scene, sample_token, camera, asset, assets_dir, as
           --envmap env.exr --asset car.glb --pose-camera 0.5,1.5,15,90 --out out/img
     """
     # Deferred: the pipeline loads torch (the learned sky model), the assets scipy; `streetaug --help` must not.
-    from streetaug.augment.assets.select import load_asset_options, select_assets
-    from streetaug.augment.pipeline import (InsertOptions, check_image_input, insert_image_to_files,
-                                            insert_view_to_files, item_seed)
-
-    from streetaug.augment.assets.classes import ClassMix
+    with library_imports():
+        from streetaug.augment.assets.classes import ClassMix
+        from streetaug.augment.assets.select import load_asset_options, select_assets
+        from streetaug.augment.pipeline import (InsertOptions, check_image_input, insert_image_to_files,
+                                                insert_view_to_files, item_seed)
 
     if asset is not None and (classes or class_weights):
         raise click.UsageError("--classes/--class-weights choose procedural objects or --assets files by class; "

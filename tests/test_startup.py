@@ -71,3 +71,19 @@ def test_a_command_imports_only_its_own_module():
     modules = loaded_after(run_cli(["train-sky", "--help"]))["modules"]
     assert "streetaug.cli.train" in modules
     assert not {"streetaug.cli.batch", "streetaug.cli.bench", "streetaug.cli.stability"} & set(modules)
+
+
+def test_library_imports_pause_the_gc_and_freeze_once():
+    code = (
+        "import gc\n"
+        "from streetaug.cli.common import library_imports\n"
+        "before = gc.get_freeze_count()\n"
+        "with library_imports():\n"
+        "    paused = not gc.isenabled()\n"
+        "    import email.mime.text\n"
+        "frozen = gc.get_freeze_count()\n"
+        "with library_imports():\n"
+        "    import xml.dom.minidom\n"
+        "print(paused, gc.isenabled(), before == 0 < frozen, gc.get_freeze_count() == frozen)"
+    )
+    assert loaded_after(code)["stdout"].split() == ["True", "True", "True", "True"]
