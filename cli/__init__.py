@@ -5,6 +5,11 @@ It owns the commands (``main.py``: the group, ``predict-light``, ``insert``, ``m
 error handling they share (``common.py``: exit 0 on success, 2 on bad arguments, 1 on runtime errors with
 a one-line cause, tracebacks with ``--debug``). The entry point is ``streetaug.cli.main:main``; nothing
 else imports this package, so it exports no names of its own.
+
+Start-up: ``main`` is a :class:`~.lazy_group.LazyGroup`, so a command's module is imported only when that
+command is looked up, and every command imports its library code (torch, scipy, the dataset reader) in its
+body (``insert`` and ``predict-light`` under :func:`~.common.library_imports`, the GC paused): ``streetaug
+--help`` loads none of it (tests/test_startup.py).
 """
 
 import os
