@@ -236,8 +236,8 @@ def sky_carved(grid: LogGrid, observations: list[ViewObservation], stride: int =
         c = np.asarray(o.camera_centre, np.float64)
         safe = np.where(np.abs(d) < 1e-12, 1e-12, d)
         t_exit = np.maximum((lo - c) / safe, (hi - c) / safe).min(axis=1).clip(min=0.0)
-        pos = c[None, None] + (t_exit[:, None] * frac[None])[..., None] * d[:, None, :]
-        flat, inside = grid.flat_index(torch.from_numpy(pos.reshape(-1, 3)))
+        t = t_exit[:, None] * frac[None]
+        flat, inside = grid.flat_index_xyz(*(c[a] + t * d[:, a, None] for a in range(3)))
         carved[flat.numpy()[inside.numpy()]] = True
     return carved.reshape(grid.shape)
 
@@ -292,7 +292,7 @@ def surface_lighting(grid: LogGrid, occ: np.ndarray, surface: np.ndarray, normal
     s_idx = np.flatnonzero(surface.reshape(-1))
     n_s = normal.reshape(-1, 3)[s_idx]
     sizes = [np.diff(e) for e in grid.axis_edges()]
-    size_s = np.stack(np.meshgrid(*sizes, indexing="ij"), -1).reshape(-1, 3)[s_idx]
+    size_s = np.stack([sz[i] for sz, i in zip(sizes, np.unravel_index(s_idx, grid.shape))], -1)
     p_s = grid.voxel_centres().reshape(-1, 3)[s_idx] + n_s * 0.6 * size_s
     ground_s = s_idx % Z < grid.n_below
     p_s[ground_s, 2] = 0.05
@@ -349,8 +349,6 @@ def assemble_params(grid: LogGrid, occ: np.ndarray, obs: ObservedVoxels, surf: S
     """VSG parameters (X, Y, Z, 8) float32: alpha = occupancy, colours (observed, else shaded, grown inwards),
     lobe axes (viewing direction where observed, else the normal), the surfaces' broad lobe."""
     n = grid.n_voxels
-    params = torch.zeros((*grid.shape, N_CHANNELS), dtype=torch.float32)
-    params[..., CH_ALPHA] = torch.from_numpy(occ.astype(np.float32))
     color = np.zeros((n, 3))
     color[surf.idx] = shaded
     obs_idx = np.flatnonzero(obs.observed.reshape(-1))
@@ -366,12 +364,17 @@ def assemble_params(grid: LogGrid, occ: np.ndarray, obs: ObservedVoxels, surf: S
     known[obs_idx] = True
     color, axis = _propagate_inwards(color.reshape(*grid.shape, 3), axis.reshape(*grid.shape, 3),
                                      known.reshape(grid.shape), occ, steps=THICKEN_VOXELS + 1)
-    flat_p = params.reshape(-1, N_CHANNELS)
-    flat_p[:, CH_COLOR] = torch.from_numpy(color.astype(np.float32))
-    axis = np.where(np.linalg.norm(axis, axis=1, keepdims=True) > 1e-6, axis, np.array([0.0, 0.0, 1.0]))
-    flat_p[:, CH_AXIS] = torch.from_numpy(axis.astype(np.float32))
-    flat_p[:, CH_SIGMA] = SIGMA_SURFACE
-    return params
+    # only occupied or known voxels got a colour / axis; the others keep colour 0 and the axis +z
+    values = np.zeros((n, N_CHANNELS), np.float32)
+    values[:, CH_AXIS] = (0.0, 0.0, 1.0)
+    values[:, CH_SIGMA] = SIGMA_SURFACE
+    values[:, CH_ALPHA] = occ.reshape(-1)
+    some = np.flatnonzero(occ.reshape(-1) | known)
+    values[some, CH_COLOR] = color[some]
+    axis = axis[some]
+    axis[~(np.linalg.norm(axis, axis=1) > 1e-6)] = (0.0, 0.0, 1.0)
+    values[some, CH_AXIS] = axis
+    return torch.from_numpy(values).reshape(*grid.shape, N_CHANNELS)
 
 
 def build_volume(grid: LogGrid, observations: list[ViewObservation], lidar_points_vol: np.ndarray | None,
@@ -426,27 +429,35 @@ def fit_shading(direct: np.ndarray, sky_view: np.ndarray, observed_rgb: np.ndarr
 def _propagate_inwards(color: np.ndarray, axis: np.ndarray, known: np.ndarray, occ: np.ndarray,
                        steps: int) -> tuple[np.ndarray, np.ndarray]:
     """Colours/axes (n, 3) of occupied voxels without one, copied from known 6-neighbours ``steps`` times,
-    then the mean known colour for the rest. Inputs are (X, Y, Z, 3) and (X, Y, Z) bool."""
-    color, axis, known = color.copy(), axis.copy(), known.copy()
+    then the mean known colour for the rest. Inputs are (X, Y, Z, 3) and (X, Y, Z) bool.
+
+    Each step tries the neighbours in the order -x, +x, -y, +y, -z, +z (wrapping at the grid's faces), a voxel
+    filled by one of them serving the later ones of the same step; only the voxels still to fill are visited."""
+    shape = known.shape
+    color, axis, known = color.reshape(-1, 3).copy(), axis.reshape(-1, 3).copy(), known.reshape(-1).copy()
+    todo = np.flatnonzero(occ.reshape(-1) & ~known)
+    coords = np.unravel_index(todo, shape)
+    strides = np.cumprod((1,) + shape[:0:-1])[::-1]  # flat-index step per axis
     for _ in range(steps):
-        todo = occ & ~known
-        if not todo.any():
-            break
         for a in range(3):
             for shift in (1, -1):
-                src = np.roll(known, shift, axis=a)
-                take = todo & src
+                if not len(todo):
+                    break
+                # voxel i takes from i - shift along axis a (np.roll's direction), wrapping around
+                c = coords[a]
+                src = todo + ((c - shift) % shape[a] - c) * strides[a]
+                take = known[src]
                 if take.any():
-                    color[take] = np.roll(color, shift, axis=a)[take]
-                    axis[take] = np.roll(axis, shift, axis=a)[take]
-                    known |= take
-                    todo &= ~take
-    rest = occ & ~known
-    if rest.any() and known.any():
-        color[rest] = color[known].mean(axis=0)
-        axis[rest] = (0.0, 0.0, 1.0)
-    return color.reshape(-1, 3), axis.reshape(-1, 3)
-
+                    dst, src = todo[take], src[take]
+                    color[dst] = color[src]
+                    axis[dst] = axis[src]
+                    known[dst] = True
+                    keep = ~take
+                    todo, coords = todo[keep], tuple(v[keep] for v in coords)
+    if len(todo) and known.any():
+        color[todo] = color[known].mean(axis=0)
+        axis[todo] = (0.0, 0.0, 1.0)
+    return color, axis
 
 
 def lidar_points_in_volume(lidar: LidarSweep, T_vol_from_global: np.ndarray) -> np.ndarray:
