@@ -76,36 +76,77 @@ GROUND_PAST_OBSTACLE_PX = 31  # window in which a nearer obstacle hides a ground
 GROUND_ROW_CLOSE_PX = 15  # horizontal closing of the ground (points along a scan line are ~4 px apart at 1600 px)
 
 
-def _ground_inverse_depth(ground: np.ndarray, obstacle: np.ndarray) -> np.ndarray:
-    """(H, W) float32 inverse depth of the ground: the sparse ground depth ``ground`` (0 = empty) joined down
-    each column by linear interpolation of 1/z between consecutive samples at most ``GROUND_MAX_GAP_PX`` apart
-    (1/z of a plane is affine in the pixel row) with no obstacle between them, after a 1 x 5 dilation that
+def _zbuffer_inverse(u: np.ndarray, v: np.ndarray, z: np.ndarray, width: int, height: int) -> np.ndarray:
+    """(H, W) float32 ``1 / z`` of the nearest point per pixel (0 = empty) for in-image pixels (u, v) (N,) int."""
+    inv = np.zeros((height, width), np.float32)
+    order = np.argsort(-z, kind="stable")  # far first, so the nearest point is written last
+    inv[v[order], u[order]] = 1.0 / np.maximum(z[order].astype(np.float32), np.float32(1e-6))
+    return inv
+
+
+def _column_neighbours(has: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per pixel of an (H, W) bool map: the row of the nearest True at or above it in its column (-1: none) and at
+    or below it (H: none), (H, W) int32 each."""
+    H = has.shape[0]
+    rows = np.arange(H, dtype=np.int32)[:, None]
+    above = np.maximum.accumulate(np.where(has, rows, np.int32(-1)), axis=0)
+    below = np.minimum.accumulate(np.where(has, rows, np.int32(H))[::-1], axis=0)[::-1]
+    return above, below
+
+
+def _ground_inverse_depth(ground: np.ndarray, obstacle: np.ndarray) -> tuple[int, np.ndarray]:
+    """Inverse depth of the ground: the sparse ground inverse depth ``ground`` (H, W) float32 (0 = empty) joined
+    down each column by linear interpolation of 1/z between consecutive samples at most ``GROUND_MAX_GAP_PX``
+    apart (1/z of a plane is affine in the pixel row) with no obstacle between them, after a 1 x 5 dilation that
     fills the columns between points. ``obstacle``: (H, W) float32 inverse depth of everything else (0 = none);
     a ground sample farther than an obstacle within ``GROUND_PAST_OBSTACLE_PX`` / 2 pixels is dropped (the
-    LiDAR, above the camera, sees road over a car that projects inside the car's image)."""
-    inv = np.where(ground > 0, 1.0 / np.maximum(ground, 1e-6), 0.0).astype(np.float32)
-    inv = cv2.morphologyEx(cv2.dilate(inv, np.ones((1, 5), np.uint8)), cv2.MORPH_CLOSE,
+    LiDAR, above the camera, sees road over a car that projects inside the car's image).
+
+    Returns (g0, (h, W) float32): the rows g0 .. g0 + h - 1 that hold ground samples (0 elsewhere); h = 0 when
+    there are none.
+    """
+    H, W = ground.shape
+    rows = np.flatnonzero(ground.any(axis=1))
+    if len(rows) == 0:
+        return 0, np.zeros((0, W), np.float32)
+    g0, g1 = int(rows[0]), int(rows[-1]) + 1  # the filters below are horizontal, the joins between samples
+    inv = cv2.morphologyEx(cv2.dilate(ground[g0:g1], np.ones((1, 5), np.uint8)), cv2.MORPH_CLOSE,
                            np.ones((1, GROUND_ROW_CLOSE_PX), np.uint8))  # each scan line continuous along its row
     # ground the LiDAR (above the camera) saw past a nearer obstacle that is beside it in the image: hidden
-    inv[inv < cv2.dilate(obstacle, np.ones((GROUND_PAST_OBSTACLE_PX, GROUND_PAST_OBSTACLE_PX), np.uint8))] = 0.0
+    r = GROUND_PAST_OBSTACLE_PX // 2
+    o0, o1 = max(g0 - r, 0), min(g1 + r, H)
+    near = cv2.dilate(obstacle[o0:o1], np.ones((GROUND_PAST_OBSTACLE_PX, GROUND_PAST_OBSTACLE_PX), np.uint8))
+    inv[inv < near[g0 - o0 : g1 - o0]] = 0.0
     out = inv.copy()
-    H, W = inv.shape
-    rows = np.arange(H, dtype=np.float64)
-    blocked = np.cumsum(obstacle > 0, axis=0)  # obstacle pixels at or above each row, per column
-    for col in np.flatnonzero((inv > 0).sum(axis=0) >= 2):
-        r = np.flatnonzero(inv[:, col] > 0)
-        gap = np.diff(r)
-        join = (gap > 1) & (gap <= GROUND_MAX_GAP_PX) & (blocked[r[1:] - 1, col] == blocked[r[:-1], col])
-        if not join.any():
-            continue
-        lo, hi = r[:-1][join], r[1:][join]
-        starts = np.zeros(H + 1, dtype=np.int64)
-        np.add.at(starts, lo + 1, 1)
-        np.add.at(starts, hi, -1)
-        span = np.cumsum(starts[:H]) > 0
-        out[span, col] = np.interp(rows[span], r, inv[r, col]).astype(np.float32)
+    has = inv > 0
+    lo, hi = _column_neighbours(has)  # the samples above and below each pixel (each sample is its own)
+    # an empty pixel between two samples of its column, close enough, with no obstacle pixel between them
+    gap = (~has) & (lo >= 0) & (hi < inv.shape[0])
+    gap &= (hi - lo) <= GROUND_MAX_GAP_PX
+    ys, xs = np.nonzero(gap)
+    lo, hi = lo[ys, xs], hi[ys, xs]
+    blocked = np.cumsum(obstacle[g0:g1] > 0, axis=0, dtype=np.int32)  # obstacle pixels at or above each row
+    keep = blocked[hi - 1, xs] == blocked[lo, xs]
+    ys, xs, lo, hi = ys[keep], xs[keep], lo[keep], hi[keep]
+    # np.interp's arithmetic (float64 slope times the offset from the upper sample), so the values are the same
+    f_lo = inv[lo, xs].astype(np.float64)
+    slope = (inv[hi, xs].astype(np.float64) - f_lo) / (hi - lo).astype(np.float64)
+    out[ys, xs] = (slope * (ys - lo).astype(np.float64) + f_lo).astype(np.float32)
     # a column whose join was refused between joined neighbours would stand out (streaks in a shadow): close it
-    return cv2.morphologyEx(out, cv2.MORPH_CLOSE, np.ones((1, GROUND_ROW_CLOSE_PX), np.uint8))
+    return g0, cv2.morphologyEx(out, cv2.MORPH_CLOSE, np.ones((1, GROUND_ROW_CLOSE_PX), np.uint8))
+
+
+def _plane_depth_at(K: np.ndarray, ys: np.ndarray, xs: np.ndarray, ground_normal_cam: np.ndarray,
+                    ground_offset_m: float) -> np.ndarray:
+    """:func:`ground_plane_depth` at the pixels (ys, xs) (N,) only, (N,) float32 (same arithmetic, same values)."""
+    a = np.linalg.inv(K).T @ np.asarray(ground_normal_cam, dtype=np.float64)
+    denom = a[0] * xs.astype(np.float64) + a[1] * ys.astype(np.float64) + a[2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        z = -float(ground_offset_m) / denom
+    return np.where(np.isfinite(z) & (z > 0), z, np.inf).astype(np.float32)
+
+
+CROP_MARGIN_PX = 48  # rows kept above the highest return: > the summed vertical reach of the filters (~33 px)
 
 
 def densify_lidar_depth(points_cam: np.ndarray, K: np.ndarray, width: int, height: int,
@@ -118,53 +159,63 @@ def densify_lidar_depth(points_cam: np.ndarray, K: np.ndarray, width: int, heigh
         ground_fill: optional ``(ground_normal_cam (3,), ground_offset_m)`` plane used where LiDAR
             leaves holes below the horizon (see :func:`ground_plane_depth`).
         max_depth_m: points farther than this are dropped.
+
+    The filters run on the rows from ``CROP_MARGIN_PX`` above the highest return down: above it every row
+    is unknown (inf, or the plane), and no filter reaches from there into the rows kept.
     """
     pts = np.asarray(points_cam, dtype=np.float64)
     check_shape(pts, ("N", 3), "points_cam")
-    pts = pts[pts[:, 2] < max_depth_m]
-    sparse = sparse_depth(pts, K, width, height)
-    is_ground = np.zeros(len(pts), dtype=bool)
-    if ground_fill is not None and len(pts):
-        normal, offset = ground_fill
-        height_m = pts @ np.asarray(normal, dtype=np.float64) + float(offset)
-        # below the ego's plane is the road too (it falls away downhill); above it, a band that grows with depth
-        is_ground = height_m < GROUND_BAND_M + GROUND_BAND_PER_M * pts[:, 2]
-    obstacles = sparse_depth(pts[~is_ground], K, width, height) if is_ground.any() else sparse
-    inv = np.where(obstacles > 0, 1.0 / np.maximum(obstacles, 1e-6), 0.0).astype(np.float32)
-    valid_rows = np.flatnonzero(sparse.any(axis=1))
-    # 1. Small diamond dilation: nearest point wins (max of inverse depth).
-    inv = cv2.dilate(inv, _diamond(5))
-    # 2. Closing to join neighbouring scan lines.
-    inv = cv2.morphologyEx(inv, cv2.MORPH_CLOSE, np.ones((5, 5), np.uint8))
-    # 2b. The ground between scan lines: its inverse depth interpolated down each column (exact for a plane),
-    #     not the nearer line grown upwards (which would hide the bottom of anything standing farther away).
-    ground = (_ground_inverse_depth(sparse_depth(pts[is_ground], K, width, height), inv) if is_ground.any()
-              else None)
-    # 3. Fill remaining small holes with a wider dilation, then large holes with a wider one (the obstacles
-    #    only, into what the ground does not cover: the ground is never grown, the plane fills its holes).
-    for size in (7, 15, 31):
-        empty = inv <= 0 if ground is None else (inv <= 0) & (ground <= 0)
-        if not empty.any():
-            break
-        grown = cv2.dilate(inv, np.ones((size, size), np.uint8))
-        inv = np.where(empty, grown, inv)
-    if ground is not None:
-        inv = np.maximum(inv, ground)  # the nearer surface wins
-    # 4. Light median to remove dilation blockiness, keeping empties empty.
-    med = cv2.medianBlur(inv, 5)
-    inv = np.where((inv > 0) & (med > 0), med, inv)
-    depth = np.where(inv > 0, 1.0 / np.maximum(inv, 1e-9), np.inf).astype(np.float32)
-    # 5. Nothing above the highest LiDAR return of each column (sky / beyond range).
-    has = sparse > 0
-    if has.any():
-        top = np.where(has.any(axis=0), has.argmax(axis=0), height)  # first row with a return
-        top = cv2.erode(top.astype(np.float32)[None, :], np.ones((1, 31), np.uint8))[0]  # spread over neighbours
-        rows = np.arange(height)[:, None]
-        depth[rows < top[None, :]] = np.inf
-    elif len(valid_rows) == 0:
-        depth[:] = np.inf
+    pts = pts[(pts[:, 2] < max_depth_m) & np.isfinite(pts).all(axis=1) & (pts[:, 2] > MIN_DEPTH_M)]
+    depth = np.full((height, width), np.inf, np.float32)
+    uv, z = project_points(K, pts) if len(pts) else (np.zeros((0, 2)), np.zeros(0))
+    u = np.round(uv[:, 0]).astype(np.int64)
+    v = np.round(uv[:, 1]).astype(np.int64)
+    ok = (u >= 0) & (u < width) & (v >= 0) & (v < height)
+    if ok.any():
+        is_ground = np.zeros(len(pts), dtype=bool)
+        if ground_fill is not None:
+            normal, offset = ground_fill
+            height_m = pts @ np.asarray(normal, dtype=np.float64) + float(offset)
+            # below the ego's plane is the road too (it falls away downhill); above it, a band growing with depth
+            is_ground = height_m < GROUND_BAND_M + GROUND_BAND_PER_M * pts[:, 2]
+        is_ground, u, v, z = is_ground[ok], u[ok], v[ok], z[ok]
+        # 0. Only the rows from a margin above the highest return (rows above it have no returns).
+        top = np.full(width, height, np.int64)
+        np.minimum.at(top, u, v)  # first row with a return, per column
+        r0 = max(int(top.min()) - CROP_MARGIN_PX, 0)
+        h = height - r0
+        v = v - r0
+        obstacle = ~is_ground
+        inv = _zbuffer_inverse(u[obstacle], v[obstacle], z[obstacle], width, h)
+        # 1. Small diamond dilation: nearest point wins (max of inverse depth).
+        inv = cv2.dilate(inv, _diamond(5))
+        # 2. Closing to join neighbouring scan lines.
+        inv = cv2.morphologyEx(inv, cv2.MORPH_CLOSE, np.ones((5, 5), np.uint8))
+        # 2b. The ground between scan lines: its inverse depth interpolated down each column (exact for a
+        #     plane), not the nearer line grown upwards (which would hide the bottom of anything standing
+        #     farther away).
+        g0, ground = _ground_inverse_depth(_zbuffer_inverse(u[is_ground], v[is_ground], z[is_ground], width, h),
+                                           inv)
+        g1 = g0 + len(ground)
+        # 3. Fill remaining small holes with a wider dilation, then large holes with a wider one (the obstacles
+        #    only, into what the ground does not cover: the ground is never grown, the plane fills its holes).
+        for size in (7, 15, 31):
+            empty = inv <= 0
+            empty[g0:g1] &= ground <= 0
+            if not empty.any():
+                break
+            grown = cv2.dilate(inv, np.ones((size, size), np.uint8))
+            np.copyto(inv, grown, where=empty)
+        np.maximum(inv[g0:g1], ground, out=inv[g0:g1])  # the nearer surface wins
+        # 4. Light median to remove dilation blockiness, keeping empties empty.
+        med = cv2.medianBlur(inv, 5)
+        np.copyto(inv, med, where=(inv > 0) & (med > 0))
+        # 5. Nothing above the highest LiDAR return of each column (sky / beyond range), spread over neighbours.
+        top = cv2.erode(top.astype(np.float32)[None, :], np.ones((1, 31), np.uint8))[0] - r0
+        known = (inv > 0) & (np.arange(h)[:, None] >= top[None, :])
+        sub = depth[r0:]
+        sub[known] = 1.0 / np.maximum(inv[known], np.float32(1e-9))
     if ground_fill is not None:
-        normal, offset = ground_fill
-        plane = ground_plane_depth(K, width, height, normal, offset)
-        depth = np.where(np.isfinite(depth), depth, plane)
+        ys, xs = np.nonzero(np.isinf(depth))
+        depth[ys, xs] = _plane_depth_at(K, ys, xs, *ground_fill)
     return depth
