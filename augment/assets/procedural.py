@@ -42,7 +42,9 @@ def procedural_car_variants() -> tuple[str, ...]:
 # ----------------------------------------------------------------------------- paint palette
 
 # (name, sRGB hex, metallic, weight) -- weights roughly follow world car-colour popularity
-# (white ~ 35 %, black ~ 20 %, grey ~ 18 %, silver ~ 10 %, blue ~ 7 %, red ~ 6 %, others).
+# (white ~ 35 %, black ~ 20 %, grey ~ 18 %, silver ~ 10 %, blue ~ 7 %, red ~ 6 %, others).  "metallic" is how
+# metallic the paint looks: the share of the base coat that is aluminium flakes (``Material.flake``), not the
+# UE4 metallic of a bare metal surface (see :func:`_materials`).
 _PALETTE: tuple[tuple[str, str, float, float], ...] = (
     ("pure white", "F2F2EE", 0.0, 12.0),
     ("pearl white", "E8E6DF", 0.3, 10.0),
@@ -106,7 +108,8 @@ def procedural_car(seed: int, body: str | None = None, paint: tuple | None = Non
         seed: random seed (body choice when ``body`` is None, dimension jitter, paint; the details draw
             from their own stream, see the module docstring).
         body: one of :func:`procedural_car_variants` (``sedan``, ``hatchback``, ``suv``, ``van``) or None.
-        paint: optional linear RGB (3,) paint colour in [0, 1], or (r, g, b, metallic).
+        paint: optional linear RGB (3,) paint colour in [0, 1], or (r, g, b, metallic): metallic is the share of
+            the base coat that is metallic flakes (the material's ``flake``; its UE4 metallic stays 0).
         plate_style: number plates and driving side: ``sg`` (right-hand drive), ``us`` or ``eu``
             (:func:`~.number_plates.plate_style_for_location` maps a nuScenes location to one).
 
@@ -208,9 +211,14 @@ def _materials(rng: np.random.Generator, detail_rng: np.random.Generator, paint:
     front_tint = np.array([0.40, 0.47, 0.45]) * d.uniform(0.92, 1.08)
     privacy = d.random() < (0.6 if body in ("suv", "van") else 0.2)
     rear_tint = np.array([0.055, 0.065, 0.065]) * d.uniform(0.8, 1.3) if privacy else front_tint
-    # The flakes share the base layer with the metallic lobe: half the metallic weight (more made the paint
-    # blotchy: the flake lobe is glossy, sampled by Monte Carlo, and the denoiser leaves mottling at 1 spp).
-    flake = float(np.clip(0.5 * metallic, 0.0, 1.0)) if metallic >= 0.2 else 0.0
+    # Metallic paint is a dielectric base coat with aluminium flakes in it, under the clear coat: the palette's
+    # metallic is the flakes' share of the base coat (the flake lobe: rough, energy-conserving, base-coloured),
+    # not the UE4 metallic of bare metal.  That lobe (single scattering, the analytic-light Smith k, no
+    # multiple-scattering term) has a directional albedo of only 0.29 / 0.36 / 0.46 for silver (0.48) at
+    # n.v 0.2 / 0.5 / 1.0 (the flakes: 0.53 / 0.51 / 0.50 with the 4 % specular; roofs and sides at 10-40 m
+    # are seen at n.v ~0.1-0.6), so silver, grey and black-metallic cars rendered darker than their colour
+    # (silver in scene-0916's overcast: side panels 28 %, roofs 37 % below a Lambertian of the same colour).
+    flake = float(np.clip(metallic, 0.0, 1.0))
     dirt = float(d.uniform(0.0, 1.0)) ** 2
     lower = np.clip(color * (1.0 - 0.18 * dirt) + dirt * 0.02 * np.array([0.9, 0.8, 0.6]), 0.0, 1.0)
     chrome = bool(d.random() < 0.3)
@@ -220,19 +228,21 @@ def _materials(rng: np.random.Generator, detail_rng: np.random.Generator, paint:
     brake_rgb = np.array([0.30, 0.29, 0.28]) * d.uniform(0.8, 1.1)
     st = style or check_plate_style("eu")
     mats = [
-        Material("paint", base_color=color, metallic=metallic, roughness=paint_rough, clearcoat=1.0, flake=flake),
+        Material("paint", base_color=color, metallic=0.0, roughness=paint_rough, clearcoat=1.0, flake=flake),
         Material("glass", base_color=front_tint, metallic=0.0, roughness=0.05, specular=0.5, opacity=0.06),
         Material("trim", base_color=np.array([0.025, 0.025, 0.027]), metallic=0.0, roughness=0.75),
         Material("tyre", base_color=np.array([0.02, 0.02, 0.02]), metallic=0.0, roughness=0.9, specular=0.3),
+        # Alloy wheels are painted: silver (or dark) flake paint under a clear coat, like the body's metallic
+        # paint (a bare-metal lobe rendered them at L* ~30, reflecting the road; real ones look light grey).
         Material("rim", base_color=np.array([0.12, 0.12, 0.13]) if rim_dark else np.array([0.62, 0.62, 0.64]),
-                 metallic=1.0, roughness=0.3),
+                 metallic=0.0, roughness=0.3, clearcoat=1.0, flake=0.7),
         Material("headlight", base_color=np.array([0.80, 0.82, 0.84]), metallic=0.0, roughness=0.04, opacity=0.3,
                  emission=np.array([0.03, 0.03, 0.03])),
         Material("taillight", base_color=np.array([0.50, 0.010, 0.015]), metallic=0.0, roughness=0.06, opacity=0.6),
         Material("glass_rear", base_color=rear_tint, metallic=0.0, roughness=0.05, specular=0.5,
                  opacity=0.35 if privacy else 0.06),
         Material("gap", base_color=np.array([0.006, 0.006, 0.006]), metallic=0.0, roughness=0.9, specular=0.2),
-        Material("paint_lower", base_color=lower, metallic=metallic, roughness=min(paint_rough + 0.12 * dirt, 0.6),
+        Material("paint_lower", base_color=lower, metallic=0.0, roughness=min(paint_rough + 0.12 * dirt, 0.6),
                  clearcoat=1.0 - 0.4 * dirt, flake=flake),
         Material("plate_front", base_color=np.array(st.front_rgb), roughness=0.45, retroreflective=0.3),
         Material("plate_rear", base_color=np.array(st.rear_rgb), roughness=0.45, retroreflective=0.3),

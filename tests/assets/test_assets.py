@@ -79,7 +79,7 @@ def test_procedural_materials(cars, body):
     glass = car.materials[_mat_index(car, "glass")]
     assert glass.opacity < 1.0 and glass.roughness <= 0.1
     paint = car.materials[_mat_index(car, "paint")]
-    assert paint.clearcoat == 1.0 and 0.25 <= paint.roughness <= 0.5 and 0.0 <= paint.metallic <= 0.7
+    assert paint.clearcoat == 1.0 and 0.25 <= paint.roughness <= 0.5 and paint.metallic == 0.0 and 0.0 <= paint.flake <= 0.7
     for name in ("glass", "tyre", "rim", "trim", "headlight", "taillight"):
         assert (car.face_material == _mat_index(car, name)).sum() > 0, name
     # Lights at the right ends, glass in the upper body.
@@ -101,7 +101,8 @@ def test_procedural_is_deterministic_and_seeds_differ():
 def test_custom_paint():
     car = procedural_car(0, "hatchback", paint=(0.5, 0.02, 0.02, 0.4))
     paint = car.materials[_mat_index(car, "paint")]
-    assert np.allclose(paint.base_color, [0.5, 0.02, 0.02]) and paint.metallic == 0.4
+    # the paint's metallic look is its flakes' share of the base coat, not a bare-metal UE4 metallic
+    assert np.allclose(paint.base_color, [0.5, 0.02, 0.02]) and paint.flake == 0.4 and paint.metallic == 0.0
     with pytest.raises(ValueError):
         procedural_car(0, "sedan", paint=(2.0, 0.0, 0.0))
 
