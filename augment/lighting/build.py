@@ -159,20 +159,28 @@ def observed_voxels(grid: LogGrid, observations: list[ViewObservation]) -> Obser
     pts = pts.copy()
     is_ground_pt = pts[:, 2] < GROUND_SNAP_M
     pts[is_ground_pt, 2] = -0.05  # into the top ground layer
-    flat, inside = grid.flat_index(torch.from_numpy(pts))
+    flat, inside = grid.flat_index(pts)
     flat, inside = flat.numpy(), inside.numpy()
-    flat, rgb, vd = flat[inside], rgb[inside], vd[inside]
+    if not inside.all():
+        flat, rgb, vd, pts, cap = flat[inside], rgb[inside], vd[inside], pts[inside], cap[inside]
     count = np.bincount(flat, minlength=n).astype(np.float64)
     observed = (count > 0).reshape(grid.shape)
-    col_sum = np.stack([np.bincount(flat, rgb[:, c], minlength=n) for c in range(3)], axis=1)
-    dir_sum = np.stack([np.bincount(flat, vd[:, c], minlength=n) for c in range(3)], axis=1)
+    # sums over the observed voxels only (bincount adds in input order either way)
+    vox = np.flatnonzero(count)
+    slot = np.zeros(n, np.int64)
+    slot[vox] = np.arange(len(vox))
+    rows = slot[flat]
+    obs_rgb, dir_sum = np.zeros((n, 3)), np.zeros((n, 3))
+    for c in range(3):
+        obs_rgb[vox, c] = np.bincount(rows, rgb[:, c], minlength=len(vox)) / count[vox]
+        dir_sum[vox, c] = np.bincount(rows, vd[:, c], minlength=len(vox))
     cam_top = np.full((X, Y), -np.inf)
     cam_capped = np.zeros((X, Y), bool)
     if len(pts):
         cf = flat // Z
-        np.maximum.at(cam_top.reshape(-1), cf, pts[inside, 2])
-        cam_capped.reshape(-1)[cf[cap[inside]]] = True
-    return ObservedVoxels(observed, col_sum / np.maximum(count, 1)[:, None], dir_sum, cam_top, cam_capped)
+        np.maximum.at(cam_top.reshape(-1), cf, pts[:, 2])
+        cam_capped.reshape(-1)[cf[cap]] = True
+    return ObservedVoxels(observed, obs_rgb, dir_sum, cam_top, cam_capped)
 
 
 def occupancy(grid: LogGrid, observed: np.ndarray, lidar_points_vol: np.ndarray | None, stats: dict) -> np.ndarray:
@@ -254,10 +262,13 @@ def surfaces_and_normals(grid: LogGrid, occ: np.ndarray) -> tuple[np.ndarray, np
     blurred = ndimage.gaussian_filter(occ.astype(np.float32), 1.0)
     sizes = [np.diff(e) for e in grid.axis_edges()]
     g = np.gradient(blurred)
-    normal = -np.stack([g[0] / sizes[0][:, None, None], g[1] / sizes[1][None, :, None], g[2] / sizes[2][None, None, :]], -1)
-    normal[:, :, : grid.n_below] = (0.0, 0.0, 1.0)
-    normal /= np.maximum(np.linalg.norm(normal, axis=-1, keepdims=True), 1e-9)
-    return surface, normal
+    # per component (cheaper than np.linalg.norm on the stacked array; equal to it within an ulp or two)
+    comp = [-(g[0] / sizes[0][:, None, None]), -(g[1] / sizes[1][None, :, None]), -(g[2] / sizes[2][None, None, :])]
+    for c, v in zip(comp, (0.0, 0.0, 1.0)):
+        c[:, :, : grid.n_below] = v
+    length = np.sqrt(comp[0] * comp[0] + (comp[1] * comp[1] + comp[2] * comp[2]))
+    np.maximum(length, 1e-9, out=length)
+    return surface, np.stack([c / length for c in comp], -1)
 
 
 @dataclass(frozen=True)

@@ -345,7 +345,8 @@ class HybridLighting:
         t = (t_exit[:, None] * frac[None]).numpy()
         p, d = points.detach().numpy(), dirs.detach().numpy()
         flat, inside = self.grid.flat_index_xyz(*(p[:, a, None] + t * d[:, a, None] for a in range(3)))
-        alpha = self.params.reshape(-1, N_CHANNELS)[:, CH_ALPHA][flat] * inside
+        alpha_col = self.params.reshape(-1, N_CHANNELS)[:, CH_ALPHA]
+        alpha = alpha_col.index_select(0, flat.reshape(-1)).reshape(flat.shape) * inside  # faster than [flat]
         return flat, alpha, inside
 
     def _radiance_chunk(self, points: torch.Tensor, dirs: torch.Tensor, include_sun: bool) -> torch.Tensor:

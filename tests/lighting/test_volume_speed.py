@@ -16,7 +16,17 @@ import pytest
 import torch
 
 from streetaug.augment.lighting import build
-from streetaug.augment.lighting.build import ObservedVoxels, Surfaces, _propagate_inwards, assemble_params, sky_carved
+from scipy import ndimage
+
+from streetaug.augment.lighting.build import (
+    ObservedVoxels,
+    Surfaces,
+    _propagate_inwards,
+    assemble_params,
+    observed_voxels,
+    sky_carved,
+    surfaces_and_normals,
+)
 from streetaug.augment.lighting.levels import L2_GRID, L3_GRID
 from streetaug.augment.lighting.volume import CH_ALPHA, CH_AXIS, CH_COLOR, CH_SIGMA, N_CHANNELS, HybridLighting, LogGrid
 
@@ -117,6 +127,47 @@ def ref_sky_carved(grid, observations, stride=build.SKY_CARVE_STRIDE, n_samples=
         flat, inside = ref_flat_index(grid, torch.from_numpy(pos.reshape(-1, 3)))
         carved[flat.numpy()[inside.numpy()]] = True
     return carved.reshape(grid.shape)
+
+
+def ref_observed_voxels(grid, observations):
+    X, Y, Z = grid.shape
+    n = grid.n_voxels
+    pts = np.concatenate([o.points for o in observations])
+    rgb = np.concatenate([o.radiance for o in observations]).astype(np.float64)
+    vd = np.concatenate([o.view_dirs for o in observations])
+    cap = np.concatenate([o.capped for o in observations])
+    pts = pts.copy()
+    pts[pts[:, 2] < build.GROUND_SNAP_M, 2] = -0.05
+    flat, inside = ref_flat_index(grid, torch.from_numpy(pts))
+    flat, inside = flat.numpy(), inside.numpy()
+    flat, rgb, vd = flat[inside], rgb[inside], vd[inside]
+    count = np.bincount(flat, minlength=n).astype(np.float64)
+    col_sum = np.stack([np.bincount(flat, rgb[:, c], minlength=n) for c in range(3)], axis=1)
+    dir_sum = np.stack([np.bincount(flat, vd[:, c], minlength=n) for c in range(3)], axis=1)
+    cam_top = np.full((X, Y), -np.inf)
+    cam_capped = np.zeros((X, Y), bool)
+    cf = flat // Z
+    np.maximum.at(cam_top.reshape(-1), cf, pts[inside, 2])
+    cam_capped.reshape(-1)[cf[cap[inside]]] = True
+    return ObservedVoxels((count > 0).reshape(grid.shape), col_sum / np.maximum(count, 1)[:, None], dir_sum, cam_top,
+                          cam_capped)
+
+
+def ref_surfaces_and_normals(grid, occ):
+    free = ~occ
+    nb_free = np.zeros_like(occ)
+    for a in range(3):
+        nb_free |= np.roll(free, 1, axis=a) | np.roll(free, -1, axis=a)
+    surface = occ & nb_free
+    surface[:, :, : grid.n_below - 1] = False
+    blurred = ndimage.gaussian_filter(occ.astype(np.float32), 1.0)
+    sizes = [np.diff(e) for e in grid.axis_edges()]
+    g = np.gradient(blurred)
+    normal = -np.stack([g[0] / sizes[0][:, None, None], g[1] / sizes[1][None, :, None], g[2] / sizes[2][None, None, :]],
+                       -1)
+    normal[:, :, : grid.n_below] = (0.0, 0.0, 1.0)
+    normal /= np.maximum(np.linalg.norm(normal, axis=-1, keepdims=True), 1e-9)
+    return surface, normal
 
 
 # ----------------------------------------------------------------------------- helpers
@@ -293,3 +344,35 @@ def test_sky_carved_equals_the_reference():
     ref = ref_sky_carved(g, obs)
     assert new.shape == g.shape and new.sum() > 1000
     assert int((new != ref).sum()) <= 2  # at most a boundary voxel from a log1p ulp
+
+
+@pytest.mark.parametrize("all_inside", [False, True])
+def test_observed_voxels_equals_the_reference(all_inside):
+    g = L3_GRID
+    rng = np.random.default_rng(9)
+    obs = []
+    for m in (40_000, 7_000):
+        p = _points(g, m, rng)
+        if all_inside:
+            p = p[ref_flat_index(g, torch.from_numpy(p))[1].numpy()]
+        d = rng.normal(size=(len(p), 3))
+        obs.append(SimpleNamespace(points=p, radiance=rng.uniform(0, 4, (len(p), 3)).astype(np.float32),
+                                   view_dirs=d / np.linalg.norm(d, axis=1, keepdims=True),
+                                   capped=rng.uniform(size=len(p)) < 0.1))
+    new, ref = observed_voxels(g, obs), ref_observed_voxels(g, obs)
+    assert new.observed.sum() > 1000
+    for f in ("observed", "obs_rgb", "dir_sum", "cam_top_m", "cam_capped"):
+        a, b = getattr(new, f), getattr(ref, f)
+        assert a.shape == b.shape and a.dtype == b.dtype and np.array_equal(a, b), f
+
+
+@pytest.mark.parametrize("grid", [TINY, LogGrid(shape=(24, 20, 10)), L2_GRID])
+def test_surfaces_and_normals_equal_the_reference(grid):
+    rng = np.random.default_rng(10)
+    occ = ndimage.binary_dilation(rng.uniform(size=grid.shape) < 0.05, iterations=1)
+    occ[:, :, : grid.n_below] = True
+    s, nrm = surfaces_and_normals(grid, occ)
+    rs, rn = ref_surfaces_and_normals(grid, occ)
+    assert np.array_equal(s, rs) and nrm.dtype == rn.dtype and nrm.shape == rn.shape
+    # numpy's norm sums the squares in an order that depends on the array's size: equal to an ulp or two
+    np.testing.assert_allclose(nrm, rn, rtol=0, atol=1e-15)
