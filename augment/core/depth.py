@@ -84,16 +84,6 @@ def _zbuffer_inverse(u: np.ndarray, v: np.ndarray, z: np.ndarray, width: int, he
     return inv
 
 
-def _column_neighbours(has: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Per pixel of an (H, W) bool map: the row of the nearest True at or above it in its column (-1: none) and at
-    or below it (H: none), (H, W) int32 each."""
-    H = has.shape[0]
-    rows = np.arange(H, dtype=np.int32)[:, None]
-    above = np.maximum.accumulate(np.where(has, rows, np.int32(-1)), axis=0)
-    below = np.minimum.accumulate(np.where(has, rows, np.int32(H))[::-1], axis=0)[::-1]
-    return above, below
-
-
 def _ground_inverse_depth(ground: np.ndarray, obstacle: np.ndarray) -> tuple[int, np.ndarray]:
     """Inverse depth of the ground: the sparse ground inverse depth ``ground`` (H, W) float32 (0 = empty) joined
     down each column by linear interpolation of 1/z between consecutive samples at most ``GROUND_MAX_GAP_PX``
@@ -117,21 +107,25 @@ def _ground_inverse_depth(ground: np.ndarray, obstacle: np.ndarray) -> tuple[int
     o0, o1 = max(g0 - r, 0), min(g1 + r, H)
     near = cv2.dilate(obstacle[o0:o1], np.ones((GROUND_PAST_OBSTACLE_PX, GROUND_PAST_OBSTACLE_PX), np.uint8))
     inv[inv < near[g0 - o0 : g1 - o0]] = 0.0
-    out = inv.copy()
-    has = inv > 0
-    lo, hi = _column_neighbours(has)  # the samples above and below each pixel (each sample is its own)
-    # an empty pixel between two samples of its column, close enough, with no obstacle pixel between them
-    gap = (~has) & (lo >= 0) & (hi < inv.shape[0])
-    gap &= (hi - lo) <= GROUND_MAX_GAP_PX
-    ys, xs = np.nonzero(gap)
-    lo, hi = lo[ys, xs], hi[ys, xs]
+    # consecutive samples of a column (column-major order), close enough, with no obstacle pixel between them
+    cols, rows = np.nonzero(inv.T > 0)
+    pair = np.flatnonzero((cols[1:] == cols[:-1]) & (rows[1:] - rows[:-1] > 1)
+                          & (rows[1:] - rows[:-1] <= GROUND_MAX_GAP_PX))
+    xs, lo, hi = cols[pair], rows[pair], rows[pair + 1]
     blocked = np.cumsum(obstacle[g0:g1] > 0, axis=0, dtype=np.int32)  # obstacle pixels at or above each row
     keep = blocked[hi - 1, xs] == blocked[lo, xs]
-    ys, xs, lo, hi = ys[keep], xs[keep], lo[keep], hi[keep]
-    # np.interp's arithmetic (float64 slope times the offset from the upper sample), so the values are the same
+    xs, lo, hi = xs[keep], lo[keep], hi[keep]
+    # the rows strictly between each pair, at np.interp's arithmetic (float64 slope times the offset from the
+    # upper sample) so the values are the same
     f_lo = inv[lo, xs].astype(np.float64)
     slope = (inv[hi, xs].astype(np.float64) - f_lo) / (hi - lo).astype(np.float64)
-    out[ys, xs] = (slope * (ys - lo).astype(np.float64) + f_lo).astype(np.float32)
+    n = hi - lo - 1
+    first = np.repeat(np.cumsum(n) - n, n)
+    step = np.arange(first.size) - first + 1  # 1 .. n of each pair
+    out = inv.T.copy()  # written column by column
+    out[np.repeat(xs, n), np.repeat(lo, n) + step] = (np.repeat(slope, n) * step + np.repeat(f_lo, n)).astype(
+        np.float32)
+    out = np.ascontiguousarray(out.T)
     # a column whose join was refused between joined neighbours would stand out (streaks in a shadow): close it
     return g0, cv2.morphologyEx(out, cv2.MORPH_CLOSE, np.ones((1, GROUND_ROW_CLOSE_PX), np.uint8))
 
@@ -144,6 +138,19 @@ def _plane_depth_at(K: np.ndarray, ys: np.ndarray, xs: np.ndarray, ground_normal
     with np.errstate(divide="ignore", invalid="ignore"):
         z = -float(ground_offset_m) / denom
     return np.where(np.isfinite(z) & (z > 0), z, np.inf).astype(np.float32)
+
+
+def _first_plane_row(K: np.ndarray, width: int, height: int, ground_normal_cam: np.ndarray,
+                     ground_offset_m: float) -> int:
+    """The first image row in which the plane ``n . p + d = 0`` can have a finite depth (``height``: none).
+
+    Along a row the ray's ``n . Kinv [u, v, 1]`` is affine in u, so it has the sign a hit needs (opposite to d)
+    somewhere in the row only if it has it in the first or the last column."""
+    a = np.linalg.inv(K).T @ np.asarray(ground_normal_cam, dtype=np.float64)
+    v = np.arange(height, dtype=np.float64)
+    ends = a[0] * np.array([0.0, width - 1.0])[None, :] + a[1] * v[:, None] + a[2]
+    rows = np.flatnonzero((np.sign(ends) == -np.sign(float(ground_offset_m))).any(axis=1))
+    return int(rows[0]) if len(rows) else height
 
 
 CROP_MARGIN_PX = 48  # rows kept above the highest return: > the summed vertical reach of the filters (~33 px)
@@ -216,6 +223,8 @@ def densify_lidar_depth(points_cam: np.ndarray, K: np.ndarray, width: int, heigh
         sub = depth[r0:]
         sub[known] = 1.0 / np.maximum(inv[known], np.float32(1e-9))
     if ground_fill is not None:
-        ys, xs = np.nonzero(np.isinf(depth))
+        p0 = _first_plane_row(K, width, height, *ground_fill)
+        ys, xs = np.nonzero(np.isinf(depth[p0:]))
+        ys += p0
         depth[ys, xs] = _plane_depth_at(K, ys, xs, *ground_fill)
     return depth

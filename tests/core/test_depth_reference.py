@@ -150,6 +150,9 @@ def test_same_depth_as_reference_on_edge_cases():
         "cloud": cloud,
         "with nan": np.r_[cloud, [[np.nan, 0.0, 5.0]]],
     }
+    tilted = np.array([0.3, -0.9, 0.4]) / np.linalg.norm([0.3, -0.9, 0.4])
+    fills = [plane, None, (np.array([0.0, 1.0, 0.0]), 1.6), (tilted, 1.2), (-tilted, -1.2), (plane[0], 0.0),
+             (np.array([0.0, 0.0, 1.0]), -30.0)]  # a ceiling, tilted both ways, through the camera, a wall ahead
     for name, pts in cases.items():
-        for fill in (plane, None):
+        for fill in fills:
             _check_same(pts, K, W, H, fill)
