@@ -98,6 +98,19 @@ def paint_palette() -> list[tuple[str, np.ndarray, float, float]]:
     return out
 
 
+GLASS_FACE_REFLECTANCE = 0.04  # one air-glass face at normal incidence (n ~1.5)
+
+
+def pane_specular(tint: np.ndarray, opacity: float) -> float:
+    """UE4 specular (F0 / 0.08) of a glass pane drawn as one surface: the reflections of both its faces,
+    ``R + R (1 - R)^2 T^2`` at normal incidence (R one face's, T the pane's one-way transmission
+    ``(1 - opacity) sqrt(tint)`` as the renderer applies it): ~5.4 % for the clear front glass, ~4.1 % for
+    privacy glass, against the 4 % of one face (clear windows reflected the sky a third too weakly)."""
+    R = GLASS_FACE_REFLECTANCE
+    T = (1.0 - float(opacity)) * float(np.sqrt(np.mean(np.clip(tint, 0.0, 1.0))))
+    return float((R + R * (1.0 - R) ** 2 * T**2) / 0.08)
+
+
 # ----------------------------------------------------------------------------- public entry point
 
 
@@ -229,9 +242,11 @@ def _materials(rng: np.random.Generator, detail_rng: np.random.Generator, paint:
     st = style or check_plate_style("eu")
     mats = [
         Material("paint", base_color=color, metallic=0.0, roughness=paint_rough, clearcoat=1.0, flake=flake),
-        Material("glass", base_color=front_tint, metallic=0.0, roughness=0.05, specular=0.5, opacity=0.06),
+        Material("glass", base_color=front_tint, metallic=0.0, roughness=0.05, specular=pane_specular(front_tint, 0.06),
+                 opacity=0.06),
         Material("trim", base_color=np.array([0.025, 0.025, 0.027]), metallic=0.0, roughness=0.75),
-        Material("tyre", base_color=np.array([0.02, 0.02, 0.02]), metallic=0.0, roughness=0.9, specular=0.3),
+        # Rubber's refractive index ~1.5 reflects 4 % at normal incidence (UE4 specular 0.5; 0.3 was 2.4 %).
+        Material("tyre", base_color=np.array([0.02, 0.02, 0.02]), metallic=0.0, roughness=0.9, specular=0.5),
         # Alloy wheels are painted: silver (or dark) flake paint under a clear coat, like the body's metallic
         # paint (a bare-metal lobe rendered them at L* ~30, reflecting the road; real ones look light grey).
         Material("rim", base_color=np.array([0.12, 0.12, 0.13]) if rim_dark else np.array([0.62, 0.62, 0.64]),
@@ -239,8 +254,8 @@ def _materials(rng: np.random.Generator, detail_rng: np.random.Generator, paint:
         Material("headlight", base_color=np.array([0.80, 0.82, 0.84]), metallic=0.0, roughness=0.04, opacity=0.3,
                  emission=np.array([0.03, 0.03, 0.03])),
         Material("taillight", base_color=np.array([0.50, 0.010, 0.015]), metallic=0.0, roughness=0.06, opacity=0.6),
-        Material("glass_rear", base_color=rear_tint, metallic=0.0, roughness=0.05, specular=0.5,
-                 opacity=0.35 if privacy else 0.06),
+        Material("glass_rear", base_color=rear_tint, metallic=0.0, roughness=0.05,
+                 specular=pane_specular(rear_tint, 0.35 if privacy else 0.06), opacity=0.35 if privacy else 0.06),
         Material("gap", base_color=np.array([0.006, 0.006, 0.006]), metallic=0.0, roughness=0.9, specular=0.2),
         Material("paint_lower", base_color=lower, metallic=0.0, roughness=min(paint_rough + 0.12 * dirt, 0.6),
                  clearcoat=1.0 - 0.4 * dirt, flake=flake),
@@ -259,5 +274,5 @@ def _materials(rng: np.random.Generator, detail_rng: np.random.Generator, paint:
     return tuple(mats), name, {"chrome": chrome, "mirror_paint": mirror_paint}
 
 
-__all__ = ["paint_palette", "plate_style_for_location", "procedural_car", "procedural_car_parts", "procedural_car_variants",
+__all__ = ["pane_specular", "paint_palette", "plate_style_for_location", "procedural_car", "procedural_car_parts", "procedural_car_variants",
            "srgb_to_linear"]

@@ -234,7 +234,7 @@ def _bike_materials(rng: np.random.Generator) -> tuple[Material, ...]:
     paint = _hex(_BIKE_PAINT[int(u[0] * len(_BIKE_PAINT)) % len(_BIKE_PAINT)])
     return (
         Material("frame_paint", base_color=paint, metallic=0.3 * u[1], roughness=0.3 + 0.2 * u[2], clearcoat=0.6),
-        Material("tyre", base_color=np.array([0.025, 0.025, 0.025]), roughness=0.85, specular=0.3),
+        Material("tyre", base_color=np.array([0.025, 0.025, 0.025]), roughness=0.85, specular=0.5),
         Material("rim", base_color=np.array([0.55, 0.56, 0.58]) if u[3] < 0.6 else np.array([0.03, 0.03, 0.03]),
                  metallic=1.0, roughness=0.35),
         Material("steel", base_color=np.array([0.6, 0.6, 0.62]), metallic=1.0, roughness=0.3),
@@ -354,7 +354,7 @@ def _moto_materials(rng: np.random.Generator) -> tuple[Material, ...]:
     paint = _hex(_MOTO_PAINT[int(u[0] * len(_MOTO_PAINT)) % len(_MOTO_PAINT)])
     return (
         Material("body_paint", base_color=paint, metallic=0.4 * u[1], roughness=0.25 + 0.1 * u[2], clearcoat=1.0),
-        Material("tyre", base_color=np.array([0.022, 0.022, 0.022]), roughness=0.85, specular=0.3),
+        Material("tyre", base_color=np.array([0.022, 0.022, 0.022]), roughness=0.85, specular=0.5),
         Material("rim", base_color=np.array([0.05, 0.05, 0.055]) if u[1] < 0.6 else np.array([0.6, 0.6, 0.62]),
                  metallic=1.0, roughness=0.35),
         Material("chrome", base_color=np.array([0.75, 0.75, 0.77]), metallic=1.0, roughness=0.15),

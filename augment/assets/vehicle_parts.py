@@ -79,18 +79,19 @@ def vehicle_materials(rng: np.random.Generator, paint: np.ndarray, accent: np.nd
 
     Args:
         paint, accent: linear RGB (3,) of the main and the second colour.
-        paint_metallic: metallic of the main paint (commercial paints are mostly solid: ~0-0.2).
+        paint_metallic: how metallic the main paint looks (commercial paints are mostly solid: ~0-0.2): the
+            share of its base coat that is flakes (``Material.flake``; its UE4 metallic stays 0, as for cars).
         accent_clearcoat: clear-coat of the accent (0 for tarps and painted steel boxes).
     """
     return (
-        Material("paint", base_color=np.asarray(paint, float), metallic=paint_metallic,
+        Material("paint", base_color=np.asarray(paint, float), metallic=0.0, flake=float(paint_metallic),
                  roughness=float(rng.uniform(0.32, 0.48)), clearcoat=1.0),
         Material("accent", base_color=np.asarray(accent, float), metallic=0.0, roughness=float(rng.uniform(0.4, 0.6)),
                  clearcoat=accent_clearcoat),
         Material("glass", base_color=np.array([0.015, 0.02, 0.022]) * rng.uniform(0.8, 1.2), roughness=0.05,
                  opacity=float(rng.uniform(0.30, 0.50))),
         Material("trim", base_color=np.array([0.025, 0.025, 0.027]), roughness=0.75),
-        Material("tyre", base_color=np.array([0.02, 0.02, 0.02]), roughness=0.9, specular=0.3),
+        Material("tyre", base_color=np.array([0.02, 0.02, 0.02]), roughness=0.9, specular=0.5),  # rubber n ~1.5: 4 %
         Material("rim", base_color=np.array([0.55, 0.55, 0.57]) * rng.uniform(0.8, 1.1), metallic=1.0,
                  roughness=0.35),
         Material("metal", base_color=np.array([0.05, 0.05, 0.055]), metallic=0.6, roughness=0.6),

@@ -1,4 +1,4 @@
-"""The lower body of a procedural car is mostly painted, as on real cars (issue #20: lower bodies too dark)."""
+"""The lower body and the windows of a procedural car (issue #20: lower bodies and windows too dark)."""
 
 import numpy as np
 import pytest
@@ -37,3 +37,19 @@ def test_lower_body_is_mostly_not_black_trim(body):
     assert np.mean(np.isin(side, [cb.PAINT, cb.PAINT_LOWER])) > 0.2
     front = _bottom_band_materials(4, body, 150.0)
     assert np.mean(np.isin(front, [cb.PAINT, cb.PAINT_LOWER])) > 0.15
+
+
+def test_clear_glass_reflects_both_faces_of_its_pane():
+    # A window is one surface in the mesh: its reflection must be the pane's (both faces, ~5.4 % for the clear
+    # front glass at normal incidence), not one face's 4 % (UE4 specular 0.5); dark privacy glass hides the
+    # second face (~4.1 %).
+    from streetaug.augment.assets.procedural import pane_specular
+
+    for seed in range(6):
+        car = procedural_car(seed)
+        front = car.materials[cb.GLASS]
+        assert 0.050 < 0.08 * front.specular < 0.058, front.specular
+        rear = car.materials[cb.GLASS_REAR]
+        assert 0.040 <= 0.08 * rear.specular <= 0.08 * front.specular + 1e-9
+    assert pane_specular(np.zeros(3), 0.0) == pytest.approx(0.5)  # a black pane: its front face alone
+    assert 0.08 * pane_specular(np.ones(3), 0.0) == pytest.approx(0.04 + 0.04 * 0.96**2)
