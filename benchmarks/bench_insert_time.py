@@ -5,13 +5,18 @@ Usage::
     nice python benchmarks/bench_insert_time.py --tag after [--reps 4]
     # another checkout's code (a shim folder whose streetaug/{augment,cli,placement,datasets} link to it):
     PYTHONPATH=/tmp/shim_before nice python benchmarks/bench_insert_time.py --tag before
+    # two checkouts interleaved (old, new, new, old, ...), pooled per checkout into insert_time_<tag>.json:
+    nice python benchmarks/bench_insert_time.py --tag s6_x --compare /tmp/shim_old /tmp/shim_new --rounds 2
 
 Items: CAM_FRONT of the three bundled sample scenes and four real scene-0916 views (keyframes 4, 16, 28
 CAM_FRONT and 8 CAM_BACK, when ``../shared/data/nuscenes-seq`` is there). Each rep draws its own car and
 seed; the first rep is a warm-up (imports, first-use tables) and is left out. Reports the median CPU
 seconds (``time.process_time``: all threads) of ``insert_into_sample`` and of its render stage per item,
-and writes them with every run to ``benchmarks/results/insert_time_<tag>.json``. One process, one item
-after the other: run the two checkouts back to back on an otherwise idle machine.
+and the median of each stage the pipeline times (``timing_s``: lighting, placement -- the scene depth
+included --, local_light, render ...; wall seconds), per item and over all items, and writes them with
+every run to ``benchmarks/results/insert_time_<tag>.json``. One process, one item after the other: run
+the two checkouts back to back (``--rounds`` alternations are left to the caller) on an otherwise idle
+machine. Torch runs on one thread (``torch.set_num_threads(1)``).
 """
 
 from __future__ import annotations
@@ -37,8 +42,16 @@ def main(argv=None) -> None:
     p.add_argument("--tag", default="after")
     p.add_argument("--reps", type=int, default=4)
     p.add_argument("--out", default=str(ROOT / "benchmarks" / "results"))
+    p.add_argument("--compare", nargs=2, metavar=("OLD_SHIM", "NEW_SHIM"),
+                   help="run this benchmark on two shim folders (PYTHONPATH) in turn, --rounds times each")
+    p.add_argument("--rounds", type=int, default=2)
     args = p.parse_args(argv)
+    if args.compare:
+        return compare(args)
 
+    import torch
+
+    torch.set_num_threads(1)
     import streetaug.augment.pipeline as pipeline
     from streetaug.augment.assets.select import select_assets
     from streetaug.augment.core.io import write_json_atomic
@@ -66,7 +79,7 @@ def main(argv=None) -> None:
             view = res.views[cam]
             runs.append({"item": name, "rep": rep, "cpu_s": time.process_time() - c0,
                          "wall_s": time.perf_counter() - w0, "render_s": view.timing_s.get("render"),
-                         "placed": len(view.objects)})
+                         "placed": len(view.objects), "timing_s": dict(view.timing_s)})
     kept = [r for r in runs if r["rep"] > 0]
     per_item = {}
     for name in dict.fromkeys(r["item"] for r in kept):
@@ -74,15 +87,62 @@ def main(argv=None) -> None:
         rendered = [r["render_s"] for r in rs if r["placed"] and r["render_s"] is not None]
         per_item[name] = {"median_cpu_s": float(np.median([r["cpu_s"] for r in rs])),
                           "median_render_s": float(np.median(rendered)) if rendered else None,
+                          "median_stage_s": stage_medians(rs),
                           "placed": sum(r["placed"] for r in rs), "runs": len(rs)}
-    doc = {"tag": args.tag, "reps_kept": args.reps - 1, "per_item": per_item,
-           "median_cpu_s": float(np.median([r["cpu_s"] for r in kept])), "runs": runs}
+    doc = {"tag": args.tag, "reps_kept": args.reps - 1, "load_avg": os.getloadavg(), "per_item": per_item,
+           "median_cpu_s": float(np.median([r["cpu_s"] for r in kept])), "median_stage_s": stage_medians(kept),
+           "runs": runs}
     out = Path(args.out) / f"insert_time_{args.tag}.json"
     write_json_atomic(out, doc)
     for name, v in per_item.items():
         render = "-" if v["median_render_s"] is None else f"{v['median_render_s']:.2f}"
         print(f"  {name:28s} cpu {v['median_cpu_s']:.2f} s, render {render} s ({v['placed']}/{v['runs']} placed)")
+    print("  stages (median wall s): " + ", ".join(f"{k} {v:.3f}" for k, v in doc["median_stage_s"].items()))
     print(f"{args.tag}: median CPU per insertion {doc['median_cpu_s']:.2f} s; wrote {out}")
+
+
+def compare(args) -> None:
+    """Interleaved runs of two checkouts (old first in odd rounds, new first in even ones), pooled per checkout."""
+    import json
+    import subprocess
+    import sys
+    import tempfile
+
+    from streetaug.augment.core.io import write_json_atomic
+
+    rounds: dict[str, list[dict]] = {"old": [], "new": []}
+    with tempfile.TemporaryDirectory() as tmp:
+        for k in range(args.rounds):
+            order = [("old", args.compare[0]), ("new", args.compare[1])]
+            for label, shim in order if k % 2 == 0 else order[::-1]:
+                tag = f"{label}_r{k}"
+                env = {**os.environ, "PYTHONPATH": shim}
+                subprocess.run([sys.executable, __file__, "--tag", tag, "--reps", str(args.reps), "--out", tmp],
+                               env=env, check=True)
+                rounds[label].append(json.loads((Path(tmp) / f"insert_time_{tag}.json").read_text()))
+    doc = {"tag": args.tag, "shims": {"old": args.compare[0], "new": args.compare[1]}, "rounds": args.rounds,
+           "reps_kept_per_round": args.reps - 1}
+    for label, docs in rounds.items():
+        kept = [r for d in docs for r in d["runs"] if r["rep"] > 0]
+        items = dict.fromkeys(r["item"] for r in kept)
+        doc[label] = {"median_cpu_s": float(np.median([r["cpu_s"] for r in kept])),
+                      "median_stage_s": stage_medians(kept),
+                      "per_item": {n: {"median_cpu_s": float(np.median([r["cpu_s"] for r in kept if r["item"] == n])),
+                                       "median_stage_s": stage_medians([r for r in kept if r["item"] == n])}
+                                   for n in items},
+                      "load_avg": [d.get("load_avg") for d in docs], "rounds": docs}
+    out = Path(args.out) / f"insert_time_{args.tag}.json"
+    write_json_atomic(out, doc)
+    for label in ("old", "new"):
+        stages = ", ".join(f"{k} {v:.3f}" for k, v in doc[label]["median_stage_s"].items())
+        print(f"{label}: median CPU per insertion {doc[label]['median_cpu_s']:.3f} s; stages (wall s): {stages}")
+    print(f"wrote {out}")
+
+
+def stage_medians(runs: list[dict]) -> dict[str, float]:
+    """Stage -> median seconds over ``runs`` (the top-level stages of ``timing_s``: no ``render.*`` parts)."""
+    stages = dict.fromkeys(k for r in runs for k in r.get("timing_s", {}) if "." not in k)
+    return {k: float(np.median([r["timing_s"][k] for r in runs if k in r.get("timing_s", {})])) for k in stages}
 
 
 if __name__ == "__main__":
