@@ -107,10 +107,14 @@ def points_in_boxes(points_global: np.ndarray, boxes: Sequence[Box], margin_m: f
         return inside
     centers = np.stack([b.center for b in boxes])
     half = np.stack([np.asarray(b.wlh)[[1, 0, 2]] / 2 + margin_m for b in boxes])  # (B, 3) along box x, y, z
-    lists = cKDTree(points_global[:, :2]).query_ball_point(centers[:, :2], np.linalg.norm(half, axis=1))
-    for b, idx in zip(boxes, lists):  # one small vectorised check per box (tens of boxes)
-        if idx:
-            idx = np.asarray(idx)
+    reach = np.linalg.norm(half, axis=1) * (1.0 + 1e-9) + 1e-9  # a square around each box's bounding circle
+    order = np.argsort(points_global[:, 0], kind="stable")
+    xs, ys = points_global[order, 0], points_global[order, 1]
+    starts = np.searchsorted(xs, centers[:, 0] - reach, side="left")
+    ends = np.searchsorted(xs, centers[:, 0] + reach, side="right")
+    for b, c, r, i0, i1 in zip(boxes, centers, reach, starts, ends):  # one small check per box (tens of boxes)
+        idx = order[i0:i1][np.abs(ys[i0:i1] - c[1]) <= r]
+        if len(idx):
             inside[idx[points_in_box(points_global[idx], b, margin_m)]] = True
     return inside
 
@@ -132,10 +136,18 @@ def _points_near_footprints(corners_xy: np.ndarray, points_xy: np.ndarray,
     ux = ex / np.maximum(2 * half_l, 1e-9)[:, None]
     uy = ey / np.maximum(2 * half_w, 1e-9)[:, None]
     radius = float(np.max(np.hypot(half_l, half_w))) + margin_m
-    lists = cKDTree(points_xy).query_ball_point(center, radius)
+    # the tree only over the points in the candidates' bounding box grown by the radius (a little more: a
+    # superset of every disc), not the whole sweep: the same points lie within the radius
+    reach = radius * (1.0 + 1e-9) + 1e-9
+    lo, hi = center.min(axis=0) - reach, center.max(axis=0) + reach
+    near = np.flatnonzero((points_xy[:, 0] >= lo[0]) & (points_xy[:, 0] <= hi[0])
+                          & (points_xy[:, 1] >= lo[1]) & (points_xy[:, 1] <= hi[1]))
+    if len(near) == 0:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    lists = cKDTree(points_xy[near]).query_ball_point(center, radius)
     lens = np.fromiter((len(x) for x in lists), dtype=np.int64, count=N)
     cand = np.repeat(np.arange(N), lens)
-    pt = np.fromiter((i for x in lists for i in x), dtype=np.int64, count=int(lens.sum()))
+    pt = near[np.fromiter((i for x in lists for i in x), dtype=np.int64, count=int(lens.sum()))]
     d = points_xy[pt] - center[cand]
     keep = (np.abs(np.einsum("kd,kd->k", d, ux[cand])) <= half_l[cand] + margin_m) & (
         np.abs(np.einsum("kd,kd->k", d, uy[cand])) <= half_w[cand] + margin_m
