@@ -274,5 +274,5 @@ def _materials(rng: np.random.Generator, detail_rng: np.random.Generator, paint:
     return tuple(mats), name, {"chrome": chrome, "mirror_paint": mirror_paint}
 
 
-__all__ = ["pane_specular", "paint_palette", "plate_style_for_location", "procedural_car", "procedural_car_parts", "procedural_car_variants",
-           "srgb_to_linear"]
+__all__ = ["pane_specular", "paint_palette", "plate_style_for_location", "procedural_car", "procedural_car_parts",
+           "procedural_car_variants", "srgb_to_linear"]
