@@ -96,10 +96,10 @@ def _ground_inverse_depth(ground: np.ndarray, obstacle: np.ndarray) -> tuple[int
     there are none.
     """
     H, W = ground.shape
-    rows = np.flatnonzero(ground.any(axis=1))
-    if len(rows) == 0:
+    sample_rows = np.flatnonzero(ground.any(axis=1))
+    if len(sample_rows) == 0:
         return 0, np.zeros((0, W), np.float32)
-    g0, g1 = int(rows[0]), int(rows[-1]) + 1  # the filters below are horizontal, the joins between samples
+    g0, g1 = int(sample_rows[0]), int(sample_rows[-1]) + 1  # the filters below are horizontal, the joins between samples
     inv = cv2.morphologyEx(cv2.dilate(ground[g0:g1], np.ones((1, 5), np.uint8)), cv2.MORPH_CLOSE,
                            np.ones((1, GROUND_ROW_CLOSE_PX), np.uint8))  # each scan line continuous along its row
     # ground the LiDAR (above the camera) saw past a nearer obstacle that is beside it in the image: hidden
@@ -112,8 +112,10 @@ def _ground_inverse_depth(ground: np.ndarray, obstacle: np.ndarray) -> tuple[int
     pair = np.flatnonzero((cols[1:] == cols[:-1]) & (rows[1:] - rows[:-1] > 1)
                           & (rows[1:] - rows[:-1] <= GROUND_MAX_GAP_PX))
     xs, lo, hi = cols[pair], rows[pair], rows[pair + 1]
-    blocked = np.cumsum(obstacle[g0:g1] > 0, axis=0, dtype=np.int32)  # obstacle pixels at or above each row
-    keep = blocked[hi - 1, xs] == blocked[lo, xs]
+    # obstacle pixels in the rows strictly between each pair: S[r, c] of the integral image counts those in the
+    # rows above r and the columns left of c, so one column's count above r is S[r, c + 1] - S[r, c]
+    S = cv2.integral((obstacle[g0:g1] > 0).view(np.uint8))
+    keep = (S[hi, xs + 1] - S[hi, xs]) == (S[lo + 1, xs + 1] - S[lo + 1, xs])
     xs, lo, hi = xs[keep], lo[keep], hi[keep]
     # the rows strictly between each pair, at np.interp's arithmetic (float64 slope times the offset from the
     # upper sample) so the values are the same
@@ -122,10 +124,9 @@ def _ground_inverse_depth(ground: np.ndarray, obstacle: np.ndarray) -> tuple[int
     n = hi - lo - 1
     first = np.repeat(np.cumsum(n) - n, n)
     step = np.arange(first.size) - first + 1  # 1 .. n of each pair
-    out = inv.T.copy()  # written column by column
-    out[np.repeat(xs, n), np.repeat(lo, n) + step] = (np.repeat(slope, n) * step + np.repeat(f_lo, n)).astype(
+    out = inv.copy()
+    out[np.repeat(lo, n) + step, np.repeat(xs, n)] = (np.repeat(slope, n) * step + np.repeat(f_lo, n)).astype(
         np.float32)
-    out = np.ascontiguousarray(out.T)
     # a column whose join was refused between joined neighbours would stand out (streaks in a shadow): close it
     return g0, cv2.morphologyEx(out, cv2.MORPH_CLOSE, np.ones((1, GROUND_ROW_CLOSE_PX), np.uint8))
 
