@@ -16,6 +16,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 TRAIN, HELD_OUT = ("pano_train", "street_train"), ("pano_heldout", "one_north", "street_test")
+EXTRA = ("pano_train_sun_in_view", "street_gap", "pano_heldout_sun_in_view")  # in the split stats when present
 
 
 def split_stats(views: list[dict]) -> dict:
@@ -26,6 +27,7 @@ def split_stats(views: list[dict]) -> dict:
         out[name] = {"n": len(vs),
                      "err_deg_median": float(np.median([v["err_deg"] for v in vs])) if vs else None,
                      "cnn_only_err_deg_median": float(np.median([v["err_deg_cnn_only"] for v in vs])) if vs else None}
+    out["reported_with_err_over_30deg"] = int(sum(v["sun_reported"] and v["err_deg"] > 30.0 for v in views))
     return out
 
 
@@ -42,7 +44,7 @@ def main() -> None:
     args = ap.parse_args()
     sets = json.load(open(args.real))["after"]
     report: dict = {"source": str(args.real.name), "sets": {}}
-    for k in TRAIN + HELD_OUT:
+    for k in [k for k in TRAIN + HELD_OUT + EXTRA if k in sets]:
         views = sets[k]["views"]
         report["sets"][k] = split_stats(views)
         print(k, json.dumps(report["sets"][k]))

@@ -505,6 +505,27 @@ def _summary(rows: list[dict]) -> dict:
     return out
 
 
+def _cue_record(pred, sun_cam) -> dict:
+    """JSON-ready :attr:`SkyPrediction.cues` of one view: the sky's fraction and colour, the network's visibility,
+    the clipped region under the fitted sun (its shape and surroundings) and whether the glare rule fired, with
+    the directions replaced by their errors (deg) against ``sun_cam``: ``err_fit_deg`` (the clear-sky fit before
+    any glare move), ``err_glare_centre_deg`` (the clipped region's centre)."""
+    out = {}
+    for k, v in pred.cues.items():
+        if k.endswith("_cam"):
+            out["err_" + k.removesuffix("_cam").removeprefix("direction_") + "_deg"] = _angle(v, sun_cam)
+        elif isinstance(v, dict):
+            out[k] = {kk: (None if not np.isfinite(vv) else float(vv)) for kk, vv in v.items()}
+        elif isinstance(v, (bool, np.bool_)):
+            out[k] = bool(v)
+        else:
+            out[k] = None if v is None or not np.isfinite(v) else float(v)
+    fit = pred.cues.get("direction_fit_cam")
+    out["elevation_fit_deg"] = None if fit is None else \
+        float(np.degrees(np.arcsin(np.clip((pred.R_heading_from_cam @ fit)[2], -1, 1))))
+    return out
+
+
 def _view_row(image, K, sun_cam, models, product: bool) -> dict:
     """Errors (deg, camera frame) of one bare image: the predictor's direction (reported or not) and, if
     ``product``, the front door's ``estimate_lighting_from_image(level="auto")`` sun."""
@@ -517,7 +538,8 @@ def _view_row(image, K, sun_cam, models, product: bool) -> dict:
     row = {"err_deg": _angle(pred.direction_cam, sun_cam), "sun_reported": bool(pred.confident),
            "err_deg_cnn_only": _angle(cnn.direction_cam, sun_cam),
            "visibility": float(pred.visibility_raw), "uncertainty_deg": float(pred.uncertainty_deg),
-           "prior_err_deg": _angle([0.0, -np.sin(np.radians(45.0)), np.cos(np.radians(45.0))], sun_cam)}
+           "prior_err_deg": _angle([0.0, -np.sin(np.radians(45.0)), np.cos(np.radians(45.0))], sun_cam),
+           "cues": _cue_record(pred, sun_cam)}
     if product:
         t = time.perf_counter()
         try:
@@ -536,14 +558,16 @@ def _view_row(image, K, sun_cam, models, product: bool) -> dict:
 
 
 def section_real_streets(models, product: bool = True, quick: bool = False,
-                         parts: tuple[str, ...] = ("streets", "one_north", "panoramas")) -> dict:
+                         parts: tuple[str, ...] = ("streets", "one_north", "panoramas", "sun_in_view")) -> dict:
     """Single-image sun direction (no metadata) on real street views and on panoramas, for one set of weights.
 
     * ``street_test`` / ``street_train``: scene-0916 (``../shared/data/nuscenes-seq``), keyframes 27-40 (never
-      trained on; a 3-keyframe gap from the training block 0-23) and 0-23 (held-in for the v3 model).
+      trained on; a 3-keyframe gap from the training block 0-23) and 0-23 (held-in for the v3 model);
+      ``street_gap``: the gap keyframes 24-26 (never trained on; with street_test the held-out 24-40).
     * ``one_north``: the 3 cameras of ``../shared/data/nuscenes-real`` (another scene, another sun).
     * ``pano_heldout`` / ``pano_train``: 12 level 1600 x 900 views (70 deg) per sunny panorama at 30 deg azimuth
       steps from its sun (``bench_sky.make_views``' level views; a bare image is assumed level).
+    * ``pano_train_sun_in_view`` / ``pano_heldout_sun_in_view``: the sun in the frame (:func:`section_sun_in_view`).
 
     Truth: the ephemeris (streets) or ``index.json`` (panoramas) rotated into the camera; errors in the camera
     frame.  ``err_deg_median_all_views``: the predictor's direction whether or not a sun is reported (overcast
@@ -561,7 +585,8 @@ def section_real_streets(models, product: bool = True, quick: bool = False,
             if p.keyframe in R.TRAIN_KEYFRAMES:
                 train_labels.setdefault(p.channel, []).append(p.sun_dir_cam)
         mean_dir = {ch: np.mean(v, axis=0) / np.linalg.norm(np.mean(v, axis=0)) for ch, v in train_labels.items()}
-        for key, kfs, prod in (("street_test", R.TEST_KEYFRAMES, product), ("street_train", R.TRAIN_KEYFRAMES, False)):
+        for key, kfs, prod in (("street_test", R.TEST_KEYFRAMES, product), ("street_train", R.TRAIN_KEYFRAMES, False),
+                               ("street_gap", R.GAP_KEYFRAMES, False)):
             rows = []
             for p in photos:
                 if p.keyframe not in kfs or (quick and p.keyframe % 4):
@@ -578,6 +603,8 @@ def section_real_streets(models, product: bool = True, quick: bool = False,
             row.update(channel=p.channel, sun_elevation_deg=p.sun_elevation_deg)
             rows.append(row)
         out["one_north"] = {"summary": _summary(rows), "views": rows}
+    if "sun_in_view" in parts:
+        out.update(section_sun_in_view(models, quick))
     suns = R.panorama_sun(HDRI)
     for key, names, prod in (("pano_heldout", R.HELDOUT_PANORAMAS, product), ("pano_train", R.TRAIN_PANORAMAS_V3, False)):
         if "panoramas" not in parts:
@@ -595,6 +622,52 @@ def section_real_streets(models, product: bool = True, quick: bool = False,
         out[key] = {"summary": _summary(rows), "per_pano_err_deg_median": {
             n: float(np.median([r["err_deg"] for r in rows if r["pano"] == n])) for n in names if suns[n][0] is not None},
             "views": rows}
+    return out
+
+
+def sun_in_view_images(names, quick: bool = False):
+    """Yields (panorama, yaw offset deg, pitch deg, image (900, 1600, 3) uint8, K, up_cam, sun_cam) of the views of
+    :func:`section_sun_in_view` of the sunny panoramas among ``names``."""
+    from streetaug.augment.training import real as R
+
+    K = intrinsics_from_fov(VIEW_W, VIEW_H, VIEW_FOV)
+    suns = R.panorama_sun(HDRI)
+    for name in names:
+        sun_w = suns[name][0]
+        if sun_w is None:
+            continue
+        pano = D.load_panoramas(HDRI, (name,))[name]
+        az = float(np.arctan2(sun_w[1], sun_w[0]))
+        pitch = max(0.0, float(np.arcsin(sun_w[2])) - np.radians(12.0))
+        for o in ((-25.0, 0.0, 25.0) if quick else (-25.0, -10.0, 0.0, 10.0, 25.0)):
+            R_wc = camera_from_angles(az + np.radians(o), pitch, 0.0)
+            rad = render_perspective(pano, K, R_wc, VIEW_W, VIEW_H, supersample=1)
+            image = np.clip(np.round(hdr_to_ldr(rad * D.auto_exposure(rad)) * 255), 0, 255).astype(np.uint8)
+            yield name, o, float(np.degrees(pitch)), image, K, R_wc.T @ np.array([0.0, 0.0, 1.0]), R_wc.T @ sun_w
+
+
+def section_sun_in_view(models, quick: bool = False) -> dict:
+    """The sun in the frame: views of every sunny panorama pitched up to ``max(0, elevation - 12 deg)`` at yaw
+    offsets -25, -10, 0, 10, 25 deg from the sun (1600 x 900, 70 deg), predicted with the true up (a tilted
+    camera with metadata-free intrinsics; a bare image would be taken as level).  ``pano_train_sun_in_view``
+    (v3's training panoramas: the development set of the glare / disc rule's thresholds) and
+    ``pano_heldout_sun_in_view`` (never trained on): whether the seen sun is still found and reported."""
+    from streetaug.augment.training import real as R
+
+    out = {}
+    for key, names in (("pano_train_sun_in_view", R.TRAIN_PANORAMAS_V3),
+                       ("pano_heldout_sun_in_view", R.HELDOUT_PANORAMAS)):
+        rows = []
+        for name, o, pitch, image, K, up_cam, sun_cam in sun_in_view_images(names, quick):
+            pred = predict_sky(image, K, up_cam, models=models)
+            cnn = predict_sky(image, K, up_cam, models=models, use_cues=False)
+            rows.append({"pano": name, "offset_deg": o, "pitch_deg": pitch,
+                         "err_deg": _angle(pred.direction_cam, sun_cam), "sun_reported": bool(pred.confident),
+                         "err_deg_cnn_only": _angle(cnn.direction_cam, sun_cam),
+                         "visibility": float(pred.visibility_raw), "uncertainty_deg": float(pred.uncertainty_deg),
+                         "prior_err_deg": _angle([0.0, -np.sin(np.radians(45.0)), np.cos(np.radians(45.0))], sun_cam),
+                         "cues": _cue_record(pred, sun_cam)})
+        out[key] = {"summary": _summary(rows), "views": rows}
     return out
 
 
@@ -682,8 +755,8 @@ def main() -> None:
     ap.add_argument("--no-product", action="store_true", help="section 8 without the (slow) front-door runs")
     ap.add_argument("--after-weights", type=Path, default=None,
                     help="section 8's 'after' with this image-predictor weights file (default: the shipped one)")
-    ap.add_argument("--real-parts", default="streets,one_north,panoramas",
-                    help="comma list of section 8's parts to measure (streets, one_north, panoramas)")
+    ap.add_argument("--real-parts", default="streets,one_north,panoramas,sun_in_view",
+                    help="comma list of section 8's parts to measure (streets, one_north, panoramas, sun_in_view)")
     ap.add_argument("--merge", type=Path, nargs="*", default=None,
                     help="--real JSON files of other parts (another process) merged into this one's result")
     args = ap.parse_args()

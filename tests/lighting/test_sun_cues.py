@@ -269,3 +269,51 @@ def test_overcast_and_night_images_report_no_sun(models, kind):
     pred = predict_sky(image, K, up, models=models)
     assert not pred.confident and pred.sun_dir_cam is None and pred.sun_visibility == 0.0, pred.reason
     assert "sun disc" not in pred.reason
+
+
+# ----------------------------------------------------------------------------- a clipped patch of overcast sky
+
+
+def _overcast_patch(az_deg, el_deg, glow_deg, glow_gain, pitch_deg=5.0, radius_deg=2.0, level=0.3):
+    """uint8 view (H, W, 3), K, up_cam, patch_cam: a CIE overcast sky (exposed so its median LDR luminance is
+    ``level`` before the response) with a clipped round patch of ``radius_deg`` at (az, el) and a narrow glow
+    ``1 + glow_gain x exp(-(angle - radius) / glow_deg)`` around it: a bright gap in the cloud, not the sun."""
+    K = intrinsics_from_fov(W, H, FOV)
+    R = camera_from_angles(0.0, np.radians(pitch_deg), 0.0)
+    d = PinholeCamera(K, W, H).rays().reshape(-1, 3) @ R.T
+    rad = S.sky_radiance(d, _sun(30, 40), 3.0, 1.0)
+    patch = _sun(az_deg, el_deg)
+    ang = np.degrees(np.arccos(np.clip(d @ patch, -1.0, 1.0)))
+    rad = (rad * (1.0 + glow_gain * np.exp(-np.maximum(ang - radius_deg, 0.0) / glow_deg))[:, None]).reshape(H, W, 3)
+    image = np.clip(np.round(hdr_to_ldr(rad * level / np.median(luminance(rad))) * 255), 0, 255).astype(np.uint8)
+    image.reshape(-1, 3)[ang <= radius_deg] = 255
+    return image, K, R.T @ np.array([0.0, 0.0, 1.0]), R.T @ patch
+
+
+@pytest.mark.parametrize("glow_deg, glow_gain, level", [(1.0, 0.8, 0.3), (2.0, 0.5, 0.3), (2.0, 0.3, 0.45)])
+def test_a_clipped_patch_of_overcast_sky_is_not_the_sun(models, glow_deg, glow_gain, level):
+    """The disc detector takes these round clipped patches with a narrow glow ring for suns (as on scene-0916's
+    overcast keyframes); the sky 15-35 deg beyond is nearly as bright as next to them, so predict_sky rejects them."""
+    from streetaug.augment.lighting.skynet.predict import glare_is_sun, predict_sky
+
+    image, K, up, patch_cam = _overcast_patch(-20, 20, glow_deg, glow_gain, level=level)
+    disc = detect_sun_disc(image, K, up)
+    assert disc is not None and angle_deg(disc.direction_cam, patch_cam) < 1.0  # the detector alone is fooled
+    pred = predict_sky(image, K, up, models=models)
+    assert pred.cues["disc_rejected"] and not glare_is_sun(pred.cues["disc_region"]), pred.cues
+    assert not pred.confident and pred.sun_dir_cam is None and "sun disc" not in pred.reason, pred.reason
+    assert "(its centre)" not in pred.reason  # nor does the fitted sun move into the patch
+
+
+@pytest.mark.parametrize("sun_az, sun_el, yaw, pitch",
+                         [(10, 25, 0, 20), (-20, 15, 0, 10), (0, 35, 0, 25), (15, 8, 0, 0)])
+def test_a_sun_in_a_clear_sky_is_still_the_sun(models, sun_az, sun_el, yaw, pitch):
+    """A real sun's glare falls off across the sky around it: the disc (or the glare under the fitted sun) is kept."""
+    from streetaug.augment.lighting.skynet.predict import glare_is_sun, predict_sky
+
+    image, K, up, sun_cam = _render(_sun(sun_az, sun_el), yaw, pitch)
+    pred = predict_sky(image, K, up, models=models)
+    features = pred.cues.get("disc_region") or pred.cues.get("region")
+    assert features is not None and glare_is_sun(features), pred.cues
+    assert pred.confident and angle_deg(pred.sun_dir_cam, sun_cam) < 3.0, pred.reason
+    assert not pred.cues.get("disc_rejected")

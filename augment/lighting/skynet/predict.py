@@ -35,8 +35,8 @@ from ..light import DistantLight, SunLight
 from .dome import dome_directions, dome_pixel_size_rad, dome_solid_angles, heading_from_camera, sample_dome
 from .inputs import VIEW_SIZE, quantize_ldr, resize_view, view_rays
 from .model import direction_cone_deg
-from .sun_cues import (clipped_region_at, detect_sun_disc, glare_centre_cam, glare_extent_deg, in_view_sky_loglik,
-                       sky_fit_loglik)
+from .sun_cues import (clipped_region_at, detect_sun_disc, glare_centre_cam, glare_extent_deg, glare_region_features,
+                       in_view_sky_loglik, sky_features, sky_fit_loglik)
 from .weights import load_light_model, load_sky_model
 
 VISIBILITY_MIN = 0.3  # below: no sun is reported (overcast, night, hidden)
@@ -51,6 +51,12 @@ GLARE_MAX_UNCERTAINTY_DEG = 15.0  # a fitted sun in a clipped region, this sure 
 GLARE_VISIBILITY = 0.5  # ... with at least this visibility (the network underrates suns in view)
 GLARE_MIN_ELEVATION_DEG = 4.0  # ... unless it is lower (a clipped twilight glow on the horizon is not a sun)
 GLARE_CENTRE_MAX_DEG = 35.0  # a fitted sun in a clipped region of at most this radius moves to the region's centre
+# a clipped region (disc or glare) is the sun only if the sky within 8 deg of it is brighter than the sky 15-35 deg
+# beyond by at least this log ratio of linear radiance (x 1.2); chosen on training views only
+# (benchmarks/tune_glare_rule.py -> results/sun_error_glare_rule_s5.json: optimal 0.12-0.24, its middle)
+GLARE_MIN_FALLOFF = 0.18
+GLARE_FALLOFF_KEY = "glow_log_ratio_sky"  # the measure of sun_cues.glare_region_features
+GLARE_FALLOFF_UNKNOWN_IS_SUN = False  # without sky around it to tell (a patch among leaves, or the whole sky clipped)
 REFINE_MAX_PIXELS = 3000
 SATURATED_LDR = 0.97
 
@@ -102,6 +108,9 @@ class SkyPrediction:
         confident: whether a sun is reported.
         reason: one line saying why.
         timing_s: seconds per step.
+        cues: what the cues saw (diagnostics, floats / bools / None): the network's visibility, the sky's
+            :func:`.sun_cues.sky_features`, the clear-sky fit's direction (camera frame, before any glare move),
+            the clipped region under it (:func:`.sun_cues.glare_region_features`) and whether the glare rule fired.
     """
 
     sky: SkyVector
@@ -115,6 +124,7 @@ class SkyPrediction:
     confident: bool
     reason: str
     timing_s: dict = field(default_factory=dict)
+    cues: dict = field(default_factory=dict)
 
 
 # ----------------------------------------------------------------------------- models
@@ -206,12 +216,12 @@ def _posterior_direction(p: np.ndarray, bins: np.ndarray) -> np.ndarray:
 
 
 def _clear_sky_posterior(small: np.ndarray, rays_h: np.ndarray, Ks: np.ndarray, R_heading_from_cam: np.ndarray,
-                         p: np.ndarray, bins: np.ndarray) -> np.ndarray:
+                         p: np.ndarray, bins: np.ndarray, mask: np.ndarray) -> np.ndarray:
     """The network's direction distribution ``p`` (n,) over ``bins`` (n, 3) (heading frame) to the power
     ``CNN_WEIGHT``, times the clear-sky fit's likelihood on the view ``small`` (h, w, 3) uint8 (rays ``rays_h``
-    (h, w, 3), intrinsics ``Ks``) and the "not on bright unclipped pixels in view" term; normalised."""
+    (h, w, 3), intrinsics ``Ks``, sky pixels ``mask`` (h, w) bool) and the "not on bright unclipped pixels in
+    view" term; normalised."""
     ldr_s = small.astype(np.float64) / 255.0
-    mask = simple_sky_mask(ldr_s, rays_h)
     loglik, _ = sky_fit_loglik(small, rays_h, mask, bins, temperature=FIT_TEMPERATURE)
     # the sun would clip the pixel it sits on: bright unclipped pixels above the horizon are not it
     no_sun = ((ldr_s.max(axis=-1) < SATURATED_LDR) & (luminance(ldr_s) > 0.25)
@@ -220,6 +230,18 @@ def _clear_sky_posterior(small: np.ndarray, rays_h: np.ndarray, Ks: np.ndarray, 
     logp = CNN_WEIGHT * np.log(np.maximum(p, 1e-12)) + loglik
     p = np.exp(logp - logp.max())
     return p / p.sum()
+
+
+def glare_is_sun(region_features: dict) -> bool:
+    """Whether a clipped region whose :func:`.sun_cues.glare_region_features` are ``region_features`` may be the
+    sun: the sky within 8 deg of it is brighter than the sky 15-35 deg beyond by at least ``GLARE_MIN_FALLOFF``
+    (log ratio of linear radiance, ``GLARE_FALLOFF_KEY``): a sun's glare falls off with the angle from it, a
+    clipped patch of overcast sky sits in an even sky.  Without enough sky around it to tell (fewer than 8 sky
+    pixels in a ring: a patch among leaves): ``GLARE_FALLOFF_UNKNOWN_IS_SUN``."""
+    f = region_features.get(GLARE_FALLOFF_KEY, float("nan"))
+    if f is None or not np.isfinite(f):
+        return GLARE_FALLOFF_UNKNOWN_IS_SUN
+    return bool(f >= GLARE_MIN_FALLOFF)
 
 
 def _decide(sky: SkyVector, R: np.ndarray, vis_used: float, unc: float, cue: str, sky_model) -> SkyPrediction:
@@ -261,6 +283,9 @@ def predict_sky(image_rgb: np.ndarray, K: np.ndarray, up_cam: np.ndarray | None 
             glare) and, if that radius is <= ``GLARE_CENTRE_MAX_DEG`` (a sun's glare, not a blown-out sky),
             the direction moves to the region's centre (:func:`.sun_cues.glare_centre_cam`); a cone still
             <= ``GLARE_MAX_UNCERTAINTY_DEG`` there counts as a seen sun (visibility >= ``GLARE_VISIBILITY``).
+            A clipped region (under a disc or under the fitted sun) does any of this only if it glows
+            (:func:`glare_is_sun`: the sky next to it is brighter than the sky beyond); otherwise a disc is
+            ignored and a fitted sun stays where the fit put it, at the network's visibility.
             False: the network alone.
     """
     image_rgb = np.asarray(image_rgb)
@@ -286,7 +311,23 @@ def predict_sky(image_rgb: np.ndarray, K: np.ndarray, up_cam: np.ndarray | None 
     vis = float(torch.sigmoid(o["vis_logit"][0]))
     vis_used = vis
     cue = "network"
+    cues: dict = {"visibility_network": vis, "glare_fired": False, "glare_moved": False}
     disc = detect_sun_disc(image_rgb, K, up / np.linalg.norm(up)) if use_cues else None
+    cues["disc"] = disc is not None
+    rays_h = rays[0].numpy().transpose(1, 2, 0).astype(np.float64)
+    up_small_cam = R.T @ np.array([0.0, 0.0, 1.0])
+    if use_cues:
+        mask = simple_sky_mask(small.astype(np.float64) / 255.0, rays_h)
+        cues.update(sky_features(small, rays_h, mask))
+    if disc is not None:
+        cues.update(disc_radius_deg=disc.radius_deg, disc_halo=disc.halo, disc_at_border=disc.clipped,
+                    disc_elevation_deg=float(np.degrees(np.arcsin(np.clip((R @ disc.direction_cam)[2], -1, 1)))))
+        disc_region = clipped_region_at(small, Ks, disc.direction_cam)
+        if disc_region is not None:
+            cues["disc_region"] = glare_region_features(small, Ks, disc_region, disc.direction_cam, up_small_cam, mask)
+            if not glare_is_sun(cues["disc_region"]):  # a round clipped patch in an even (overcast) sky: not the sun
+                cues["disc_rejected"] = True
+                disc = None
     if disc is not None:
         direction = R @ disc.direction_cam
         unc = disc.uncertainty_deg
@@ -294,27 +335,37 @@ def predict_sky(image_rgb: np.ndarray, K: np.ndarray, up_cam: np.ndarray | None 
         cue = f"sun disc at pixel ({disc.pixel_xy[0]:.0f}, {disc.pixel_xy[1]:.0f})"
     else:
         if use_cues:
-            p = _clear_sky_posterior(small, rays[0].numpy().transpose(1, 2, 0).astype(np.float64), Ks, R, p, bins)
+            p = _clear_sky_posterior(small, rays_h, Ks, R, p, bins, mask)
             direction = _posterior_direction(p, bins)
             cue = "network x clear-sky fit"
         unc = direction_cone_deg(p, bins, direction)
+        cues.update(direction_fit_cam=R.T @ direction, uncertainty_fit_deg=unc)
         # a fitted sun inside a clipped region of the image is known only to within that region's radius
         region = clipped_region_at(small, Ks, R.T @ direction) if use_cues else None
         glare = glare_extent_deg(region, Ks, R.T @ direction) if region is not None else None
         if glare is not None:
+            centre_cam = glare_centre_cam(region, Ks)
+            features = glare_region_features(small, Ks, region, centre_cam, up_small_cam, mask)
+            sun_like = glare_is_sun(features)
+            cues.update(glare_extent_from_fit_deg=glare, glare_centre_cam=centre_cam, region=features,
+                        glare_sun_like=sun_like)
             unc = max(unc, glare)
             cue += f", in a clipped region of radius {glare:.0f} deg"
-            if glare <= GLARE_CENTRE_MAX_DEG:  # a sun's glare, not a blown-out sky: its middle, not its edge
-                direction = R @ glare_centre_cam(region, Ks)
+            if not sun_like:
+                cue += " (no glare around it: not the sun)"
+            elif glare <= GLARE_CENTRE_MAX_DEG:  # a sun's glare, not a blown-out sky: its middle, not its edge
+                direction = R @ centre_cam
                 cue += " (its centre)"
-        if glare is not None and unc <= GLARE_MAX_UNCERTAINTY_DEG and \
+                cues["glare_moved"] = True
+        if glare is not None and cues.get("glare_sun_like") and unc <= GLARE_MAX_UNCERTAINTY_DEG and \
                 direction[2] >= np.sin(np.radians(GLARE_MIN_ELEVATION_DEG)):
             vis_used = max(vis, GLARE_VISIBILITY)  # the fitted sun sits in a compact clipped glare: seen
+            cues["glare_fired"] = True
     t3 = time.perf_counter()
     sky = SkyVector(np.expm1(o["log_int"][0].double().numpy()), direction, o["latent"][0].double().numpy())
     out = _decide(sky, R, vis_used, unc, cue, sky_model)
     timing = {"prepare": t1 - t0, "network": t2 - t1, "cues": t3 - t2, "total": time.perf_counter() - t0}
-    return replace(out, timing_s=timing)
+    return replace(out, timing_s=timing, cues=cues)
 
 
 # ----------------------------------------------------------------------------- refinement

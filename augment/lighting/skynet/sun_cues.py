@@ -408,3 +408,78 @@ def glare_centre_cam(region: np.ndarray, K_small: np.ndarray) -> np.ndarray:
     core = dist >= 0.7 * dist.max()
     c = PinholeCamera(K_small, w, h).rays()[core].sum(axis=0)
     return c / np.linalg.norm(c)
+
+
+def glare_region_features(image_small: np.ndarray, K_small: np.ndarray, region: np.ndarray, centre_cam: np.ndarray,
+                          up_cam: np.ndarray, sky: np.ndarray) -> dict:
+    """What a clipped ``region`` (h, w) bool of ``image_small`` (h, w, 3) uint8 (intrinsics ``K_small``) looks like
+    around its centre ``centre_cam`` (3,) (:func:`glare_centre_cam`); ``up_cam`` (3,) unit gravity up, ``sky``
+    (h, w) bool the image's sky pixels.
+
+    Returns floats: ``extent_deg`` (largest angle from the centre to a region pixel), ``inscribed_deg`` (radius
+    of its largest inscribed disc), ``fill`` (its pixels' share of the cone of ``extent_deg``: 1 for a disc, small
+    for a ragged or elongated patch), ``border`` (share of its pixels on the image border); around it, the
+    unclipped pixels above the horizon in the near ring (``extent`` to ``extent + 8 deg``) and the sky pixels in
+    the far ring (``extent + 15 deg`` to ``extent + 35 deg``): ``near_lum`` (median LDR luminance), ``near_p90``
+    (its 90th percentile: the glare where occluders fill most of the ring), ``near_dark`` (share darker than LDR
+    0.5), ``far_lum`` (median), ``falloff`` = near_lum - far_lum, ``falloff_p90`` = near_p90 - far_lum and
+    ``falloff_sky`` (median of the near ring's sky pixels - far_lum), and the same three as log ratios of linear
+    radiance (exposure-invariant): ``glow_log_ratio``, ``glow_log_ratio_p90``, ``glow_log_ratio_sky``. A sun's
+    glare falls off with the angle from it; an overcast sky's clipped patch sits in an even sky. NaN where a ring
+    holds fewer than 8 pixels.
+    """
+    h, w = region.shape
+    rays = PinholeCamera(K_small, w, h).rays()
+    c = np.asarray(centre_cam, dtype=np.float64)
+    ang = np.degrees(np.arccos(np.clip(rays @ (c / np.linalg.norm(c)), -1.0, 1.0)))
+    extent = float(ang[region].max())
+    dist = cv2.distanceTransform(region.astype(np.uint8), cv2.DIST_L2, 5)
+    px_deg = np.degrees(1.0 / np.sqrt(K_small[0, 0] * K_small[1, 1]))
+    border = np.zeros((h, w), bool)
+    border[[0, -1], :] = border[:, [0, -1]] = True
+    ldr = image_small.astype(np.float64) / 255.0
+    lum = luminance(ldr)
+    open_ = (ldr.max(axis=-1) < SATURATED) & (rays @ np.asarray(up_cam, dtype=np.float64) > 0.0)
+    near = open_ & (ang >= extent) & (ang < extent + 8.0)
+    far = open_ & sky & (ang >= extent + 15.0) & (ang < extent + 35.0)
+    nan = float("nan")
+    stat = lambda x, m, f: float(f(x[m])) if m.sum() >= 8 else nan  # noqa: E731
+    p90 = lambda x: np.percentile(x, 90)  # noqa: E731
+    near_lum, near_p90, far_lum = stat(lum, near, np.median), stat(lum, near, p90), stat(lum, far, np.median)
+    hdr = luminance(ldr_uint8_to_hdr(image_small).astype(np.float64))
+    log_far = np.log(max(stat(hdr, far, np.median), 1e-9))
+    return {"extent_deg": extent, "inscribed_deg": float(dist.max()) * px_deg,
+            "fill": float(region.sum() / max((ang <= extent).sum(), 1)),
+            "border": float(region[border].sum() / max(region.sum(), 1)),
+            "near_lum": near_lum, "near_p90": near_p90,
+            "near_dark": float(np.mean(lum[near] < 0.5)) if near.any() else nan,
+            "far_lum": far_lum, "falloff": near_lum - far_lum, "falloff_p90": near_p90 - far_lum,
+            "falloff_sky": stat(lum, near & sky, np.median) - far_lum,
+            "glow_log_ratio": np.log(max(stat(hdr, near, np.median), 1e-9)) - log_far,
+            "glow_log_ratio_p90": np.log(max(stat(hdr, near, p90), 1e-9)) - log_far,
+            "glow_log_ratio_sky": np.log(max(stat(hdr, near & sky, np.median), 1e-9)) - log_far}
+
+
+def sky_features(image_small: np.ndarray, rays_h: np.ndarray, sky: np.ndarray) -> dict:
+    """Summary of the sky of ``image_small`` (h, w, 3) uint8: ``sky`` (h, w) bool its sky pixels, ``rays_h``
+    (h, w, 3) heading-frame rays.
+
+    Returns floats: ``sky_fraction`` (of the image), ``clipped_fraction`` (clipped pixels above the horizon, of
+    the image), ``sky_lum_median`` / ``sky_lum_iqr`` (LDR luminance of the sky pixels), ``sky_blue`` (median of
+    (B - R) / (B + R) in linear radiance over the unclipped sky pixels: ~0.3-0.6 for a clear sky, ~0 for grey
+    cloud), NaN when there is no sky.
+    """
+    ldr = image_small.astype(np.float64) / 255.0
+    above = rays_h[..., 2] > 0.0
+    clipped = ldr.max(axis=-1) >= SATURATED
+    out = {"sky_fraction": float(sky.mean()), "clipped_fraction": float((clipped & above).mean())}
+    lum = luminance(ldr)[sky]
+    open_sky = sky & ~clipped
+    if sky.sum() < 8:
+        return out | {"sky_lum_median": float("nan"), "sky_lum_iqr": float("nan"), "sky_blue": float("nan")}
+    q25, q50, q75 = np.percentile(lum, [25, 50, 75])
+    blue = float("nan")
+    if open_sky.sum() >= 8:
+        hdr = ldr_uint8_to_hdr(image_small[open_sky][None])[0].astype(np.float64)
+        blue = float(np.median((hdr[:, 2] - hdr[:, 0]) / np.maximum(hdr[:, 2] + hdr[:, 0], 1e-6)))
+    return out | {"sky_lum_median": float(q50), "sky_lum_iqr": float(q75 - q25), "sky_blue": blue}
