@@ -317,3 +317,32 @@ def test_a_sun_in_a_clear_sky_is_still_the_sun(models, sun_az, sun_el, yaw, pitc
     assert features is not None and glare_is_sun(features), pred.cues
     assert pred.confident and angle_deg(pred.sun_dir_cam, sun_cam) < 3.0, pred.reason
     assert not pred.cues.get("disc_rejected")
+
+
+def test_glare_rule_tells_a_suns_glare_from_a_clipped_patch_of_overcast_sky():
+    """The glare path (no disc: the fitted sun lands in a clipped region): an over-exposed sun's glare region
+    glows against the sky beyond it, a clipped 8 deg patch of overcast sky does not, nor does a patch with
+    no sky around it (leaves)."""
+    from streetaug.augment.lighting.evidence import sky_mask
+    from streetaug.augment.lighting.skynet.predict import glare_is_sun
+    from streetaug.augment.lighting.skynet.sun_cues import glare_region_features
+
+    def features(image, K, up, d_cam):
+        rays = PinholeCamera(K, W, H).rays()
+        sky = sky_mask(image / 255.0, np.arcsin(np.clip(rays @ up, -1, 1)), min_elevation_deg=2.0, min_lum=0.25,
+                       bright_percentile=10.0, max_grad=0.15)
+        region = clipped_region_at(image, K, d_cam)
+        assert region is not None
+        return glare_region_features(image, K, region, glare_centre_cam(region, K), up, sky)
+
+    image, K, up, sun_cam = _render(_sun(10, 20), 0, 10)
+    image = np.clip(image.astype(np.float64) * 1.5, 0, 255).astype(np.uint8)  # the glare of test above
+    assert detect_sun_disc(image, K, up) is None
+    assert glare_is_sun(features(image, K, up, sun_cam))
+    image, K, up, patch_cam = _overcast_patch(-20, 20, 1.0, 0.2, radius_deg=8.0)
+    f = features(image, K, up, patch_cam)
+    assert f["extent_deg"] > 6.0 and not glare_is_sun(f), f
+    leaves = image.copy()
+    ang = np.degrees(np.arccos(np.clip(PinholeCamera(K, W, H).rays() @ patch_cam, -1, 1)))
+    leaves[(ang > 8.0) & (ang < 40.0)] = 40  # dark foliage all around the clipped patch
+    assert not glare_is_sun(features(leaves, K, up, patch_cam))
