@@ -13,7 +13,8 @@ CAM_FRONT and 8 CAM_BACK, when ``../shared/data/nuscenes-seq`` is there). Each r
 seed; the first rep is a warm-up (imports, first-use tables) and is left out. Reports the median CPU
 seconds (``time.process_time``: all threads) of ``insert_into_sample`` and of its render stage per item,
 and the median of each stage the pipeline times (``timing_s``: lighting, placement -- the scene depth
-included --, local_light, render ...; wall seconds), per item and over all items, and writes them with
+included --, local_light, render ...; wall seconds) and the CPU seconds of placement and of the scene
+depth inside it (``cpu_stage_s``), per item and over all items, and writes them with
 every run to ``benchmarks/results/insert_time_<tag>.json``. One process, one item after the other: run
 the two checkouts back to back (``--rounds`` alternations are left to the caller) on an otherwise idle
 machine. Torch runs on one thread (``torch.set_num_threads(1)``).
@@ -59,6 +60,8 @@ def main(argv=None) -> None:
     from streetaug.datasets.nuscenes import NuScenesReader
 
     has_location = "location" in inspect.signature(select_assets).parameters  # older checkouts: no plates
+    cpu = _time_cpu_of({"placement": (pipeline.sample, "place_in_sample"),
+                        "scene_depth": (pipeline.context, "scene_depth")})
     bundled = NuScenesReader(bundled_dataroot(), BUNDLED_VERSION)
     items = [(bundled, bundled.sample_tokens(name)[0], "CAM_FRONT", name)
              for name in ("sample-sunny", "sample-overcast", "sample-lowsun")]
@@ -73,13 +76,15 @@ def main(argv=None) -> None:
             sample = reader.sample(token)
             where = {"location": sample.location} if has_location else {}
             assets = {cam: select_assets(pipeline.item_seed(rep, "asset", token, cam), 1, **where)}
+            cpu.clear()
             c0, w0 = time.process_time(), time.perf_counter()
             res = pipeline.insert_into_sample(sample, [sample.cameras[cam]], assets,
                                               pipeline.InsertOptions(seed=rep, n_objects=1))
             view = res.views[cam]
             runs.append({"item": name, "rep": rep, "cpu_s": time.process_time() - c0,
                          "wall_s": time.perf_counter() - w0, "render_s": view.timing_s.get("render"),
-                         "placed": len(view.objects), "timing_s": dict(view.timing_s)})
+                         "placed": len(view.objects), "timing_s": dict(view.timing_s),
+                         "cpu_stage_s": dict(cpu)})
     kept = [r for r in runs if r["rep"] > 0]
     per_item = {}
     for name in dict.fromkeys(r["item"] for r in kept):
@@ -87,18 +92,38 @@ def main(argv=None) -> None:
         rendered = [r["render_s"] for r in rs if r["placed"] and r["render_s"] is not None]
         per_item[name] = {"median_cpu_s": float(np.median([r["cpu_s"] for r in rs])),
                           "median_render_s": float(np.median(rendered)) if rendered else None,
-                          "median_stage_s": stage_medians(rs),
+                          "median_stage_s": stage_medians(rs), "median_cpu_stage_s": stage_medians(rs, "cpu_stage_s"),
                           "placed": sum(r["placed"] for r in rs), "runs": len(rs)}
     doc = {"tag": args.tag, "reps_kept": args.reps - 1, "load_avg": os.getloadavg(), "per_item": per_item,
            "median_cpu_s": float(np.median([r["cpu_s"] for r in kept])), "median_stage_s": stage_medians(kept),
-           "runs": runs}
+           "median_cpu_stage_s": stage_medians(kept, "cpu_stage_s"), "runs": runs}
     out = Path(args.out) / f"insert_time_{args.tag}.json"
     write_json_atomic(out, doc)
     for name, v in per_item.items():
         render = "-" if v["median_render_s"] is None else f"{v['median_render_s']:.2f}"
         print(f"  {name:28s} cpu {v['median_cpu_s']:.2f} s, render {render} s ({v['placed']}/{v['runs']} placed)")
     print("  stages (median wall s): " + ", ".join(f"{k} {v:.3f}" for k, v in doc["median_stage_s"].items()))
+    print("  CPU s: " + ", ".join(f"{k} {v:.3f}" for k, v in doc["median_cpu_stage_s"].items()))
     print(f"{args.tag}: median CPU per insertion {doc['median_cpu_s']:.2f} s; wrote {out}")
+
+
+def _time_cpu_of(functions: dict[str, tuple]) -> dict[str, float]:
+    """Wrap each ``(module, name)`` so its CPU seconds (``time.process_time``) add up under its label in the
+    returned dict (cleared by the caller per run); names a checkout lacks are skipped."""
+    spent: dict[str, float] = {}
+    for label, (module, name) in functions.items():
+        f = getattr(module, name, None)
+        if f is None:
+            continue
+
+        def timed(*a, _f=f, _label=label, **k):
+            c = time.process_time()
+            try:
+                return _f(*a, **k)
+            finally:
+                spent[_label] = spent.get(_label, 0.0) + time.process_time() - c
+        setattr(module, name, timed)
+    return spent
 
 
 def compare(args) -> None:
@@ -126,23 +151,28 @@ def compare(args) -> None:
         kept = [r for d in docs for r in d["runs"] if r["rep"] > 0]
         items = dict.fromkeys(r["item"] for r in kept)
         doc[label] = {"median_cpu_s": float(np.median([r["cpu_s"] for r in kept])),
-                      "median_stage_s": stage_medians(kept),
+                      "median_stage_s": stage_medians(kept), "median_cpu_stage_s": stage_medians(kept, "cpu_stage_s"),
                       "per_item": {n: {"median_cpu_s": float(np.median([r["cpu_s"] for r in kept if r["item"] == n])),
-                                       "median_stage_s": stage_medians([r for r in kept if r["item"] == n])}
+                                       "median_stage_s": stage_medians([r for r in kept if r["item"] == n]),
+                                       "median_cpu_stage_s": stage_medians([r for r in kept if r["item"] == n],
+                                                                           "cpu_stage_s")}
                                    for n in items},
                       "load_avg": [d.get("load_avg") for d in docs], "rounds": docs}
     out = Path(args.out) / f"insert_time_{args.tag}.json"
     write_json_atomic(out, doc)
     for label in ("old", "new"):
         stages = ", ".join(f"{k} {v:.3f}" for k, v in doc[label]["median_stage_s"].items())
-        print(f"{label}: median CPU per insertion {doc[label]['median_cpu_s']:.3f} s; stages (wall s): {stages}")
+        cpu = ", ".join(f"{k} {v:.3f}" for k, v in doc[label]["median_cpu_stage_s"].items())
+        print(f"{label}: median CPU per insertion {doc[label]['median_cpu_s']:.3f} s; stages (wall s): {stages}; "
+              f"CPU s: {cpu}")
     print(f"wrote {out}")
 
 
-def stage_medians(runs: list[dict]) -> dict[str, float]:
-    """Stage -> median seconds over ``runs`` (the top-level stages of ``timing_s``: no ``render.*`` parts)."""
-    stages = dict.fromkeys(k for r in runs for k in r.get("timing_s", {}) if "." not in k)
-    return {k: float(np.median([r["timing_s"][k] for r in runs if k in r.get("timing_s", {})])) for k in stages}
+def stage_medians(runs: list[dict], key: str = "timing_s") -> dict[str, float]:
+    """Stage -> median seconds over ``runs`` (the top-level stages of ``timing_s``: no ``render.*`` parts;
+    ``key="cpu_stage_s"``: the CPU seconds of placement and of the scene depth inside it)."""
+    stages = dict.fromkeys(k for r in runs for k in r.get(key, {}) if "." not in k)
+    return {k: float(np.median([r[key][k] for r in runs if k in r.get(key, {})])) for k in stages}
 
 
 if __name__ == "__main__":
