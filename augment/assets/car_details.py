@@ -65,7 +65,11 @@ def _sheet(P: np.ndarray, mat: int, outward: np.ndarray) -> MeshPart:
 
 def lamp_parts(surface: BodySurface, spec: BodySpec) -> list[MeshPart]:
     """Head and tail lamps: a dark bezel (4 mm out), a bright reflector sheet (8 mm) and a tinted
-    transparent lens (16 mm over the body) (``HEADLIGHT`` / ``TAILLIGHT``), both following the body's curve.
+    transparent lens (16 mm over the body) (``HEADLIGHT`` / ``TAILLIGHT``), all following the body's curve.
+
+    The sheets are offset along the body's normal (not along x: where a lamp wraps round a corner the
+    surface runs nearly along x and an x offset left the sheets in it) from a grid dense enough that
+    their chords stay out of the curved body; the bezel's grown rim is put back on the surface.
 
     Outlines (y, z): heights over the bumper line / under the rear belt line (headlights slant up
     towards the car's corners, tail lights are bands); across, from a fixed share of the width out
@@ -74,8 +78,9 @@ def lamp_parts(surface: BodySurface, spec: BodySpec) -> list[MeshPart]:
     W = spec.width
     zb = _bumper_line(spec)
     zt = spec.belt_rear - (0.12 if spec.length - spec.d_rear > 0.35 else 0.05)  # under a boot lid's rounded edge
-    t_y = np.linspace(0.0, 1.0, 9)
-    t_z = np.linspace(0.0, 1.0, 6)
+    n_y, n_z = 17, 7
+    t_y = np.linspace(0.0, 1.0, n_y)
+    t_z = np.linspace(0.0, 1.0, n_z)
     parts = []
     for rear in (False, True):
         u = np.array([1.0, 0.0, 0.0]) if rear else np.array([-1.0, 0.0, 0.0])  # into the body
@@ -84,38 +89,60 @@ def lamp_parts(surface: BodySurface, spec: BodySpec) -> list[MeshPart]:
             for y1 in np.linspace(0.46, 0.30, 9) * W:  # shrink the outer end until the lamp stays at the end
                 ys = s * (y0 + (y1 - y0) * t_y)
                 if rear:
-                    z_lo, z_hi = np.full(9, zt - 0.15), np.full(9, zt)
+                    z_lo, z_hi = np.full(n_y, zt - 0.15), np.full(n_y, zt)
                 else:
                     z_lo = zb + 0.03 + 0.05 * t_y  # rising towards the corner
                     z_hi = z_lo + 0.11 - 0.03 * t_y
-                Y = np.broadcast_to(ys[None, :], (6, 9))
+                Y = np.broadcast_to(ys[None, :], (n_z, n_y))
                 Z = z_lo[None, :] + (z_hi - z_lo)[None, :] * t_z[:, None]
-                pts = np.stack([np.full(Y.shape, -u[0] * spec.length), Y, Z], -1).reshape(-1, 3)
-                x = surface.hit(pts, u, reach_m=0.0)
-                if not np.isnan(x).any() and np.ptp(x) <= LAMP_WRAP_M:
+                base = _on_body(surface, Y, Z, u, spec.length)
+                if base is not None and np.ptp(base[..., 0]) <= LAMP_WRAP_M:
                     break
             else:
                 continue
-            base = np.stack([x, Y.ravel(), Z.ravel()], 1).reshape(6, 9, 3)
             out = -u
-            parts.append(_sheet(_grown(base, 0.015) + 0.004 * out, TRIM, out))  # the dark bezel around the lamp
-            parts.append(_sheet(base + 0.008 * out, REFLECTOR, out))
-            parts.append(_sheet(base + 0.016 * out, TAILLIGHT if rear else HEADLIGHT, out))
+            rim = _grown(base, 0.015)
+            hit = _on_body(surface, rim[..., 1], rim[..., 2], u, spec.length, allow_miss=True)
+            rim[..., 0] = np.where(np.isnan(hit[..., 0]), rim[..., 0], hit[..., 0])
+            parts.append(_sheet(_lifted(rim, 0.004, out), TRIM, out))  # the dark bezel around the lamp
+            parts.append(_sheet(_lifted(base, 0.008, out), REFLECTOR, out))
+            parts.append(_sheet(_lifted(base, 0.016, out), TAILLIGHT if rear else HEADLIGHT, out))
     return parts
 
 
+def _on_body(surface: BodySurface, Y: np.ndarray, Z: np.ndarray, u: np.ndarray, length_m: float,
+             allow_miss: bool = False) -> np.ndarray | None:
+    """Grid points (rows, cols, 3) on the body's front / rear surface (rays along ``u``) at (Y, Z); None
+    where a ray misses (NaN x with ``allow_miss``)."""
+    pts = np.stack([np.full(Y.size, -u[0] * length_m), Y.ravel(), Z.ravel()], -1)
+    x = surface.hit(pts, u, reach_m=0.0)
+    if np.isnan(x).any() and not allow_miss:
+        return None
+    return np.stack([x, Y.ravel(), Z.ravel()], 1).reshape(Y.shape + (3,))
+
+
+def _lifted(P: np.ndarray, offset_m: float, outward: np.ndarray) -> np.ndarray:
+    """Grid points (rows, cols, 3) moved ``offset_m`` along the grid surface's normal (turned to ``outward``)."""
+    r, c = P.shape[:2]
+    V = P.reshape(-1, 3)
+    n = smooth_vertex_normals(V, grid_faces(r, c, wrap_cols=False))
+    n *= np.sign(n @ outward + 1e-12)[:, None]
+    return (V + offset_m * n).reshape(P.shape)
+
+
 def _grown(P: np.ndarray, margin_m: float) -> np.ndarray:
-    """Grid points (rows, cols, 3) with the outer rows / columns moved ``margin_m`` further out in y-z."""
-    G = P.copy()
-    for axis, idx in ((0, 0), (0, -1), (1, 0), (1, -1)):
-        edge = np.take(P, idx, axis=axis)
-        inner = np.take(P, 1 if idx == 0 else -2, axis=axis)
-        step = edge - inner
-        step[..., 0] = 0.0
-        step /= np.maximum(np.linalg.norm(step, axis=-1, keepdims=True), 1e-12)
-        sl = [slice(None)] * 3
-        sl[axis] = idx
-        G[tuple(sl)] += margin_m * step
+    """Grid points (rows, cols, 3) with a ring of points around them, ``margin_m`` further out in y-z
+    ((rows + 2, cols + 2, 3); x copied from the edge: put it back on the surface)."""
+    G = np.pad(P, ((1, 1), (1, 1), (0, 0)), mode="edge")
+    for axis in (0, 1):
+        for idx, inner in ((0, 2), (-1, -3)):
+            edge = np.take(G, idx, axis=axis)
+            step = edge - np.take(G, inner, axis=axis)
+            step[..., 0] = 0.0
+            step /= np.maximum(np.linalg.norm(step, axis=-1, keepdims=True), 1e-12)
+            sl = [slice(None)] * 3
+            sl[axis] = idx
+            G[tuple(sl)] += margin_m * step
     return G
 
 
@@ -203,9 +230,11 @@ def wiper_parts(surface: BodySurface, spec: BodySpec, right_hand_drive: bool) ->
     return parts
 
 
-def plate_parts(surface: BodySurface, spec: BodySpec, style: PlateStyle, rng: np.random.Generator) -> list[MeshPart]:
+def plate_parts(surface: BodySurface, spec: BodySpec, style: PlateStyle, rng: np.random.Generator,
+                anonymised: bool = False) -> list[MeshPart]:
     """Front plate under the bumper line, rear plate just over it: 2 cm thick boxes whose face is 6 mm
-    proud of the body's outermost point behind them (on a curved bumper their edges stand off it)."""
+    proud of the body's outermost point behind them (on a curved bumper their edges stand off it);
+    ``anonymised``: without characters (see :func:`~.number_plates.plate_part`)."""
     w, h = style.size_m
     zb = _bumper_line(spec)
     parts = []
@@ -219,7 +248,7 @@ def plate_parts(surface: BodySurface, spec: BodySpec, style: PlateStyle, rng: np
             continue
         x_face = float(c.min()) - 0.006 if rear else float(c.max()) + 0.006
         x_back = x_face + (0.02 if rear else -0.02)
-        parts.append(plate_part(style, x_face, x_back, zc, rear, rng))
+        parts.append(plate_part(style, x_face, x_back, zc, rear, rng, anonymised))
     return parts
 
 

@@ -75,7 +75,8 @@ def _variant_wlh(variant: str | None, wlh: np.ndarray, size: CategorySize) -> np
 
 
 def procedural_object(detection_class: str, seed: int, sizes: dict[str, CategorySize] | None = None,
-                      still: bool = False, plate_style: str = "eu") -> Asset:
+                      still: bool = False, plate_style: str = "eu", paint_region: str = "global",
+                      anonymised_plates: bool = False) -> Asset:
     """One procedural object of ``detection_class``, deterministic in ``seed``.
 
     Args:
@@ -85,6 +86,7 @@ def procedural_object(detection_class: str, seed: int, sizes: dict[str, Category
         still: an object that stays put for a whole track: pedestrians stand, two-wheelers have no rider.
         plate_style: cars' number plates and driving side (``sg``, ``us``, ``eu``; see
             :func:`~.number_plates.plate_style_for_location`); other classes ignore it.
+        paint_region, anonymised_plates: cars' paint colours and plates (see :func:`~.procedural.procedural_car`).
 
     Raises:
         InputError: unknown class, or the table lacks the drawn category.
@@ -97,7 +99,8 @@ def procedural_object(detection_class: str, seed: int, sizes: dict[str, Category
     if still and variant == "with_rider":
         variant = "without_rider"
     if detection_class == "car":
-        return procedural_car(int(rng.integers(2**31)), plate_style=plate_style)
+        return procedural_car(int(rng.integers(2**31)), plate_style=plate_style, paint_region=paint_region,
+                              anonymised_plates=anonymised_plates)
     table = sizes if sizes is not None else read_class_sizes()
     if category not in table:
         raise InputError(f"class sizes table: no entry for {category!r} (needed for class {detection_class!r})")

@@ -2,7 +2,8 @@
 
 A plate is a thin box on the bumper (its face in the object frame's y-z plane, x front) with a row of
 dark character blocks slightly proud of it, so it reads as a bright rectangle with a dark band at
-distance and as characters up close.  Styles follow the nuScenes locations: Singapore (``sg``,
+distance and as characters up close, or (``anonymised``) as a plain plate of its mean colour: nuScenes
+blurs the plates of its images, and a blurred plate is about that.  Styles follow the nuScenes locations: Singapore (``sg``,
 right-hand drive, white front / yellow rear plates), Boston (``us``, the 12 x 6 inch plate) and
 ``eu`` (the 520 x 110 mm plate with the blue band) for anything else.
 """
@@ -77,11 +78,64 @@ def _box(lo: np.ndarray, hi: np.ndarray, mat: int) -> MeshPart:
     return MeshPart(V, F, np.full(len(F), mat, dtype=np.int64), smooth_vertex_normals(V, F))
 
 
+def _layout(style: PlateStyle, widths: np.ndarray, separator: int, left_y: float
+            ) -> tuple[tuple[float, float, float, float] | None, list[tuple[float, float, float, float]]]:
+    """The band and the character blocks of a plate as (y0, y1, dz0, dz1) rectangles (y across the plate,
+    dz from its centre height, metres): ``widths`` (n,) the characters' relative widths, ``separator`` the
+    index of the wider space, ``left_y`` -1 / +1 the viewer's left end of the plate."""
+    w, h = style.size_m
+    margin = 0.06 * w
+    y_start, y_end = -w / 2 + margin, w / 2 - margin
+    band = None
+    if style.band_rgb is not None:
+        band_w = 0.085 * w
+        yb = left_y * (w / 2 - 0.004)
+        ya, yc = sorted((yb, yb - left_y * band_w))
+        band = (ya, yc, -h / 2 + 0.004, h / 2 - 0.004)
+        if left_y < 0:
+            y_start = -w / 2 + band_w + 0.02
+        else:
+            y_end = w / 2 - band_w - 0.02
+    n = style.n_chars
+    spaces = np.full(n + 1, 0.35)
+    spaces[0] = spaces[-1] = 0.0
+    spaces[separator] = 1.1
+    unit = (y_end - y_start) / (widths.sum() + spaces.sum())
+    ch = 0.62 * h
+    chars, y = [], y_start
+    for k in range(n):
+        y += spaces[k] * unit
+        chars.append((y, y + widths[k] * unit, -ch / 2, ch / 2))
+        y += widths[k] * unit
+    return band, chars
+
+
+# Share of a character's block its strokes cover in typical plate fonts (estimate: stroke width ~ 1/7 of
+# the character height; "E" ~ 0.55, "L" ~ 0.3, "8" ~ 0.5): the blocks stand for whole characters.
+CHAR_INK_SHARE = 0.45
+
+
+def anonymised_plate_rgb(style: PlateStyle, rear: bool) -> np.ndarray:
+    """Linear RGB (3,) of an anonymised plate: its face's area-weighted mean colour (base, band and the ink of
+    the characters of a typical layout, :data:`CHAR_INK_SHARE` of their blocks), what the strong blur of an
+    anonymised dataset leaves (nuScenes blurs the plates in its images)."""
+    w, h = style.size_m
+    n = style.n_chars
+    band, chars = _layout(style, np.full(n, 0.9), n // 2, -1.0)
+    area = lambda r: (r[1] - r[0]) * (r[3] - r[2])  # noqa: E731
+    a_ink = CHAR_INK_SHARE * sum(area(r) for r in chars) / (w * h)
+    a_band = area(band) / (w * h) if band is not None else 0.0
+    base = np.array(style.rear_rgb if rear else style.front_rgb)
+    band_rgb = np.array(style.band_rgb) if style.band_rgb is not None else base
+    return (1.0 - a_ink - a_band) * base + a_ink * np.array(style.ink_rgb) + a_band * band_rgb
+
+
 def plate_part(style: PlateStyle, x_face: float, x_back: float, z_centre: float, rear: bool,
-               rng: np.random.Generator) -> MeshPart:
+               rng: np.random.Generator, anonymised: bool = False) -> MeshPart:
     """One plate: a box from ``x_back`` to ``x_face`` (its visible face at ``x_face``, metres in the
     object frame; ``x_face > x_back`` at the front, ``<`` at the rear) centred on y = 0 at ``z_centre``,
-    with character blocks (and the EU band) 1.5 mm proud of the face."""
+    with character blocks (and the EU band) 1.5 mm proud of the face; ``anonymised``: the plain box (its
+    material then has :func:`anonymised_plate_rgb`; ``rng`` draws the same either way)."""
     w, h = style.size_m
     out = 1.0 if x_face > x_back else -1.0
     parts = [_box(np.array([x_back, -w / 2, z_centre - h / 2]), np.array([x_face, w / 2, z_centre + h / 2]),
@@ -89,33 +143,18 @@ def plate_part(style: PlateStyle, x_face: float, x_back: float, z_centre: float,
     x0, x1 = x_face, x_face + out * 0.0015
     # The viewer's left end of the plate: at the front the car's right (-y), at the rear its left (+y).
     left_y = -1.0 if out > 0 else 1.0
-    margin = 0.06 * w
-    y_start, y_end = -w / 2 + margin, w / 2 - margin
-    if style.band_rgb is not None:
-        band_w = 0.085 * w
-        yb = left_y * (w / 2 - 0.004)
-        parts.append(_box(np.array([x0, yb, z_centre - h / 2 + 0.004]),
-                          np.array([x1, yb - left_y * band_w, z_centre + h / 2 - 0.004]), PLATE_BAND))
-        if left_y < 0:
-            y_start = -w / 2 + band_w + 0.02
-        else:
-            y_end = w / 2 - band_w - 0.02
     # Characters: n blocks with a random wider space (a group separator) and slightly varied widths.
-    n = style.n_chars
-    widths = rng.uniform(0.8, 1.0, n)
-    spaces = np.full(n + 1, 0.35)
-    spaces[0] = spaces[-1] = 0.0
-    spaces[int(rng.integers(2, n - 1))] = 1.1
-    unit = (y_end - y_start) / (widths.sum() + spaces.sum())
-    ch = 0.62 * h
-    y = y_start
-    for k in range(n):
-        y += spaces[k] * unit
-        parts.append(_box(np.array([x0, y, z_centre - ch / 2]), np.array([x1, y + widths[k] * unit, z_centre + ch / 2]),
-                          PLATE_INK))
-        y += widths[k] * unit
+    widths = rng.uniform(0.8, 1.0, style.n_chars)
+    separator = int(rng.integers(2, style.n_chars - 1))
+    if not anonymised:
+        band, chars = _layout(style, widths, separator, left_y)
+        if band is not None:
+            parts.append(_box(np.array([x0, band[0], z_centre + band[2]]), np.array([x1, band[1], z_centre + band[3]]),
+                              PLATE_BAND))
+        for y0, y1, dz0, dz1 in chars:
+            parts.append(_box(np.array([x0, y0, z_centre + dz0]), np.array([x1, y1, z_centre + dz1]), PLATE_INK))
     V, F, M = merge_parts(parts)
     return MeshPart(V, F, M, np.concatenate([p.normals for p in parts]))
 
 
-__all__ = ["PLATE_STYLES", "PlateStyle", "check_plate_style", "plate_part", "plate_style_for_location"]
+__all__ = ["CHAR_INK_SHARE", "PLATE_STYLES", "PlateStyle", "anonymised_plate_rgb", "check_plate_style", "plate_part", "plate_style_for_location"]

@@ -26,9 +26,10 @@ from .car_body import BODY_SPECS, BODY_WEIGHTS, N_SLOTS, BodySpec, body_part, ji
 from .car_details import (BodySurface, door_handle_parts, grille_parts, lamp_parts, mirror_parts,
                           paint_over_loft_lamps, plate_parts, wiper_parts)
 from .car_interior import interior_parts
+from .car_paint import check_paint_region, paint_palette, srgb_to_linear
 from .car_wheels import wheel_parts, wheel_well_parts
 from .mesh_parts import MeshPart, merge_parts
-from .number_plates import PlateStyle, check_plate_style, plate_style_for_location
+from .number_plates import PlateStyle, anonymised_plate_rgb, check_plate_style, plate_style_for_location
 from .validate import validate_asset
 
 MIRROR_OUT_M = 0.04  # how far the mirrors reach beyond the body's widest point (both inside the box)
@@ -39,63 +40,9 @@ def procedural_car_variants() -> tuple[str, ...]:
     return tuple(BODY_SPECS)
 
 
-# ----------------------------------------------------------------------------- paint palette
-
-# (name, sRGB hex, metallic, weight) -- weights roughly follow world car-colour popularity
-# (white ~ 35 %, black ~ 20 %, grey ~ 18 %, silver ~ 10 %, blue ~ 7 %, red ~ 6 %, others).  "metallic" is how
-# metallic the paint looks: the share of the base coat that is aluminium flakes (``Material.flake``), not the
-# UE4 metallic of a bare metal surface (see :func:`_materials`).
-_PALETTE: tuple[tuple[str, str, float, float], ...] = (
-    ("pure white", "F2F2EE", 0.0, 12.0),
-    ("pearl white", "E8E6DF", 0.3, 10.0),
-    ("arctic white", "EDEFF0", 0.0, 7.0),
-    ("cream white", "E6E1D3", 0.1, 3.0),
-    ("jet black", "0C0C0D", 0.0, 8.0),
-    ("black metallic", "141518", 0.5, 8.0),
-    ("midnight black", "1A1B20", 0.4, 4.0),
-    ("graphite grey", "3C3F44", 0.6, 5.0),
-    ("gunmetal grey", "53565C", 0.6, 4.0),
-    ("dark grey", "2E3034", 0.5, 3.0),
-    ("mid grey", "6E7074", 0.4, 3.0),
-    ("nardo grey", "8A8C8C", 0.0, 2.0),
-    ("silver", "B5B8BB", 0.7, 5.0),
-    ("bright silver", "C8CACC", 0.7, 3.0),
-    ("champagne silver", "BDB5A6", 0.6, 2.0),
-    ("navy blue", "1B2A4A", 0.5, 2.0),
-    ("dark blue", "1F3560", 0.5, 2.0),
-    ("royal blue", "2A4F9C", 0.4, 1.5),
-    ("sky blue", "6F9CC8", 0.3, 0.8),
-    ("steel blue", "4A6580", 0.5, 1.0),
-    ("bright red", "B01C1C", 0.0, 2.0),
-    ("dark red", "6E1418", 0.4, 1.5),
-    ("candy red", "9A1420", 0.5, 1.5),
-    ("maroon", "4E1A22", 0.4, 0.8),
-    ("orange", "D9621C", 0.2, 0.5),
-    ("yellow", "E3B521", 0.1, 0.4),
-    ("racing green", "1E3B2C", 0.4, 0.6),
-    ("olive green", "55603E", 0.3, 0.4),
-    ("teal", "1F5D63", 0.4, 0.4),
-    ("beige", "C2B28F", 0.2, 0.8),
-    ("bronze", "7A5B3C", 0.6, 0.6),
-    ("brown", "4A3528", 0.4, 0.8),
-    ("taxi yellow", "F0B21A", 0.0, 0.3),
-    ("purple", "3E2A52", 0.5, 0.3),
-)
-
-
-def srgb_to_linear(srgb: np.ndarray) -> np.ndarray:
-    """IEC 61966-2-1 sRGB in [0, 1] -> linear RGB (same shape)."""
-    c = np.asarray(srgb, dtype=np.float64)
-    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
-
-
-def paint_palette() -> list[tuple[str, np.ndarray, float, float]]:
-    """The paint palette as (name, linear RGB (3,), metallic, weight) entries (>= 30 colours)."""
-    out = []
-    for name, hexcode, metallic, weight in _PALETTE:
-        srgb = np.array([int(hexcode[i:i + 2], 16) for i in (0, 2, 4)]) / 255.0
-        out.append((name, srgb_to_linear(srgb), metallic, weight))
-    return out
+# The paint palette (regional colour-family shares from published colour-popularity reports) is
+# :mod:`.car_paint`; "metallic" is the share of the base coat that is aluminium flakes (``Material.flake``), not
+# the UE4 metallic of a bare metal surface (see :func:`_materials`).
 
 
 GLASS_FACE_REFLECTANCE = 0.04  # one air-glass face at normal incidence (n ~1.5)
@@ -114,7 +61,8 @@ def pane_specular(tint: np.ndarray, opacity: float) -> float:
 # ----------------------------------------------------------------------------- public entry point
 
 
-def procedural_car(seed: int, body: str | None = None, paint: tuple | None = None, plate_style: str = "eu") -> Asset:
+def procedural_car(seed: int, body: str | None = None, paint: tuple | None = None, plate_style: str = "eu",
+                   paint_region: str = "global", anonymised_plates: bool = False) -> Asset:
     """A plausible car mesh, deterministic for ``seed``.
 
     Args:
@@ -125,13 +73,17 @@ def procedural_car(seed: int, body: str | None = None, paint: tuple | None = Non
             the base coat that is metallic flakes (the material's ``flake``; its UE4 metallic stays 0).
         plate_style: number plates and driving side: ``sg`` (right-hand drive), ``us`` or ``eu``
             (:func:`~.number_plates.plate_style_for_location` maps a nuScenes location to one).
+        paint_region: whose colour popularity the paint is drawn from: ``global``, ``asia_pacific``,
+            ``north_america`` or ``europe`` (:func:`~.car_paint.paint_region_for_location` maps a location).
+        anonymised_plates: plates without characters, of the plate's mean colour (as the blurred plates of
+            nuScenes' images); False: readable characters.
 
     Returns:
         An :class:`Asset` (category ``vehicle.car``), object frame (x front, y left, z up, metres),
         origin at the bottom centre; the tyres touch z = 0; the mirrors reach the box's sides.
         About 14-15 k triangles.
     """
-    groups, materials, name = _build(seed, body, paint, plate_style)
+    groups, materials, name = _build(seed, body, paint, plate_style, paint_region, anonymised_plates)
     parts = [p for group in groups.values() for p in group]
     vertices, faces, face_material = merge_parts(parts)
 
@@ -146,18 +98,19 @@ def procedural_car(seed: int, body: str | None = None, paint: tuple | None = Non
     return validate_asset(asset)
 
 
-def procedural_car_parts(seed: int, body: str | None = None, paint: tuple | None = None,
-                         plate_style: str = "eu") -> dict[str, list[MeshPart]]:
+def procedural_car_parts(seed: int, body: str | None = None, paint: tuple | None = None, plate_style: str = "eu",
+                         paint_region: str = "global", anonymised_plates: bool = False) -> dict[str, list[MeshPart]]:
     """The parts of :func:`procedural_car` (same arguments) by group, before centring: ``body`` (the
     shell), ``lenses``, ``wheels``, ``exterior`` (grille slats, mirrors, handles, wipers), ``plates``
     and ``interior``; the car's vertices are their union shifted to the box's bottom centre."""
-    return _build(seed, body, paint, plate_style)[0]
+    return _build(seed, body, paint, plate_style, paint_region, anonymised_plates)[0]
 
 
-def _build(seed: int, body: str | None, paint: tuple | None, plate_style: str
-           ) -> tuple[dict[str, list[MeshPart]], tuple[Material, ...], str]:
+def _build(seed: int, body: str | None, paint: tuple | None, plate_style: str, paint_region: str = "global",
+           anonymised_plates: bool = False) -> tuple[dict[str, list[MeshPart]], tuple[Material, ...], str]:
     """(parts by group, material table, asset name) of :func:`procedural_car`."""
     style = check_plate_style(plate_style)
+    check_paint_region(paint_region)
     rng = np.random.default_rng([int(seed) & 0xFFFFFFFF, 0x5CA4])
     names = list(BODY_SPECS)
     if body is None:
@@ -169,12 +122,13 @@ def _build(seed: int, body: str | None, paint: tuple | None, plate_style: str
         raise ValueError(f"procedural_car: unknown body {body!r}; expected one of {', '.join(names)}")
     spec = jitter_spec(BODY_SPECS[body](), rng)
     detail_rng = np.random.default_rng([int(seed) & 0xFFFFFFFF, 0xDE7A])
-    materials, paint_name, looks = _materials(rng, detail_rng, paint, body, style)
-    groups = _car_parts(spec, style, looks, detail_rng)
+    materials, paint_name, looks = _materials(rng, detail_rng, paint, body, style, paint_region, anonymised_plates)
+    groups = _car_parts(spec, style, looks, detail_rng, anonymised_plates)
     return groups, materials, f"procedural-{body}-{seed}-{paint_name.replace(' ', '_')}"
 
 
-def _car_parts(spec: BodySpec, style: PlateStyle, looks: dict, rng: np.random.Generator) -> dict[str, list[MeshPart]]:
+def _car_parts(spec: BodySpec, style: PlateStyle, looks: dict, rng: np.random.Generator,
+               anonymised_plates: bool = False) -> dict[str, list[MeshPart]]:
     """Every mesh part of the car by group: the body (a little narrower than ``spec.width`` so the
     mirrors fit in the box), lamp lenses, wheels and wells, exterior details, plates and the interior.
     The wheels keep ``spec.width``'s track: their outer faces stand about flush with the body's sides."""
@@ -186,7 +140,7 @@ def _car_parts(spec: BodySpec, style: PlateStyle, looks: dict, rng: np.random.Ge
                 + door_handle_parts(shell, looks["chrome"]) + wiper_parts(surface, shell, style.right_hand_drive))
     return {
         "body": [body], "lenses": lenses, "wheels": wheel_parts(spec) + wheel_well_parts(shell), "exterior": exterior,
-        "plates": plate_parts(surface, shell, style, rng), "interior": interior_parts(shell, style.right_hand_drive),
+        "plates": plate_parts(surface, shell, style, rng, anonymised_plates), "interior": interior_parts(shell, style.right_hand_drive),
     }
 
 
@@ -194,13 +148,14 @@ def _car_parts(spec: BodySpec, style: PlateStyle, looks: dict, rng: np.random.Ge
 
 
 def _materials(rng: np.random.Generator, detail_rng: np.random.Generator, paint: tuple | None, body: str,
-               style: PlateStyle | None = None) -> tuple[tuple[Material, ...], str, dict]:
+               style: PlateStyle | None = None, paint_region: str = "global", anonymised_plates: bool = False
+               ) -> tuple[tuple[Material, ...], str, dict]:
     """The material table in slot order (:mod:`.car_body`), the paint's name and the detail choices.
 
     ``rng`` draws exactly what it drew before the details existed (paint, roughness, glass opacity and
     tint, dark rims: the last two are no longer used but keep the stream); ``detail_rng`` the rest.
     """
-    palette = paint_palette()
+    palette = paint_palette(paint_region)
     weights = np.array([p[3] for p in palette])
     idx = int(rng.choice(len(palette), p=weights / weights.sum()))
     name, color, metallic, _ = palette[idx]
@@ -240,6 +195,8 @@ def _materials(rng: np.random.Generator, detail_rng: np.random.Generator, paint:
     seat_rgb = (np.array([0.20, 0.16, 0.11]) if beige else np.array([0.035, 0.035, 0.038])) * d.uniform(0.8, 1.2)
     brake_rgb = np.array([0.30, 0.29, 0.28]) * d.uniform(0.8, 1.1)
     st = style or check_plate_style("eu")
+    plate_rgb = ([anonymised_plate_rgb(st, rear) for rear in (False, True)] if anonymised_plates
+                 else [np.array(st.front_rgb), np.array(st.rear_rgb)])
     mats = [
         Material("paint", base_color=color, metallic=0.0, roughness=paint_rough, clearcoat=1.0, flake=flake),
         Material("glass", base_color=front_tint, metallic=0.0, roughness=0.05, specular=pane_specular(front_tint, 0.06),
@@ -259,8 +216,8 @@ def _materials(rng: np.random.Generator, detail_rng: np.random.Generator, paint:
         Material("gap", base_color=np.array([0.006, 0.006, 0.006]), metallic=0.0, roughness=0.9, specular=0.2),
         Material("paint_lower", base_color=lower, metallic=0.0, roughness=min(paint_rough + 0.12 * dirt, 0.6),
                  clearcoat=1.0 - 0.4 * dirt, flake=flake),
-        Material("plate_front", base_color=np.array(st.front_rgb), roughness=0.45, retroreflective=0.3),
-        Material("plate_rear", base_color=np.array(st.rear_rgb), roughness=0.45, retroreflective=0.3),
+        Material("plate_front", base_color=plate_rgb[0], roughness=0.45, retroreflective=0.3),
+        Material("plate_rear", base_color=plate_rgb[1], roughness=0.45, retroreflective=0.3),
         Material("plate_ink", base_color=np.array(st.ink_rgb), roughness=0.5),
         Material("plate_band", base_color=np.array(st.band_rgb or st.ink_rgb), roughness=0.5),
         Material("interior", base_color=seat_rgb, roughness=0.85, specular=0.3),

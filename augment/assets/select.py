@@ -14,6 +14,7 @@ import numpy as np
 
 from ..core import InputError
 from .asset import Asset
+from .car_paint import paint_region_for_location
 from .categories import category_for_asset
 from .class_sizes import read_class_sizes
 from .classes import CLASS_CATEGORIES, ClassMix, procedural_object
@@ -31,14 +32,16 @@ def load_asset_options(asset: str | Path, asset_front: str = "+z", asset_length:
 
 
 @lru_cache(maxsize=64)
-def _procedural(seed: int, plate_style: str = "eu") -> Asset:
-    return procedural_car(seed, plate_style=plate_style)
+def _procedural(seed: int, plate_style: str = "eu", paint_region: str = "global", anonymised_plates: bool = True
+                ) -> Asset:
+    return procedural_car(seed, plate_style=plate_style, paint_region=paint_region, anonymised_plates=anonymised_plates)
 
 
 @lru_cache(maxsize=256)
 def _procedural_of(detection_class: str, seed: int, still: bool = False, sizes_path: str | None = None,
-                   plate_style: str = "eu") -> Asset:
-    return procedural_object(detection_class, seed, read_class_sizes(sizes_path), still=still, plate_style=plate_style)
+                   plate_style: str = "eu", paint_region: str = "global", anonymised_plates: bool = True) -> Asset:
+    return procedural_object(detection_class, seed, read_class_sizes(sizes_path), still=still, plate_style=plate_style,
+                             paint_region=paint_region, anonymised_plates=anonymised_plates)
 
 
 CATEGORY_CLASS = {category: name for name, options in CLASS_CATEGORIES.items() for category, _, _ in options}
@@ -64,6 +67,7 @@ def select_assets(
     still: bool = False,
     class_sizes: str | Path | None = None,
     location: str | None = None,
+    anonymised_plates: bool = True,
 ) -> list[Asset]:
     """``n_objects`` assets: the file ``asset`` repeated, random files of ``assets_dir``, or procedural objects.
 
@@ -79,11 +83,16 @@ def select_assets(
         class_sizes: a class-sizes table (``streetaug class-sizes``) procedural objects are sized from (None:
             the shipped one).
         location: the scene's ``log.location`` (its map name): procedural cars get its country's number
-            plates and driving side (:func:`~.number_plates.plate_style_for_location`; None: ``eu``).
+            plates and driving side (:func:`~.number_plates.plate_style_for_location`; None: ``eu``) and
+            its region's paint colours (:func:`~.car_paint.paint_region_for_location`; None: ``global``).
+        anonymised_plates: procedural cars' plates without characters, in the plate's mean colour (the
+            default: nuScenes' images blur every plate, so readable plates would give inserted cars away);
+            False: readable characters.
     """
     if n_objects < 1:
         raise ValueError(f"n_objects must be >= 1, got {n_objects}")
     plate_style = "eu" if location is None else plate_style_for_location(location)
+    paint_region = paint_region_for_location(location)
     if asset is not None:
         return [load_asset_options(asset, asset_front, asset_length)] * n_objects
     if assets_dir is not None and class_mix is not None:
@@ -105,6 +114,6 @@ def select_assets(
     if class_mix is not None:
         names = class_mix.draw(rng, n_objects)
         sizes_path = None if class_sizes is None else str(class_sizes)
-        return [_procedural_of(name, int(s), still, sizes_path, plate_style)
+        return [_procedural_of(name, int(s), still, sizes_path, plate_style, paint_region, anonymised_plates)
                 for name, s in zip(names, rng.integers(0, _SEED_RANGE, size=n_objects))]
-    return [_procedural(int(s), plate_style) for s in rng.integers(0, _SEED_RANGE, size=n_objects)]
+    return [_procedural(int(s), plate_style, paint_region, anonymised_plates) for s in rng.integers(0, _SEED_RANGE, size=n_objects)]

@@ -1,9 +1,10 @@
-"""Procedural cars carry the number plates and driving side of the scene's location."""
+"""Procedural cars carry the number plates, driving side and paint colours of the scene's location."""
 
 from __future__ import annotations
 
 import numpy as np
 
+from streetaug.augment.assets.car_paint import paint_region_for_location
 from streetaug.augment.assets.classes import ClassMix
 from streetaug.augment.assets.procedural import procedural_car
 from streetaug.augment.assets.select import select_assets
@@ -17,7 +18,8 @@ def test_select_assets_builds_the_locations_plates():
     seed = _seed_drawn(0)
     for location, style in (("singapore-queenstown", "sg"), ("boston-seaport", "us"), (None, "eu"), ("berlin", "eu")):
         (car,) = select_assets(np.random.default_rng(0), 1, location=location)
-        expected = procedural_car(seed, plate_style=style)
+        expected = procedural_car(seed, plate_style=style, paint_region=paint_region_for_location(location),
+                                  anonymised_plates=True)
         np.testing.assert_array_equal(car.vertices, expected.vertices)
         np.testing.assert_array_equal(car.faces, expected.faces)
     sg, us = (select_assets(np.random.default_rng(0), 1, location=loc)[0] for loc in ("singapore-onenorth", "boston-seaport"))
