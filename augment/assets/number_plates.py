@@ -2,10 +2,10 @@
 
 A plate is a thin box on the bumper (its face in the object frame's y-z plane, x front) with a row of
 dark character blocks slightly proud of it, so it reads as a bright rectangle with a dark band at
-distance and as characters up close, or (``anonymised``) as a plain plate of its mean colour: nuScenes
-blurs the plates of its images, and a blurred plate is about that.  Styles follow the nuScenes locations: Singapore (``sg``,
-right-hand drive, white front / yellow rear plates), Boston (``us``, the 12 x 6 inch plate) and
-``eu`` (the 520 x 110 mm plate with the blue band) for anything else.
+distance and as characters up close; or (``anonymised``) a plain plate of its face's mean colour:
+nuScenes blurs the plates of its images, and a blurred plate is about that.  Styles follow the nuScenes
+locations: Singapore (``sg``, right-hand drive, white front / yellow rear plates), Boston (``us``, the
+12 x 6 inch plate) and ``eu`` (the 520 x 110 mm plate with the blue band) for anything else.
 """
 
 from __future__ import annotations
@@ -157,4 +157,5 @@ def plate_part(style: PlateStyle, x_face: float, x_back: float, z_centre: float,
     return MeshPart(V, F, M, np.concatenate([p.normals for p in parts]))
 
 
-__all__ = ["CHAR_INK_SHARE", "PLATE_STYLES", "PlateStyle", "anonymised_plate_rgb", "check_plate_style", "plate_part", "plate_style_for_location"]
+__all__ = ["CHAR_INK_SHARE", "PLATE_STYLES", "PlateStyle", "anonymised_plate_rgb", "check_plate_style", "plate_part",
+           "plate_style_for_location"]

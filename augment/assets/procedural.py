@@ -140,7 +140,8 @@ def _car_parts(spec: BodySpec, style: PlateStyle, looks: dict, rng: np.random.Ge
                 + door_handle_parts(shell, looks["chrome"]) + wiper_parts(surface, shell, style.right_hand_drive))
     return {
         "body": [body], "lenses": lenses, "wheels": wheel_parts(spec) + wheel_well_parts(shell), "exterior": exterior,
-        "plates": plate_parts(surface, shell, style, rng, anonymised_plates), "interior": interior_parts(shell, style.right_hand_drive),
+        "plates": plate_parts(surface, shell, style, rng, anonymised_plates),
+        "interior": interior_parts(shell, style.right_hand_drive),
     }
 
 

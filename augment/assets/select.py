@@ -116,4 +116,5 @@ def select_assets(
         sizes_path = None if class_sizes is None else str(class_sizes)
         return [_procedural_of(name, int(s), still, sizes_path, plate_style, paint_region, anonymised_plates)
                 for name, s in zip(names, rng.integers(0, _SEED_RANGE, size=n_objects))]
-    return [_procedural(int(s), plate_style, paint_region, anonymised_plates) for s in rng.integers(0, _SEED_RANGE, size=n_objects)]
+    return [_procedural(int(s), plate_style, paint_region, anonymised_plates)
+            for s in rng.integers(0, _SEED_RANGE, size=n_objects)]
