@@ -346,3 +346,24 @@ def test_glare_rule_tells_a_suns_glare_from_a_clipped_patch_of_overcast_sky():
     ang = np.degrees(np.arccos(np.clip(PinholeCamera(K, W, H).rays() @ patch_cam, -1, 1)))
     leaves[(ang > 8.0) & (ang < 40.0)] = 40  # dark foliage all around the clipped patch
     assert not glare_is_sun(features(leaves, K, up, patch_cam))
+
+
+def test_without_sky_in_view_the_network_direction_stands_and_no_sun_is_reported(models):
+    """A view whose sky is hidden (foliage over all but the road): no clear-sky fit moves the network's direction
+    (there is no sky to fit), and the sun is not reported (nothing confirms it); the same view with its sky gets
+    the fit (the test above)."""
+    from streetaug.augment.lighting.skynet.predict import FIT_MIN_SKY_FRACTION, predict_sky
+
+    image, K, up, _ = _render(_sun(60, 30), 0, 0, gains=(1.1, 1.0, 0.85))
+    rng = np.random.default_rng(3)
+    hidden = image.copy()
+    rows = int(0.62 * hidden.shape[0])  # everything above the road: dark, textured leaves
+    leaves = rng.integers(0, 40, size=(rows, hidden.shape[1], 1)) + np.array([25, 45, 20])
+    hidden[:rows] = np.clip(leaves, 0, 255).astype(np.uint8)
+    pred = predict_sky(hidden, K, up, models=models)
+    assert pred.cues["sky_fraction"] < FIT_MIN_SKY_FRACTION and not pred.cues["clear_sky_fit"]
+    alone = predict_sky(hidden, K, up, models=models, use_cues=False)
+    assert angle_deg(pred.direction_cam, alone.direction_cam) < 1e-6
+    assert pred.sun_dir_cam is None and not pred.confident and "too little sky" in pred.reason
+    with_sky = predict_sky(image, K, up, models=models)
+    assert with_sky.cues["clear_sky_fit"] and with_sky.cues["sky_fraction"] >= FIT_MIN_SKY_FRACTION
