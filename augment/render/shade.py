@@ -89,6 +89,8 @@ class ShadingContext:
         foot_ratio: (3,) mean shadow ratio under the object (for ``bounce``).
         ground_shadow: the shadow ratio map as seen from the object, or None.
         rays: rays cast per stage (filled in place); raycast_s: seconds spent in ray casting.
+        residual: False = the environment's Monte Carlo residual is not sampled (``noisy`` stays 0): the
+            foreground's extra edge samples, whose pixels take the residual from the samples that have it.
     """
 
     prep: PreparedAsset
@@ -105,6 +107,7 @@ class ShadingContext:
     ground_shadow: GroundShadow | None = None
     rays: dict[str, int] = field(default_factory=dict)
     raycast_s: float = 0.0
+    residual: bool = True
 
     @classmethod
     def for_object(cls, prep: PreparedAsset, light: DistantLight, env: EnvironmentTables, T_cam_from_object: np.ndarray,
@@ -206,7 +209,7 @@ def _shade_batch(ctx: ShadingContext, p: np.ndarray, n_s: np.ndarray, n_g: np.nd
         mirror = (w_m, scale_m)
         r_cam = reflect(v, n_s) @ ctx.R_cam_from_obj.T
         smooth += mirror_albedo(n_v, params, w_m, spec_alb) * scale_m[:, None] * lookup_envmap(ctx.env.pyramid[0], r_cam)
-    for kind in ("env", "brdf"):
+    for kind in ("env", "brdf") if ctx.residual else ():
         if (ctx.settings.env_samples if kind == "env" else ctx.settings.brdf_samples) > 0:
             samples.append(_env_samples(ctx, kind, p, n_s, n_g, v, params, g_color, noisy, mirror))
     if samples:

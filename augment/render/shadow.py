@@ -16,7 +16,9 @@ since the light is distant)::
   ground-parallel plane through their pixel's point (a grazing ground pixel is decimetres deep).
 * Sky: every ``shadow_factor`` pixels, ``shadow_sky_dirs`` directions in the cone around the object's
   bounding sphere (the only directions it can block; the whole upper hemisphere under it), each
-  standing for ``w_k = cone solid angle / N``; smoothed and upsampled; at full resolution where it
+  standing for ``w_k = cone solid angle / N`` -- coarse to fine: on every 4th cell first, in between only
+  where those differ (elsewhere interpolated: far from the object the occlusion is smooth over many
+  cells) --; smoothed and upsampled; at full resolution where it
   changes fast between cells and within a band around where the object touches the ground (the
   contact shadow of feet, tyres and posts: the sky they hide, not only the sun).
 * A blocked ray sees the object's own surface, ``L_hit`` from the one-bounce model of
@@ -197,11 +199,14 @@ def _sky_occlusion(geo: "_Ground", box: PixelBox, light: DistantLight, prep: Pre
     D0 = np.zeros((len(uv), 3))
     C = np.zeros((len(uv), 3))
     chunk = max(1, SHADOW_CHUNK_RAYS // settings.shadow_sky_dirs)
-    cells = np.flatnonzero(valid)
-    for a in range(0, len(cells), chunk):
-        sel = cells[a : a + chunk]
-        D0[sel], C[sel] = _sky_deficit(p_obj[sel], geo.n_obj, light, prep, bounce, settings.shadow_sky_dirs, geo.R, rng,
-                                       stats, fade=False)
+
+    def evaluate(cells: np.ndarray) -> None:
+        for a in range(0, len(cells), chunk):
+            sel = cells[a : a + chunk]
+            D0[sel], C[sel] = _sky_deficit(p_obj[sel], geo.n_obj, light, prep, bounce, settings.shadow_sky_dirs, geo.R,
+                                           rng, stats, fade=False)
+
+    _coarse_to_fine_cells(hl, wl, valid, evaluate, D0, C, E_safe, stats)
     stats["grid"] = [int(hl), int(wl)]
     stats["pixels"] = int(valid.sum())
 
@@ -225,6 +230,46 @@ def _sky_occlusion(geo: "_Ground", box: PixelBox, light: DistantLight, prep: Pre
         low = np.where(valid, luminance(D0 / E_safe), 0.0).reshape(hl, wl).astype(np.float32)
         _refine_sky_edges(geo, box, low, light, prep, bounce, settings, rng, stats, E_safe, sky_def, bounce_gain)
     return SkyOcclusion(uv, valid, D0, C, sky_def, bounce_gain)
+
+
+def _coarse_to_fine_cells(hl: int, wl: int, valid: np.ndarray, evaluate, D0: np.ndarray, C: np.ndarray,
+                          E_safe: np.ndarray, stats: dict) -> None:
+    """Fill the sky deficit (D0, C) of the (hl x wl) cell grid, in place, at the resolution it needs.
+
+    The sky a car hides changes over distances like the car's distance from the ground point: far from
+    it (most of the pixel box) it is smooth over many cells.  It is evaluated (``evaluate(cell indices)``)
+    on every :data:`SKY_COARSE_STEP`-th cell first; within a square of four such nodes whose deficits differ
+    by more than :data:`SKY_COARSE_TOL` of E (or that mixes cells with and without a ground point), every
+    cell is evaluated, elsewhere the cells are interpolated bilinearly between the nodes.
+    """
+    S = SKY_COARSE_STEP
+    if hl < 2 * S or wl < 2 * S:
+        evaluate(np.flatnonzero(valid))
+        return
+    ry = np.unique(np.r_[np.arange(0, hl, S), hl - 1])
+    rx = np.unique(np.r_[np.arange(0, wl, S), wl - 1])
+    nodes = (ry[:, None] * wl + rx[None, :]).ravel()
+    evaluate(nodes[valid[nodes]])
+    lum = luminance(D0[nodes] / E_safe).reshape(len(ry), len(rx))
+    ok = valid[nodes].reshape(len(ry), len(rx))
+    corners = np.stack([lum[:-1, :-1], lum[:-1, 1:], lum[1:, :-1], lum[1:, 1:]])
+    corner_ok = np.stack([ok[:-1, :-1], ok[:-1, 1:], ok[1:, :-1], ok[1:, 1:]])
+    refine = (corners.max(axis=0) - corners.min(axis=0) > SKY_COARSE_TOL) | (corner_ok.any(axis=0) & ~corner_ok.all(axis=0))
+    qy = np.clip(np.searchsorted(ry, np.arange(hl), side="right") - 1, 0, len(ry) - 2)
+    qx = np.clip(np.searchsorted(rx, np.arange(wl), side="right") - 1, 0, len(rx) - 2)
+    ty = ((np.arange(hl) - ry[qy]) / (ry[qy + 1] - ry[qy]))[:, None, None]
+    tx = ((np.arange(wl) - rx[qx]) / (rx[qx + 1] - rx[qx]))[None, :, None]
+    is_node = np.zeros((hl, wl), bool)
+    is_node[ry[:, None], rx[None, :]] = True
+    for a in (D0, C):
+        g = a[nodes].reshape(len(ry), len(rx), 3)
+        top = g[qy][:, qx] * (1 - tx) + g[qy][:, qx + 1] * tx
+        bot = g[qy + 1][:, qx] * (1 - tx) + g[qy + 1][:, qx + 1] * tx
+        interp = (top * (1 - ty) + bot * ty).reshape(-1, 3)
+        a[~is_node.ravel()] = np.where(valid[~is_node.ravel()][:, None], interp[~is_node.ravel()], 0.0)
+    fine = np.flatnonzero((refine[qy][:, qx] & ~is_node).ravel() & valid)
+    evaluate(fine)
+    stats["sky_cells_evaluated"] = int(valid[nodes].sum() + len(fine))
 
 
 def _refine_sky_edges(geo: "_Ground", box: PixelBox, low: np.ndarray, light: DistantLight, prep: PreparedAsset,
@@ -323,6 +368,8 @@ CONTACT_MAX_POINTS = 256
 GROUND_SNAP_M = 0.25  # depth-map points this close to the object's ground plane are taken on it ...
 GROUND_SNAP_END_M = 0.5  # ... and from this far on as the depth map says (smoothstep between)
 REFINE_RANGE_SIGMA = 0.12  # deficit difference (fraction of E) the refined band's smoothing does not cross
+SKY_COARSE_STEP = 4  # the sky deficit is first evaluated every this many cells ...
+SKY_COARSE_TOL = 0.01  # ... and at every cell where those nodes differ by more than this (fraction of E)
 SKY_REFINE_JUMP = 0.08  # sky-occlusion change (fraction of E) between neighbouring cells that asks for full resolution
 
 
