@@ -20,6 +20,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .locations import nuscenes_city
+
 # (family, name, sRGB hex, metallic, share within the family)
 _SHADES: tuple[tuple[str, str, str, float, float], ...] = (
     ("white", "pure white", "F2F2F2", 0.0, 0.40),
@@ -70,19 +72,12 @@ REGION_FAMILY_SHARES: dict[str, dict[str, float]] = {
                "yellow": 0.5, "other": 0.5},
 }
 
-_SINGAPORE = ("singapore-onenorth", "singapore-queenstown", "singapore-hollandvillage")
-_BOSTON = ("boston-seaport",)
 
 
 def paint_region_for_location(location: str | None) -> str:
     """The paint region of a nuScenes log location (its map name): ``asia_pacific`` (Singapore),
     ``north_america`` (Boston) or ``global`` (any other, or None)."""
-    loc = "" if location is None else str(location).strip().lower()
-    if loc in _SINGAPORE or loc.startswith("singapore"):
-        return "asia_pacific"
-    if loc in _BOSTON or loc.startswith("boston"):
-        return "north_america"
-    return "global"
+    return {"singapore": "asia_pacific", "boston": "north_america"}.get(nuscenes_city(location), "global")
 
 
 def check_paint_region(region: str) -> str:

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .car_body import PLATE_BAND, PLATE_FRONT, PLATE_INK, PLATE_REAR
+from .locations import nuscenes_city
 from .mesh_parts import MeshPart, box_mesh, merge_parts
 from .validate import smooth_vertex_normals
 
@@ -52,18 +53,11 @@ PLATE_STYLES: dict[str, PlateStyle] = {
                      (0.01, 0.04, 0.35), 7, False),
 }
 
-_SINGAPORE = ("singapore-onenorth", "singapore-queenstown", "singapore-hollandvillage")
-_BOSTON = ("boston-seaport",)
 
 
 def plate_style_for_location(location: str) -> str:
     """The plate style of a nuScenes log location (its map name): ``sg``, ``us`` or ``eu`` (any other)."""
-    loc = str(location).strip().lower()
-    if loc in _SINGAPORE or loc.startswith("singapore"):
-        return "sg"
-    if loc in _BOSTON or loc.startswith("boston"):
-        return "us"
-    return "eu"
+    return {"singapore": "sg", "boston": "us"}.get(nuscenes_city(location), "eu")
 
 
 def check_plate_style(style: str) -> PlateStyle:
