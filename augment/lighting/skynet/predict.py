@@ -54,12 +54,12 @@ GLARE_CENTRE_MAX_DEG = 35.0  # a fitted sun in a clipped region of at most this 
 # a clipped region (disc or glare) is the sun only if the sky within 8 deg of it is brighter than the sky 15-35 deg
 # beyond by at least this log ratio of linear radiance (x 1.2); chosen on training views only
 # (benchmarks/tune_glare_rule.py -> results/sun_error_glare_rule_s5.json: optimal 0.12-0.24, its middle)
-FIT_MIN_SKY_FRACTION = 0.1  # below this fraction of sky pixels the clear-sky fit and glare cues are not used
-# (they need sky to measure: on scene-0916's street views, median sky fraction 0, the fit moved the network's
-# direction away from the sun; threshold chosen on the training sets only, see benchmarks/results/sky_benchmark_real_s6.json)
 GLARE_MIN_FALLOFF = 0.18
 GLARE_FALLOFF_KEY = "glow_log_ratio_sky"  # the measure of sun_cues.glare_region_features
 GLARE_FALLOFF_UNKNOWN_IS_SUN = False  # without sky around it to tell (a patch among leaves, or the whole sky clipped)
+FIT_MIN_SKY_FRACTION = 0.1  # below this fraction of sky pixels the clear-sky fit and glare cues are not used
+# (they need sky to measure: on scene-0916's street views, median sky fraction 0, the fit moved the network's
+# direction away from the sun; threshold chosen on the training sets only, see benchmarks/results/sky_benchmark_real_s6.json)
 REFINE_MAX_PIXELS = 3000
 SATURATED_LDR = 0.97
 
@@ -327,6 +327,7 @@ def predict_sky(image_rgb: np.ndarray, K: np.ndarray, up_cam: np.ndarray | None 
     if use_cues:
         mask = simple_sky_mask(small.astype(np.float64) / 255.0, rays_h)
         cues.update(sky_features(small, rays_h, mask))
+    sky_cues = bool(use_cues and cues["sky_fraction"] >= FIT_MIN_SKY_FRACTION)  # sky enough to fit and to confirm
     if disc is not None:
         cues.update(disc_radius_deg=disc.radius_deg, disc_halo=disc.halo, disc_at_border=disc.clipped,
                     disc_elevation_deg=float(np.degrees(np.arcsin(np.clip((R @ disc.direction_cam)[2], -1, 1)))))
@@ -342,14 +343,13 @@ def predict_sky(image_rgb: np.ndarray, K: np.ndarray, up_cam: np.ndarray | None 
         vis_used = max(vis, DISC_VISIBILITY)
         cue = f"sun disc at pixel ({disc.pixel_xy[0]:.0f}, {disc.pixel_xy[1]:.0f})"
     else:
-        sky_cues = use_cues and cues.get("sky_fraction", 0.0) >= FIT_MIN_SKY_FRACTION
         if sky_cues:
             p = _clear_sky_posterior(small, rays_h, Ks, R, p, bins, mask)
             direction = _posterior_direction(p, bins)
             cue = "network x clear-sky fit"
         elif use_cues:
-            cue = f"network (sky fraction {cues.get('sky_fraction', 0.0):.2f} < {FIT_MIN_SKY_FRACTION}: no clear-sky fit)"
-        cues["clear_sky_fit"] = bool(sky_cues)
+            cue = f"network (sky fraction {cues['sky_fraction']:.2f} < {FIT_MIN_SKY_FRACTION}: no clear-sky fit)"
+        cues["clear_sky_fit"] = sky_cues
         unc = direction_cone_deg(p, bins, direction)
         cues.update(direction_fit_cam=R.T @ direction, uncertainty_fit_deg=unc)
         # a fitted sun inside a clipped region of the image is known only to within that region's radius
@@ -376,8 +376,7 @@ def predict_sky(image_rgb: np.ndarray, K: np.ndarray, up_cam: np.ndarray | None 
     t3 = time.perf_counter()
     sky = SkyVector(np.expm1(o["log_int"][0].double().numpy()), direction, o["latent"][0].double().numpy())
     # without sky in view nothing confirms the network's sun (a dim night sky, a street under trees)
-    unconfirmed = "too little sky in view to confirm it" if use_cues and disc is None and not cues.get(
-        "clear_sky_fit", True) else None
+    unconfirmed = "too little sky in view to confirm it" if use_cues and disc is None and not sky_cues else None
     out = _decide(sky, R, vis_used, unc, cue, sky_model, unconfirmed)
     timing = {"prepare": t1 - t0, "network": t2 - t1, "cues": t3 - t2, "total": time.perf_counter() - t0}
     return replace(out, timing_s=timing, cues=cues)
