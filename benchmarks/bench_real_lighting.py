@@ -50,11 +50,7 @@ from streetaug.augment.evaluation.novel_view import (  # noqa: E402
     view_scores,
 )
 from streetaug.augment.lighting.api import estimate_views_lighting  # noqa: E402
-from streetaug.augment.lighting.predicted_view import (  # noqa: E402
-    auto_exposure_target,
-    exposed_to_mean_ldr,
-    predicted_radiance,
-)
+from streetaug.augment.lighting.predicted_view import auto_exposed, predicted_radiance  # noqa: E402
 from streetaug.datasets.nuscenes import NuScenesReader  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -83,8 +79,7 @@ def scored(sl, target, source_images) -> dict:
     the same prediction at the reference camera's exposure instead (what the auto-exposure model adds)."""
     truth = real_view(target)
     raw = predicted_radiance(replace(sl, input_mean_ldr={}), target)
-    ae_target = None if sl.is_input(target) else auto_exposure_target(sl, target)
-    s = view_scores(raw if ae_target is None else exposed_to_mean_ldr(raw, ae_target), truth)
+    s = view_scores(raw if sl.is_input(target) else auto_exposed(sl, target, raw), truth)
     c = constant_colour_scores(source_images, truth)
     return {"psnr": s["psnr"], "si_psnr": s["si_psnr"], "const_psnr": c["psnr"], "const_si_psnr": c["si_psnr"],
             "psnr_reference_exposure": view_scores(raw, truth)["psnr"]}

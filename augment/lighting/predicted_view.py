@@ -85,18 +85,19 @@ def predicted_radiance(lighting: SampleLighting, view: CameraView, width: int = 
             R = np.asarray(view.T_cam_from_global)[:3, :3] @ np.asarray(lighting.T_global_from_ref_cam)[:3, :3]
             light = ref.light_cam.rotated(R)
         rad = light.radiance(np.zeros_like(rays), rays).reshape(h, width, 3)
-        return rad if same else _auto_exposed(lighting, view, rad)
+        return rad if same else auto_exposed(lighting, view, rad)
     T = invert_transform(lighting.T_global_from_vol) @ np.asarray(view.T_global_from_cam)
     centre = lighting.hybrid.lift_out_of_solid(T[:3, 3])
     dirs = rays @ T[:3, :3].T
     with torch.no_grad():
         rad = lighting.hybrid.radiance(np.repeat(centre[None], len(dirs), axis=0), dirs, include_sun=False).numpy()
     rad = rad.reshape(h, width, 3)
-    return rad * float(lighting.exposure_ratio.get(view.channel, 1.0)) if same else _auto_exposed(lighting, view, rad)
+    return rad * float(lighting.exposure_ratio.get(view.channel, 1.0)) if same else auto_exposed(lighting, view, rad)
 
 
-def _auto_exposed(lighting: SampleLighting, view: CameraView, radiance: np.ndarray) -> np.ndarray:
-    """A non-input view's prediction at its camera's auto-exposure (the reference exposure if that is unknown)."""
+def auto_exposed(lighting: SampleLighting, view: CameraView, radiance: np.ndarray) -> np.ndarray:
+    """A non-input view's prediction ``radiance`` (at the reference exposure) at its camera's auto-exposure
+    (:func:`auto_exposure_target`; left at the reference exposure if that is unknown)."""
     target = auto_exposure_target(lighting, view)
     return radiance if target is None else exposed_to_mean_ldr(radiance, target)
 
