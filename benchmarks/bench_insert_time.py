@@ -60,7 +60,7 @@ def main(argv=None) -> None:
     from streetaug.datasets.nuscenes import NuScenesReader
 
     has_location = "location" in inspect.signature(select_assets).parameters  # older checkouts: no plates
-    cpu = _time_cpu_of({"placement": (pipeline.sample, "place_in_sample"),
+    cpu = time_cpu_of({"placement": (pipeline.sample, "place_in_sample"),
                         "scene_depth": (pipeline.context, "scene_depth")})
     bundled = NuScenesReader(bundled_dataroot(), BUNDLED_VERSION)
     items = [(bundled, bundled.sample_tokens(name)[0], "CAM_FRONT", name)
@@ -107,7 +107,7 @@ def main(argv=None) -> None:
     print(f"{args.tag}: median CPU per insertion {doc['median_cpu_s']:.2f} s; wrote {out}")
 
 
-def _time_cpu_of(functions: dict[str, tuple]) -> dict[str, float]:
+def time_cpu_of(functions: dict[str, tuple]) -> dict[str, float]:
     """Wrap each ``(module, name)`` so its CPU seconds (``time.process_time``) add up under its label in the
     returned dict (cleared by the caller per run); names a checkout lacks are skipped."""
     spent: dict[str, float] = {}

@@ -115,15 +115,10 @@ def replay(args) -> dict:
 
     import streetaug.augment.render.insert as insert_mod
 
-    cpu_stage: dict[str, float] = {}
-    for label, name in (("shadow", "render_shadow"), ("foreground", "_foreground"), ("composite", "composite_layers")):
-        def timed(*a, _f=getattr(insert_mod, name), _label=label, **k):
-            c0 = time.process_time()
-            try:
-                return _f(*a, **k)
-            finally:
-                cpu_stage[_label] = cpu_stage.get(_label, 0.0) + time.process_time() - c0
-        setattr(insert_mod, name, timed)
+    from bench_insert_time import time_cpu_of  # this folder is the script's sys.path[0]
+
+    cpu_stage = time_cpu_of({"shadow": (insert_mod, "render_shadow"), "foreground": (insert_mod, "_foreground"),
+                             "composite": (insert_mod, "composite_layers")})
     with open(args.inputs, "rb") as f:
         calls = pickle.load(f)
     for c in calls:
