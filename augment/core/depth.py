@@ -34,17 +34,32 @@ def sparse_depth(points_cam: np.ndarray, K: np.ndarray, width: int, height: int)
     points_cam = np.asarray(points_cam, dtype=np.float64)
     check_shape(points_cam, ("N", 3), "points_cam")
     pts = points_cam[np.isfinite(points_cam).all(axis=1) & (points_cam[:, 2] > MIN_DEPTH_M)]
-    depth = np.zeros((height, width), np.float32)
-    if len(pts) == 0:
-        return depth
-    uv, z = project_points(K, pts)
+    u, v, z, ok = _pixels_of(pts, K, width, height)
+    return _zbuffer(u[ok], v[ok], z[ok], z[ok], width, height)
+
+
+def _pixels_of(pts: np.ndarray, K: np.ndarray, width: int, height: int) -> tuple[np.ndarray, ...]:
+    """Nearest pixel (u, v) (N,) int64 and depth z (N,) of finite points (N, 3) in front of the camera, and
+    whether the pixel is in the image (N,) bool."""
+    uv, z = project_points(K, pts) if len(pts) else (np.zeros((0, 2)), np.zeros(0))
     u = np.round(uv[:, 0]).astype(np.int64)
     v = np.round(uv[:, 1]).astype(np.int64)
-    ok = (u >= 0) & (u < width) & (v >= 0) & (v < height)
-    u, v, z = u[ok], v[ok], z[ok]
+    return u, v, z, (u >= 0) & (u < width) & (v >= 0) & (v < height)
+
+
+def _zbuffer(u: np.ndarray, v: np.ndarray, z: np.ndarray, values: np.ndarray, width: int, height: int) -> np.ndarray:
+    """(H, W) float32 image of ``values`` (N,) of the nearest point (least ``z``) per in-image pixel (u, v), 0 where
+    empty."""
+    out = np.zeros((height, width), np.float32)
     order = np.argsort(-z, kind="stable")  # far first, so the nearest point is written last
-    depth[v[order], u[order]] = z[order]
-    return depth
+    out[v[order], u[order]] = values[order]
+    return out
+
+
+def _plane_coefficients(K: np.ndarray, ground_normal_cam: np.ndarray) -> np.ndarray:
+    """(3,) ``a`` with ``n . (Kinv [u, v, 1]) = a0 u + a1 v + a2``: the ray through pixel (u, v) has z = 1, so
+    the plane ``n . p + d = 0`` lies at depth ``-d / (a0 u + a1 v + a2)`` along it."""
+    return np.linalg.inv(K).T @ np.asarray(ground_normal_cam, dtype=np.float64)
 
 
 def ground_plane_depth(K: np.ndarray, width: int, height: int, ground_normal_cam: np.ndarray,
@@ -57,11 +72,9 @@ def ground_plane_depth(K: np.ndarray, width: int, height: int, ground_normal_cam
     check_shape(K, (3, 3), "K")
     n = np.asarray(ground_normal_cam, dtype=np.float64)
     check_shape(n, (3,), "ground_normal_cam")
-    Kinv = np.linalg.inv(K)
     u = np.arange(width, dtype=np.float64)
     v = np.arange(height, dtype=np.float64)
-    # ray(u, v) = Kinv [u, v, 1] has z = 1, so the plane's t along it is the depth.
-    a = Kinv.T @ n  # n . (Kinv [u, v, 1]) = a0 u + a1 v + a2
+    a = _plane_coefficients(K, n)
     denom = a[0] * u[None, :] + a[1] * v[:, None] + a[2]
     with np.errstate(divide="ignore", invalid="ignore"):
         z = -float(ground_offset_m) / denom
@@ -78,10 +91,7 @@ GROUND_ROW_CLOSE_PX = 15  # horizontal closing of the ground (points along a sca
 
 def _zbuffer_inverse(u: np.ndarray, v: np.ndarray, z: np.ndarray, width: int, height: int) -> np.ndarray:
     """(H, W) float32 ``1 / z`` of the nearest point per pixel (0 = empty) for in-image pixels (u, v) (N,) int."""
-    inv = np.zeros((height, width), np.float32)
-    order = np.argsort(-z, kind="stable")  # far first, so the nearest point is written last
-    inv[v[order], u[order]] = 1.0 / np.maximum(z[order].astype(np.float32), np.float32(1e-6))
-    return inv
+    return _zbuffer(u, v, z, 1.0 / np.maximum(z.astype(np.float32), np.float32(1e-6)), width, height)
 
 
 def _ground_inverse_depth(ground: np.ndarray, obstacle: np.ndarray) -> tuple[int, np.ndarray]:
@@ -134,7 +144,7 @@ def _ground_inverse_depth(ground: np.ndarray, obstacle: np.ndarray) -> tuple[int
 def _plane_depth_at(K: np.ndarray, ys: np.ndarray, xs: np.ndarray, ground_normal_cam: np.ndarray,
                     ground_offset_m: float) -> np.ndarray:
     """:func:`ground_plane_depth` at the pixels (ys, xs) (N,) only, (N,) float32 (same arithmetic, same values)."""
-    a = np.linalg.inv(K).T @ np.asarray(ground_normal_cam, dtype=np.float64)
+    a = _plane_coefficients(K, ground_normal_cam)
     denom = a[0] * xs.astype(np.float64) + a[1] * ys.astype(np.float64) + a[2]
     with np.errstate(divide="ignore", invalid="ignore"):
         z = -float(ground_offset_m) / denom
@@ -147,7 +157,7 @@ def _first_plane_row(K: np.ndarray, width: int, height: int, ground_normal_cam: 
 
     Along a row the ray's ``n . Kinv [u, v, 1]`` is affine in u, so it has the sign a hit needs (opposite to d)
     somewhere in the row only if it has it in the first or the last column."""
-    a = np.linalg.inv(K).T @ np.asarray(ground_normal_cam, dtype=np.float64)
+    a = _plane_coefficients(K, ground_normal_cam)
     v = np.arange(height, dtype=np.float64)
     ends = a[0] * np.array([0.0, width - 1.0])[None, :] + a[1] * v[:, None] + a[2]
     rows = np.flatnonzero((np.sign(ends) == -np.sign(float(ground_offset_m))).any(axis=1))
@@ -175,10 +185,7 @@ def densify_lidar_depth(points_cam: np.ndarray, K: np.ndarray, width: int, heigh
     check_shape(pts, ("N", 3), "points_cam")
     pts = pts[(pts[:, 2] < max_depth_m) & np.isfinite(pts).all(axis=1) & (pts[:, 2] > MIN_DEPTH_M)]
     depth = np.full((height, width), np.inf, np.float32)
-    uv, z = project_points(K, pts) if len(pts) else (np.zeros((0, 2)), np.zeros(0))
-    u = np.round(uv[:, 0]).astype(np.int64)
-    v = np.round(uv[:, 1]).astype(np.int64)
-    ok = (u >= 0) & (u < width) & (v >= 0) & (v < height)
+    u, v, z, ok = _pixels_of(pts, K, width, height)
     if ok.any():
         is_ground = np.zeros(len(pts), dtype=bool)
         if ground_fill is not None:
