@@ -33,7 +33,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import torch
 from scipy import ndimage
 from scipy.optimize import nnls
 
@@ -160,7 +159,6 @@ def observed_voxels(grid: LogGrid, observations: list[ViewObservation]) -> Obser
     is_ground_pt = pts[:, 2] < GROUND_SNAP_M
     pts[is_ground_pt, 2] = -0.05  # into the top ground layer
     flat, inside = grid.flat_index(pts)
-    flat, inside = flat.numpy(), inside.numpy()
     if not inside.all():
         flat, rgb, vd, pts, cap = flat[inside], rgb[inside], vd[inside], pts[inside], cap[inside]
     count = np.bincount(flat, minlength=n).astype(np.float64)
@@ -189,8 +187,8 @@ def occupancy(grid: LogGrid, observed: np.ndarray, lidar_points_vol: np.ndarray 
     occ[:, :, : grid.n_below] = True  # the ground continues everywhere
     if lidar_points_vol is not None and len(lidar_points_vol):
         lp = lidar_points_vol[lidar_points_vol[:, 2] >= GROUND_SNAP_M]
-        lf, lin = grid.flat_index(torch.from_numpy(np.ascontiguousarray(lp)))
-        lf = lf.numpy()[lin.numpy()]
+        lf, lin = grid.flat_index(lp)
+        lf = lf[lin]
         occ.reshape(-1)[lf] = True
         stats["lidar_voxels"] = int(len(np.unique(lf)))
     return occ
@@ -246,7 +244,7 @@ def sky_carved(grid: LogGrid, observations: list[ViewObservation], stride: int =
         t_exit = np.maximum((lo - c) / safe, (hi - c) / safe).min(axis=1).clip(min=0.0)
         t = t_exit[:, None] * frac[None]
         flat, inside = grid.flat_index_xyz(*(c[a] + t * d[:, a, None] for a in range(3)))
-        carved[flat.numpy()[inside.numpy()]] = True
+        carved[flat[inside]] = True
     return carved.reshape(grid.shape)
 
 
@@ -309,11 +307,10 @@ def surface_lighting(grid: LogGrid, occ: np.ndarray, surface: np.ndarray, normal
     p_s[ground_s, 2] = 0.05
     tau = np.zeros(len(s_idx))
     if light.sun_dir is not None and len(s_idx):
-        params = torch.zeros((*grid.shape, N_CHANNELS), dtype=torch.float32)
-        params[..., CH_ALPHA] = torch.from_numpy(occ.astype(np.float32))
-        probe = HybridLighting(torch.from_numpy(sky_world), grid=grid, params=params, n_samples=SHADOW_SAMPLES)
-        with torch.no_grad():
-            tau = probe.transmittance(p_s, np.repeat(light.sun_dir[None], len(p_s), axis=0)).numpy().astype(np.float64)
+        params = np.zeros((*grid.shape, N_CHANNELS), dtype=np.float32)
+        params[..., CH_ALPHA] = occ
+        probe = HybridLighting(np.asarray(sky_world), grid=grid, params=params, n_samples=SHADOW_SAMPLES)
+        tau = probe.transmittance(p_s, np.repeat(light.sun_dir[None], len(p_s), axis=0)).astype(np.float64)
         cos_s = np.maximum(n_s @ light.sun_dir, 0.0)
     else:
         cos_s = np.zeros(len(s_idx))
@@ -356,7 +353,7 @@ def shade_surfaces(grid: LogGrid, surf: Surfaces, obs_rgb: np.ndarray, light: Di
 
 
 def assemble_params(grid: LogGrid, occ: np.ndarray, obs: ObservedVoxels, surf: Surfaces,
-                    shaded: np.ndarray) -> torch.Tensor:
+                    shaded: np.ndarray) -> np.ndarray:
     """VSG parameters (X, Y, Z, 8) float32: alpha = occupancy, colours (observed, else shaded, grown inwards),
     lobe axes (viewing direction where observed, else the normal), the surfaces' broad lobe."""
     n = grid.n_voxels
@@ -385,13 +382,13 @@ def assemble_params(grid: LogGrid, occ: np.ndarray, obs: ObservedVoxels, surf: S
     axis = axis[some]
     axis[~(np.linalg.norm(axis, axis=1) > 1e-6)] = (0.0, 0.0, 1.0)
     values[some, CH_AXIS] = axis
-    return torch.from_numpy(values).reshape(*grid.shape, N_CHANNELS)
+    return values.reshape(*grid.shape, N_CHANNELS)
 
 
 def build_volume(grid: LogGrid, observations: list[ViewObservation], lidar_points_vol: np.ndarray | None,
                  light: DistantSun, sky_world: np.ndarray, ground_albedo: float = 0.15,
-                 unseen_keep: float = UNSEEN_KEEP) -> tuple[torch.Tensor, dict]:
-    """VSG parameters (X, Y, Z, 8) float32 tensor of a scene (see module doc), and build statistics."""
+                 unseen_keep: float = UNSEEN_KEEP) -> tuple[np.ndarray, dict]:
+    """VSG parameters (X, Y, Z, 8) float32 array of a scene (see module doc), and build statistics."""
     stats: dict = {}
     obs = observed_voxels(grid, observations)
     stats["observed_voxels"] = int(obs.observed.sum())

@@ -3,7 +3,8 @@
 Used by the front door (:mod:`.api`) whenever the ephemeris cannot place the sun (no location, no timestamp, a
 bare image). The sun is reported (``sun_source="image"``) only when the predictor is confident (visibility
 and a tight direction cone); otherwise a diffuse sky, said so. The ground below the horizon is the image's
-road (its median radiance); radiance is on the image's scale (contract response, EV 0).
+road (its median radiance); radiance is on the image's scale (contract response, EV 0). The network (and
+torch) is imported when an estimate runs, not with this module: the ephemeris levels never need it.
 """
 
 from __future__ import annotations
@@ -13,7 +14,6 @@ import time
 import numpy as np
 
 from .evidence import ground_evidence, image_sky_mask, prepare_image
-from .skynet.predict import estimate_sky_light
 from .types import ENVMAP_HEIGHT, ENVMAP_WIDTH, LightingEstimate, json_clean
 
 MIN_SKY_PIXELS = 20  # fewer visible sky pixels: the predicted sky is not refined
@@ -29,6 +29,8 @@ def learned_sky_estimate(image_rgb: np.ndarray, K: np.ndarray, up_cam: np.ndarra
         up_cam: (3,) unit gravity up, camera frame ((0, -1, 0) for a level camera).
         camera_height_m: camera height above the ground (for the road evidence).
     """
+    from .skynet.predict import estimate_sky_light  # deferred: imports torch (~0.7 s)
+
     t0 = time.perf_counter()
     up_cam = np.asarray(up_cam, dtype=np.float64)
     work = prepare_image(image_rgb, np.asarray(K, dtype=np.float64), up_cam)

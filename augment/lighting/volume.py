@@ -2,14 +2,18 @@
 
 Everything here lives in one z-up *volume frame* (metres; in practice the ego frame of the reference camera,
 shifted so that the origin is on the ground under that camera: x forward, y left, z up, ground at z = 0).
-Radiance is linear RGB on one radiometric scale (the reference image's); torch float32, differentiable with
-respect to the sky dome, the sun irradiance and the volume parameters.
+Radiance is linear RGB on one radiometric scale (the reference image's).
+
+Two backends, chosen by what :class:`HybridLighting` is built from (numpy in, numpy out; tensors in, tensors
+out): numpy float32 arrays (what the pipeline builds; :class:`NumpyBackend`, no torch import), or torch tensors
+(:mod:`.volume_torch`, imported only then), differentiable with respect to the sky dome, the sun irradiance and
+the volume parameters. Both give the same radiance to float32 rounding (tests/lighting/test_volume_numpy_backend.py).
 
 * **Sky dome** ``sky_world``: (H, W, 3) equirect map in the world (z-up) convention of
   :mod:`streetaug.augment.core` (``lon = atan2(dy, dx)``, ``lat = asin(dz)``), sun disc excluded; the
   sun is analytic (direction, irradiance, angular radius) and added by the radiance query where a ray
   falls inside its disc.
-* **VSG volume** ``params``: (X, Y, Z, 8) channels-last tensor, per voxel ``[c_r, c_g, c_b, mu_x, mu_y, mu_z,
+* **VSG volume** ``params``: (X, Y, Z, 8) channels-last array, per voxel ``[c_r, c_g, c_b, mu_x, mu_y, mu_z,
   sigma, alpha]``: the lobe ``G(l) = c exp(-(1 - l . mu / |mu|) / sigma^2)`` (c: RGB amplitude, mu: axis,
   sigma: sharpness, larger = broader) and the occupancy ``alpha`` in [0, 1].
 * **Log-projected grid** (:class:`LogGrid`): voxel i along x spans ``[i, i + 1)`` of the continuous index
@@ -31,11 +35,12 @@ from __future__ import annotations
 
 import functools
 import math
+import sys
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
-import torch
 
 from ..core import (
     InputError,
@@ -50,6 +55,9 @@ from ..core import (
     write_json_atomic,
 )
 from .seen_surfaces import SeenSurfaces
+
+if TYPE_CHECKING:
+    import torch
 
 N_CHANNELS = 8
 CH_COLOR, CH_AXIS, CH_SIGMA, CH_ALPHA = slice(0, 3), slice(3, 6), 6, 7
@@ -96,13 +104,14 @@ class LogGrid:
     def n_voxels(self) -> int:
         return int(np.prod(self.shape))
 
-    def to_index(self, points: torch.Tensor | np.ndarray) -> torch.Tensor:
+    def to_index(self, points: np.ndarray | torch.Tensor) -> np.ndarray | torch.Tensor:
         """Continuous voxel coordinates (..., 3) of points (..., 3) in the volume frame (voxel i spans [i, i+1)).
 
-        Not differentiable (numpy; the points' dtype is kept, float64 for non-float input)."""
+        Not differentiable (numpy; the points' dtype is kept, float64 for non-float input); a tensor for a
+        tensor, else a numpy array."""
         p = _coordinates(points)
         q = p.reshape(-1, 3)
-        return torch.from_numpy(np.stack(self._axes(q[:, 0], q[:, 1], q[:, 2]), axis=-1).reshape(p.shape))
+        return _like(points, np.stack(self._axes(q[:, 0], q[:, 1], q[:, 2]), axis=-1).reshape(p.shape))
 
     def _axes(self, x: np.ndarray, y: np.ndarray, z: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Continuous voxel coordinates along x, y, z (new arrays) of coordinate arrays of one shape and float dtype.
@@ -141,18 +150,20 @@ class LogGrid:
         az += self.n_below
         return horiz(x, cx, nx), horiz(y, cy, ny), az
 
-    def flat_index(self, points: torch.Tensor | np.ndarray) -> tuple[torch.Tensor, torch.Tensor]:
+    def flat_index(self, points: np.ndarray | torch.Tensor) -> tuple[np.ndarray, np.ndarray] | tuple[torch.Tensor, torch.Tensor]:
         """Nearest-neighbour voxel of points (..., 3): (flat index (...) int64, inside mask (...) bool).
 
-        Points outside the grid get a clamped (valid) index and ``inside = False``.
+        Points outside the grid get a clamped (valid) index and ``inside = False``. Tensors for a tensor, else
+        numpy arrays.
         """
         p = _coordinates(points)
         q = p.reshape(-1, 3)
         flat, inside = self.flat_index_xyz(q[:, 0], q[:, 1], q[:, 2])
-        return flat.reshape(p.shape[:-1]), inside.reshape(p.shape[:-1])
+        return _like(points, flat.reshape(p.shape[:-1])), _like(points, inside.reshape(p.shape[:-1]))
 
-    def flat_index_xyz(self, x: np.ndarray, y: np.ndarray, z: np.ndarray) -> tuple[torch.Tensor, torch.Tensor]:
-        """:meth:`flat_index` of points given as three coordinate arrays of one shape (saves stacking them)."""
+    def flat_index_xyz(self, x: np.ndarray, y: np.ndarray, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`flat_index` of points given as three numpy coordinate arrays of one shape (saves stacking
+        them): numpy arrays."""
         dtype = np.float64 if self.n_voxels >= 2**24 else np.result_type(x.dtype, np.float32)  # exact integers
         shape = np.shape(x)
         x, y, z = (np.asarray(v, dtype=dtype).reshape(-1) for v in (x, y, z))
@@ -172,7 +183,7 @@ class LogGrid:
                     f += c
             flat[part] = f
             inside[part] = ok
-        return torch.from_numpy(flat.reshape(shape)), torch.from_numpy(inside.reshape(shape))
+        return flat.reshape(shape), inside.reshape(shape)
 
     def index_to_point(self, index: np.ndarray) -> np.ndarray:
         """Volume-frame points (..., 3) at continuous voxel coordinates (..., 3) (inverse of :meth:`to_index`)."""
@@ -246,33 +257,141 @@ def world_envmap_directions(height: int, width: int) -> np.ndarray:
 def world_to_frame_envmap(env_world: np.ndarray | torch.Tensor, R_vol_from_frame: np.ndarray, height: int,
                           width: int) -> np.ndarray:
     """A world-convention (H, W, C) map resampled (bilinear) into the camera-convention map (height, width, C) of
-    the frame whose directions rotate into the volume frame by ``R_vol_from_frame``."""
+    the frame whose directions rotate into the volume frame by ``R_vol_from_frame`` (float32, numpy)."""
     d = camera_envmap_directions(height, width).reshape(-1, 3) @ np.asarray(R_vol_from_frame, np.float64).T
-    env = torch.as_tensor(np.asarray(env_world, np.float32)) if not torch.is_tensor(env_world) else env_world
-    with torch.no_grad():
-        out = sample_world_equirect(env, torch.from_numpy(d).float())
-    return out.numpy().reshape(height, width, -1).astype(np.float32)
+    env = np.asarray(_as_numpy(env_world), np.float32)
+    out = sample_world_equirect(env, d.astype(np.float32))
+    return out.reshape(height, width, -1).astype(np.float32, copy=False)
 
 
-def sample_world_equirect(env: torch.Tensor, dirs: torch.Tensor) -> torch.Tensor:
-    """Bilinear lookup (N, C) of a world-convention (H, W, C) map at unit directions (N, 3); wraps in longitude."""
+def sample_world_equirect(env: np.ndarray | torch.Tensor, dirs: np.ndarray | torch.Tensor) -> np.ndarray | torch.Tensor:
+    """Bilinear lookup (N, C) of a world-convention (H, W, C) map at unit directions (N, 3); wraps in longitude.
+
+    numpy arrays (in the dtype of ``env`` and ``dirs``), or tensors (differentiable, :mod:`.volume_torch`) if
+    either is one."""
+    if _is_tensor(env) or _is_tensor(dirs):
+        from .volume_torch import TorchBackend, sample_world_equirect as sample_torch
+
+        return sample_torch(TorchBackend.array(env), TorchBackend.array(dirs))
     H, W = env.shape[:2]
-    lon = torch.atan2(dirs[:, 1], dirs[:, 0])
-    lat = torch.asin(dirs[:, 2].clamp(-1.0, 1.0))
-    x = torch.remainder(lon / (2 * math.pi) + 0.5, 1.0) * W - 0.5
-    y = ((0.5 - lat / math.pi) * H - 0.5).clamp(0.0, H - 1.0)
-    x0 = torch.floor(x)
-    y0 = torch.floor(y)
+    lon = np.arctan2(dirs[:, 1], dirs[:, 0])
+    lat = np.arcsin(np.clip(dirs[:, 2], -1.0, 1.0))
+    x = np.remainder(lon / (2 * math.pi) + 0.5, 1.0) * W - 0.5
+    y = np.clip((0.5 - lat / math.pi) * H - 0.5, 0.0, H - 1.0)
+    x0 = np.floor(x)
+    y0 = np.floor(y)
     fx = (x - x0)[:, None]
     fy = (y - y0)[:, None]
-    x0 = x0.long()
-    y0 = y0.long()
-    y1 = (y0 + 1).clamp(max=H - 1)
-    x0w = torch.remainder(x0, W)
-    x1w = torch.remainder(x0 + 1, W)
+    x0 = x0.astype(np.int64)
+    y0 = y0.astype(np.int64)
+    y1 = np.minimum(y0 + 1, H - 1)
+    x0w = np.remainder(x0, W)
+    x1w = np.remainder(x0 + 1, W)
     top = env[y0, x0w] * (1 - fx) + env[y0, x1w] * fx
     bottom = env[y1, x0w] * (1 - fx) + env[y1, x1w] * fx
     return top * (1 - fy) + bottom * fy
+
+
+# ----------------------------------------------------------------------------- backends
+
+
+class NumpyBackend:
+    """Eq. 1 and the transmittance on numpy arrays (no gradients; same results as :mod:`.volume_torch` to float32
+    rounding). Each function takes the :class:`HybridLighting` and a chunk of rays (N, 3) in its dtype."""
+
+    is_tensor = False
+
+    @staticmethod
+    def array(x, dtype: np.dtype | None = None) -> np.ndarray:
+        """``x`` as a numpy array (no copy where possible), of ``dtype`` if given."""
+        return np.asarray(_as_numpy(x), dtype=dtype)
+
+    @staticmethod
+    def rays(points, dirs, dtype: np.dtype) -> tuple[np.ndarray, np.ndarray]:
+        """Points and directions (N, 3) as arrays of ``dtype`` (ValueError on other shapes)."""
+        points, dirs = NumpyBackend.array(points, dtype), NumpyBackend.array(dirs, dtype)
+        check_shape(points, ("N", 3), "points")
+        check_shape(dirs, ("N", 3), "dirs")
+        if len(points) != len(dirs):
+            raise ValueError(f"points and dirs must have the same length, got {len(points)} and {len(dirs)}")
+        return points, dirs
+
+    @staticmethod
+    def cat(parts: list[np.ndarray], empty_shape: tuple[int, ...], dtype: np.dtype) -> np.ndarray:
+        return np.concatenate(parts) if parts else np.zeros(empty_shape, dtype=dtype)
+
+    @staticmethod
+    def ones(n: int, dtype: np.dtype) -> np.ndarray:
+        return np.ones(n, dtype=dtype)
+
+    @staticmethod
+    def env_radiance(h: "HybridLighting", dirs: np.ndarray, include_sun: bool) -> np.ndarray:
+        rgb = sample_world_equirect(h.sky_world, dirs)
+        if include_sun and h.sun_dir is not None:
+            in_disc = (dirs @ h.sun_dir.astype(dirs.dtype)) >= math.cos(h.sun_half_angle_rad)
+            rgb = rgb + in_disc[:, None] * (h.sun_irradiance / h.sun_solid_angle_sr)[None]
+        return rgb
+
+    @staticmethod
+    def march(h: "HybridLighting", points: np.ndarray, dirs: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        lo, hi = (b.astype(points.dtype) for b in h.grid.bounds())
+        safe = np.where(np.abs(dirs) < 1e-12, dirs.dtype.type(1e-12), dirs)
+        t_hi = np.maximum((lo - points) / safe, (hi - points) / safe)
+        t_exit = np.maximum(t_hi.min(axis=1), 0.0)  # (N,)
+        K = h.n_samples
+        frac = (np.arange(K, dtype=points.dtype) + 0.5) / K
+        t = t_exit[:, None] * frac[None]
+        flat, inside = h.grid.flat_index_xyz(*(points[:, a, None] + t * dirs[:, a, None] for a in range(3)))
+        alpha = h._alpha_flat().take(flat)
+        np.multiply(alpha, inside, out=alpha)
+        return flat, alpha, inside
+
+    @staticmethod
+    def radiance_chunk(h: "HybridLighting", points: np.ndarray, dirs: np.ndarray, include_sun: bool) -> np.ndarray:
+        if h.seen is None:
+            return NumpyBackend.volume_chunk(h, points, dirs, include_sun)
+        hit, _, mesh_rgb = h.seen.trace(points, dirs)
+        miss = np.flatnonzero(~hit)
+        out = mesh_rgb.astype(h.sky_world.dtype)
+        if len(miss):
+            out[miss] = NumpyBackend.volume_chunk(h, points[miss], dirs[miss], include_sun)
+        return out
+
+    @staticmethod
+    def volume_chunk(h: "HybridLighting", points: np.ndarray, dirs: np.ndarray, include_sun: bool) -> np.ndarray:
+        env = NumpyBackend.env_radiance(h, dirs, include_sun)
+        if h.params is None:
+            return env
+        flat, alpha, _ = NumpyBackend.march(h, points, dirs)
+        trans = np.subtract(1.0, alpha)
+        np.cumprod(trans, axis=1, out=trans)  # tau_k
+        weight = alpha
+        weight[:, 1:] *= trans[:, :-1]  # tau_{k-1} alpha_k (alpha is this call's own array)
+        sample = np.flatnonzero(weight > 0)  # (ray, k) row-major: ray ascending
+        out = trans[:, -1:] * env
+        if len(sample):
+            ray = sample // weight.shape[1]
+            vox = h.params.reshape(-1, N_CHANNELS).take(flat.reshape(-1).take(sample), axis=0)
+            axis = vox[:, CH_AXIS]
+            axis = axis / np.maximum(np.sqrt(np.einsum("ij,ij->i", axis, axis)), 1e-9)[:, None]
+            cosang = -np.einsum("ij,ij->i", dirs.take(ray, axis=0), axis)  # G(-l): leaving the voxel to the point
+            sigma2 = np.maximum(np.square(vox[:, CH_SIGMA]), 1e-6)
+            lobe = vox[:, CH_COLOR] * np.exp(-(1.0 - cosang) / sigma2)[:, None]
+            lobe *= weight.reshape(-1).take(sample)[:, None]
+            first = np.flatnonzero(np.r_[True, ray[1:] != ray[:-1]])  # each ray's first sample
+            out[ray[first]] += np.add.reduceat(lobe, first, axis=0)
+        return out
+
+    @staticmethod
+    def transmittance_chunk(h: "HybridLighting", points: np.ndarray, dirs: np.ndarray) -> np.ndarray:
+        _, alpha, _ = NumpyBackend.march(h, points, dirs)
+        return np.prod(1.0 - alpha, axis=1)
+
+    @staticmethod
+    def version(x: np.ndarray | None) -> int:
+        """The array's identity: :class:`HybridLighting` keeps its numpy arrays read-only, so a change is a new
+        array (the local env-map cache's key)."""
+        return -1 if x is None else id(x)
 
 
 # ----------------------------------------------------------------------------- hybrid lighting
@@ -282,28 +401,48 @@ def sample_world_equirect(env: torch.Tensor, dirs: torch.Tensor) -> torch.Tensor
 class HybridLighting:
     """Sky dome + analytic sun + optional VSG volume, in the volume frame (see module doc).
 
+    Built from numpy arrays it stays numpy (read-only views of them; queries return numpy arrays, torch is not
+    imported); if any of ``sky_world``, ``sun_irradiance``, ``params`` is a tensor, all three become tensors and
+    the queries return (differentiable) tensors.
+
     Attributes:
-        sky_world: (H, W, 3) float32 tensor, world-convention equirect sky radiance, sun excluded.
+        sky_world: (H, W, 3) float32 array or tensor, world-convention equirect sky radiance, sun excluded.
         sun_dir: (3,) float64 unit vector towards the sun (volume frame), or None (night / no sun).
-        sun_irradiance: (3,) float32 tensor, irradiance of the sun on a surface facing it (clouds applied).
+        sun_irradiance: (3,) irradiance of the sun on a surface facing it (clouds applied), the dtype of the sky.
         sun_half_angle_rad: angular radius of the sun disc.
         grid: the volume's grid, or None (sky only).
-        params: (X, Y, Z, 8) float32 tensor of VSG parameters (see module doc), or None.
+        params: (X, Y, Z, 8) float32 VSG parameters (see module doc), or None.
         n_samples: K of Eq. 1.
         seen: the input cameras' seen surfaces at image resolution, or None (volume and sky only).
     """
 
-    sky_world: torch.Tensor
+    sky_world: np.ndarray | torch.Tensor
     sun_dir: np.ndarray | None = None
-    sun_irradiance: torch.Tensor | None = None
+    sun_irradiance: np.ndarray | torch.Tensor | None = None
     sun_half_angle_rad: float = float(np.radians(0.2665))
     grid: LogGrid | None = None
-    params: torch.Tensor | None = None
+    params: np.ndarray | torch.Tensor | None = None
     n_samples: int = DEFAULT_SAMPLES
     seen: SeenSurfaces | None = None
     _envmap_cache: dict = field(default_factory=dict, init=False, repr=False, compare=False)
+    _ops: type = field(default=NumpyBackend, init=False, repr=False, compare=False)
+    _alpha: tuple = field(default=(None, None), init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
+        if any(_is_tensor(x) for x in (self.sky_world, self.sun_irradiance, self.params)):
+            from .volume_torch import TorchBackend
+
+            self._ops = TorchBackend
+            self.sky_world = TorchBackend.array(self.sky_world)
+            dtype = self.sky_world.dtype
+            self.params = None if self.params is None else TorchBackend.array(self.params)
+            if self.sun_irradiance is not None:
+                self.sun_irradiance = TorchBackend.array(self.sun_irradiance, dtype)
+        else:
+            self.sky_world = _read_only(self.sky_world)
+            self.params = None if self.params is None else _read_only(self.params)
+            if self.sun_irradiance is not None:
+                self.sun_irradiance = _read_only(np.asarray(self.sun_irradiance, self.sky_world.dtype))
         check_shape(self.sky_world, ("H", "W", 3), "sky_world")
         if (self.grid is None) != (self.params is None):
             raise ValueError("HybridLighting: give both grid and params, or neither")
@@ -316,89 +455,47 @@ class HybridLighting:
             if self.sun_irradiance is None:
                 raise ValueError("HybridLighting: sun_dir given without sun_irradiance")
 
+    def _alpha_flat(self) -> np.ndarray:
+        """The occupancy channel (X*Y*Z,) of the numpy parameters, contiguous (cached per parameter array)."""
+        if self._alpha[0] is not self.params:
+            self._alpha = (self.params, np.ascontiguousarray(self.params.reshape(-1, N_CHANNELS)[:, CH_ALPHA]))
+        return self._alpha[1]
+
     # ------------------------------------------------------------------ environment
 
     @property
     def sun_solid_angle_sr(self) -> float:
         return 2 * math.pi * (1 - math.cos(self.sun_half_angle_rad))
 
-    def env_radiance(self, dirs: torch.Tensor, include_sun: bool = True) -> torch.Tensor:
+    def env_radiance(self, dirs: np.ndarray | torch.Tensor, include_sun: bool = True) -> np.ndarray | torch.Tensor:
         """``L_env(l)`` (N, 3): the sky dome (bilinear) plus, inside the sun's disc, the sun's radiance."""
-        rgb = sample_world_equirect(self.sky_world, dirs)
-        if include_sun and self.sun_dir is not None:
-            sun = torch.as_tensor(self.sun_dir, dtype=dirs.dtype)
-            in_disc = (dirs @ sun) >= math.cos(self.sun_half_angle_rad)
-            rgb = rgb + in_disc[:, None].to(rgb.dtype) * (self.sun_irradiance / self.sun_solid_angle_sr)[None]
-        return rgb
+        return self._ops.env_radiance(self, self._ops.array(dirs, self.sky_world.dtype), include_sun)
 
     # ------------------------------------------------------------------ Eq. 1
 
-    def _march(self, points: torch.Tensor, dirs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    def _march(self, points, dirs):
         """Sample the volume along rays: (flat voxel index (N, K), alpha (N, K), inside (N, K))."""
-        lo, hi = (torch.as_tensor(b, dtype=points.dtype) for b in self.grid.bounds())
-        with torch.no_grad():
-            safe = torch.where(dirs.abs() < 1e-12, torch.full_like(dirs, 1e-12), dirs)
-            t_hi = torch.maximum((lo - points) / safe, (hi - points) / safe)
-            t_exit = t_hi.min(dim=1).values.clamp(min=0.0)  # (N,)
-        K = self.n_samples
-        frac = (torch.arange(K, dtype=points.dtype) + 0.5) / K
-        t = (t_exit[:, None] * frac[None]).numpy()
-        p, d = points.detach().numpy(), dirs.detach().numpy()
-        flat, inside = self.grid.flat_index_xyz(*(p[:, a, None] + t * d[:, a, None] for a in range(3)))
-        alpha_col = self.params.reshape(-1, N_CHANNELS)[:, CH_ALPHA]
-        alpha = alpha_col.index_select(0, flat.reshape(-1)).reshape(flat.shape) * inside  # faster than [flat]
-        return flat, alpha, inside
+        return self._ops.march(self, points, dirs)
 
-    def _radiance_chunk(self, points: torch.Tensor, dirs: torch.Tensor, include_sun: bool) -> torch.Tensor:
-        """Radiance (N, 3) of a chunk: the seen surfaces where a ray hits one, else :meth:`_volume_chunk`."""
-        if self.seen is None:
-            return self._volume_chunk(points, dirs, include_sun)
-        hit, _, mesh_rgb = self.seen.trace(points.detach().numpy(), dirs.detach().numpy())
-        miss = torch.from_numpy(np.flatnonzero(~hit))
-        out = torch.from_numpy(mesh_rgb).to(self.sky_world.dtype)
-        if len(miss):
-            out = out.index_put((miss,), self._volume_chunk(points[miss], dirs[miss], include_sun))
-        return out
-
-    def _volume_chunk(self, points: torch.Tensor, dirs: torch.Tensor, include_sun: bool) -> torch.Tensor:
-        """Eq. 1 (N, 3) for a chunk of rays (the sky dome and sun alone without a volume)."""
-        env = self.env_radiance(dirs, include_sun)
-        if self.params is None:
-            return env
-        flat, alpha, _ = self._march(points, dirs)
-        trans = torch.cumprod(1.0 - alpha, dim=1)  # tau_k
-        trans_before = torch.cat([torch.ones_like(trans[:, :1]), trans[:, :-1]], dim=1)  # tau_{k-1}
-        weight = trans_before * alpha
-        ray, k = torch.nonzero(weight > 0, as_tuple=True)
-        out = trans[:, -1:] * env
-        if len(ray):
-            vox = self.params.reshape(-1, N_CHANNELS)[flat[ray, k]]
-            axis = vox[:, CH_AXIS]
-            axis = axis / axis.norm(dim=1, keepdim=True).clamp(min=1e-9)
-            cosang = -(dirs[ray] * axis).sum(dim=1)  # G(-l): radiance leaving the voxel towards the point
-            sigma2 = vox[:, CH_SIGMA].square().clamp(min=1e-6)
-            lobe = vox[:, CH_COLOR] * torch.exp(-(1.0 - cosang) / sigma2)[:, None]
-            out = out.index_add(0, ray, weight[ray, k][:, None] * lobe)
-        return out
-
-    def radiance(self, points: torch.Tensor | np.ndarray, dirs: torch.Tensor | np.ndarray,
-                 include_sun: bool = True) -> torch.Tensor:
-        """Eq. 1: radiance (N, 3) arriving at points (N, 3) from unit directions (N, 3) (pointing away), batched."""
-        points, dirs = _as_rays(points, dirs, self.sky_world.dtype)
-        outs = [self._radiance_chunk(points[i : i + CHUNK_RAYS], dirs[i : i + CHUNK_RAYS], include_sun)
+    def radiance(self, points: np.ndarray | torch.Tensor, dirs: np.ndarray | torch.Tensor,
+                 include_sun: bool = True) -> np.ndarray | torch.Tensor:
+        """Eq. 1: radiance (N, 3) arriving at points (N, 3) from unit directions (N, 3) (pointing away), batched;
+        where a ray hits a seen surface, that surface's radiance."""
+        ops, dtype = self._ops, self.sky_world.dtype
+        points, dirs = ops.rays(points, dirs, dtype)
+        outs = [ops.radiance_chunk(self, points[i : i + CHUNK_RAYS], dirs[i : i + CHUNK_RAYS], include_sun)
                 for i in range(0, len(points), CHUNK_RAYS)]
-        return torch.cat(outs) if outs else torch.zeros((0, 3), dtype=self.sky_world.dtype)
+        return ops.cat(outs, (0, 3), dtype)
 
-    def transmittance(self, points: torch.Tensor | np.ndarray, dirs: torch.Tensor | np.ndarray) -> torch.Tensor:
+    def transmittance(self, points: np.ndarray | torch.Tensor, dirs: np.ndarray | torch.Tensor) -> np.ndarray | torch.Tensor:
         """``tau_K`` (N,): the fraction of the distant light (sky, sun) that reaches points along directions."""
-        points, dirs = _as_rays(points, dirs, self.sky_world.dtype)
+        ops, dtype = self._ops, self.sky_world.dtype
+        points, dirs = ops.rays(points, dirs, dtype)
         if self.params is None:
-            return torch.ones(len(points), dtype=points.dtype)
-        outs = []
-        for i in range(0, len(points), CHUNK_RAYS):
-            _, alpha, _ = self._march(points[i : i + CHUNK_RAYS], dirs[i : i + CHUNK_RAYS])
-            outs.append(torch.prod(1.0 - alpha, dim=1))
-        return torch.cat(outs)
+            return ops.ones(len(points), points.dtype)
+        outs = [ops.transmittance_chunk(self, points[i : i + CHUNK_RAYS], dirs[i : i + CHUNK_RAYS])
+                for i in range(0, len(points), CHUNK_RAYS)]
+        return ops.cat(outs, (0,), dtype)
 
     def sun_transmittance(self, point: np.ndarray, n_rays: int = 7) -> float:
         """Mean transmittance towards the sun's disc from a point (3,): the centre and a ring of rays; 0 without sun."""
@@ -417,8 +514,7 @@ class HybridLighting:
         dirs = np.array(dirs)
         dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
         pts = np.repeat(np.asarray(point, dtype=np.float64)[None], len(dirs), axis=0)
-        with torch.no_grad():
-            return float(self.transmittance(pts, dirs).mean())
+        return float(_as_numpy(self.transmittance(pts, dirs)).mean())
 
     # ------------------------------------------------------------------ local environment maps
 
@@ -435,34 +531,34 @@ class HybridLighting:
             d = world_envmap_directions(height, width).reshape(-1, 3)
         else:
             d = camera_envmap_directions(height, width).reshape(-1, 3) @ np.asarray(R_vol_from_frame).T
-        with torch.no_grad():
-            rad = self.radiance(np.repeat(p[None], len(d), axis=0), d, include_sun=False)
-        return rad.numpy().reshape(height, width, 3).astype(np.float32)
+        rad = _as_numpy(self.radiance(np.repeat(p[None], len(d), axis=0), d, include_sun=False))
+        return rad.reshape(height, width, 3).astype(np.float32)
 
     def envmap_at_cached(self, point: np.ndarray, height: int = 128, width: int = 256) -> np.ndarray:
         """World-convention :meth:`envmap_at`, remembered per point (to the millimetre) while the sky and volume
-        tensors are unchanged: an object that several cameras see is traced once and then rotated into each
-        camera (:func:`world_to_frame_envmap`; 0.4 % mean difference from tracing the camera's map directly)."""
+        are unchanged (the same tensors at the same version; the same numpy arrays): an object that several
+        cameras see is traced once and then rotated into each camera (:func:`world_to_frame_envmap`; 0.4 % mean
+        difference from tracing the camera's map directly)."""
         p = np.asarray(point, dtype=np.float64)
-        versions = (self.sky_world._version, -1 if self.params is None else self.params._version, id(self.seen))
+        anchors = (self.sky_world, self.params, self.seen)
+        versions = (self._ops.version(self.sky_world), self._ops.version(self.params), id(self.seen))
         key = (tuple(np.round(p, 3).tolist()), height, width, versions)
-        if key not in self._envmap_cache:
+        hit = self._envmap_cache.get(key)
+        if hit is None or any(a is not b for a, b in zip(hit[0], anchors)):  # ids of live objects only
             if len(self._envmap_cache) >= ENVMAP_CACHE_SIZE:
                 self._envmap_cache.pop(next(iter(self._envmap_cache)))
-            self._envmap_cache[key] = self.envmap_at(p, height, width)
-        return self._envmap_cache[key]
+            hit = self._envmap_cache[key] = (anchors, self.envmap_at(p, height, width))
+        return hit[1]
 
     def lift_out_of_solid(self, point: np.ndarray, max_steps: int = 64) -> np.ndarray:
         """The point (3,) moved straight up to the first voxel with alpha < 0.5 (unchanged if already free)."""
         p = np.asarray(point, dtype=np.float64).copy()
         if self.params is None:
             return p
-        alpha = self.params[..., CH_ALPHA]
-        with torch.no_grad():
-            idx = torch.floor(self.grid.to_index(torch.as_tensor(p))).long().numpy()
+        idx = np.floor(self.grid.to_index(p)).astype(np.int64)
         if np.any(idx[:2] < 0) or idx[0] >= self.grid.shape[0] or idx[1] >= self.grid.shape[1]:
             return p
-        column = alpha[idx[0], idx[1]].detach().numpy()
+        column = _as_numpy(self.params[int(idx[0]), int(idx[1]), :, CH_ALPHA])
         k = int(np.clip(idx[2], 0, self.grid.shape[2] - 1))
         steps = 0
         while k < self.grid.shape[2] and column[k] >= 0.5 and steps < max_steps:
@@ -483,10 +579,10 @@ class HybridLighting:
         Empty voxels (alpha 0) do not affect the radiance; they load back as :func:`empty_params` voxels.
         """
         out = Path(out_dir)
-        write_exr(out / "sky_world.exr", self.sky_world.detach().numpy().astype(np.float32))
+        write_exr(out / "sky_world.exr", _as_numpy(self.sky_world).astype(np.float32))
         files = {"sky_world": "sky_world.exr"}
         if self.params is not None:
-            flat = self.params.detach().reshape(-1, N_CHANNELS).numpy()
+            flat = _as_numpy(self.params).reshape(-1, N_CHANNELS)
             keep = np.flatnonzero(flat[:, CH_ALPHA] > 0)
             import io
 
@@ -504,7 +600,7 @@ class HybridLighting:
             "sky_convention": "world z-up equirect: lon = atan2(dy, dx), lat = asin(dz); sun excluded",
             "sun": None if self.sun_dir is None else {
                 "direction": [float(v) for v in self.sun_dir],
-                "irradiance_rgb": [float(v) for v in self.sun_irradiance.detach().numpy()],
+                "irradiance_rgb": [float(v) for v in _as_numpy(self.sun_irradiance)],
                 "half_angle_rad": float(self.sun_half_angle_rad),
             },
             "grid": None if self.grid is None else self.grid.to_json(),
@@ -518,13 +614,14 @@ class HybridLighting:
         return doc
 
     @staticmethod
-    def load(in_dir: str | Path) -> "HybridLighting":
-        """Read what :meth:`save` wrote (raises ``InputError`` naming the file and field on bad input)."""
+    def load(in_dir: str | Path, as_tensors: bool = True) -> "HybridLighting":
+        """Read what :meth:`save` wrote (raises ``InputError`` naming the file and field on bad input): tensors, or
+        numpy arrays with ``as_tensors=False`` (no torch import)."""
         d = Path(in_dir)
         doc = read_json(d / "hybrid.json")
         if doc.get("schema") != VOLUME_SCHEMA:
             raise InputError(f"{d / 'hybrid.json'}: field 'schema' is {doc.get('schema')!r}, expected {VOLUME_SCHEMA!r}")
-        sky = torch.from_numpy(read_exr(d / doc["files"]["sky_world"]).astype(np.float32))
+        sky = read_exr(d / doc["files"]["sky_world"]).astype(np.float32)
         sun = doc.get("sun")
         grid = params = None
         if doc.get("grid") is not None:
@@ -537,38 +634,66 @@ class HybridLighting:
                 raise InputError(f"{path}: cannot read the volume ({e}); expected arrays shape, index, values") from None
             if shape != grid.shape or values.shape[1:] != (N_CHANNELS,) or len(index) != len(values):
                 raise InputError(f"{path}: volume of shape {shape} / values {values.shape} does not match grid {grid.shape}")
-            params = empty_params(grid)
-            params.reshape(-1, N_CHANNELS)[torch.from_numpy(index.astype(np.int64))] = torch.from_numpy(
-                values.astype(np.float32))
+            params = empty_params(grid, as_tensor=False)
+            params.reshape(-1, N_CHANNELS)[index.astype(np.int64)] = values.astype(np.float32)
         seen = SeenSurfaces.load(d / doc["files"]["seen_surfaces"]) if "seen_surfaces" in doc["files"] else None
+        irradiance = None if sun is None else np.array(sun["irradiance_rgb"], dtype=np.float32)
+        if as_tensors:
+            from .volume_torch import TorchBackend
+
+            sky = TorchBackend.array(sky)
+            params = None if params is None else TorchBackend.array(params)
+            irradiance = None if irradiance is None else TorchBackend.array(irradiance)
         return HybridLighting(
             sky_world=sky,
             sun_dir=None if sun is None else np.array(sun["direction"]),
-            sun_irradiance=None if sun is None else torch.tensor(sun["irradiance_rgb"], dtype=torch.float32),
+            sun_irradiance=irradiance,
             sun_half_angle_rad=float(sun["half_angle_rad"]) if sun else float(np.radians(0.2665)),
             grid=grid, params=params, n_samples=int(doc.get("n_samples", DEFAULT_SAMPLES)), seen=seen,
         )
 
 
-def _coordinates(points: torch.Tensor | np.ndarray) -> np.ndarray:
+def _is_tensor(x) -> bool:
+    """Whether ``x`` is a torch tensor, without importing torch (a tensor exists only once torch is loaded)."""
+    torch = sys.modules.get("torch")
+    return torch is not None and isinstance(x, torch.Tensor)
+
+
+def _as_numpy(x) -> np.ndarray:
+    """A tensor's values as a numpy array (detached, on the CPU; no copy there), or ``np.asarray(x)``."""
+    return x.detach().cpu().numpy() if _is_tensor(x) else np.asarray(x)
+
+
+def _like(like, values: np.ndarray):
+    """``values`` as a tensor if ``like`` is one (shared memory), else unchanged."""
+    if _is_tensor(like):
+        from .volume_torch import TorchBackend
+
+        return TorchBackend.array(values)
+    return values
+
+
+def _read_only(x) -> np.ndarray:
+    """A read-only view of an array (the caller's array keeps its own flags)."""
+    view = np.asarray(x).view()
+    view.flags.writeable = False
+    return view
+
+
+def _coordinates(points: np.ndarray | torch.Tensor) -> np.ndarray:
     """Points (..., 3) as a float numpy array (float64 unless float32 or float64 already; no copy for a tensor)."""
-    p = points.detach().cpu().numpy() if torch.is_tensor(points) else np.asarray(points)
+    p = _as_numpy(points)
     return p if p.dtype in (np.float32, np.float64) else p.astype(np.float64)
 
 
-def _as_rays(points, dirs, dtype: torch.dtype) -> tuple[torch.Tensor, torch.Tensor]:
-    points = torch.as_tensor(np.asarray(points) if not torch.is_tensor(points) else points, dtype=dtype)
-    dirs = torch.as_tensor(np.asarray(dirs) if not torch.is_tensor(dirs) else dirs, dtype=dtype)
-    check_shape(points, ("N", 3), "points")
-    check_shape(dirs, ("N", 3), "dirs")
-    if len(points) != len(dirs):
-        raise ValueError(f"points and dirs must have the same length, got {len(points)} and {len(dirs)}")
-    return points, dirs
-
-
-def empty_params(grid: LogGrid) -> torch.Tensor:
-    """An all-empty (alpha 0) parameter tensor (X, Y, Z, 8) with unit axes +z and sigma 1."""
-    p = torch.zeros((*grid.shape, N_CHANNELS), dtype=torch.float32)
+def empty_params(grid: LogGrid, as_tensor: bool = True) -> np.ndarray | torch.Tensor:
+    """An all-empty (alpha 0) float32 parameter array (X, Y, Z, 8) with unit axes +z and sigma 1: a tensor, or a
+    numpy array with ``as_tensor=False``."""
+    p = np.zeros((*grid.shape, N_CHANNELS), dtype=np.float32)
     p[..., 5] = 1.0
     p[..., CH_SIGMA] = 1.0
+    if as_tensor:
+        from .volume_torch import TorchBackend
+
+        return TorchBackend.array(p)
     return p

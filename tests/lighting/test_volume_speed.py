@@ -223,11 +223,12 @@ def test_flat_index_float32_matches_the_torch_reference(name):
 def test_flat_index_keeps_the_shape_and_takes_numpy_and_axes():
     g = TINY
     p = _points(g, 600, np.random.default_rng(3)).reshape(20, 30, 3)
-    flat, inside = g.flat_index(p)
+    flat, inside = g.flat_index(p)  # numpy in, numpy out
     rf, ri = ref_flat_index(g, torch.from_numpy(p))
-    assert flat.shape == (20, 30) and torch.equal(flat, rf) and torch.equal(inside, ri)
+    assert isinstance(flat, np.ndarray) and flat.dtype == np.int64 and inside.dtype == bool
+    assert flat.shape == (20, 30) and np.array_equal(flat, rf.numpy()) and np.array_equal(inside, ri.numpy())
     f2, i2 = g.flat_index_xyz(p[..., 0], p[..., 1], p[..., 2])
-    assert torch.equal(f2, flat) and torch.equal(i2, inside)
+    assert np.array_equal(f2, flat) and np.array_equal(i2, inside)
     single, ok = g.flat_index(torch.tensor([0.5, -0.3, 1.0], dtype=torch.float64))
     assert single.shape == () and bool(ok)
 
@@ -238,7 +239,7 @@ def test_flat_index_in_blocks_equals_one_block(monkeypatch):
     whole = g.flat_index(p)
     monkeypatch.setattr("streetaug.augment.lighting.volume.INDEX_CHUNK", 777)
     blocks = g.flat_index(p)
-    assert torch.equal(whole[0], blocks[0]) and torch.equal(whole[1], blocks[1])
+    assert np.array_equal(whole[0], blocks[0]) and np.array_equal(whole[1], blocks[1])
 
 
 @pytest.mark.parametrize("name", sorted(GRIDS))
@@ -323,8 +324,8 @@ def test_assemble_params_equals_the_dense_reference(grid):
     occ, obs, surf, shaded = _synthetic_scene(grid, np.random.default_rng(7))
     new = assemble_params(grid, occ, obs, surf, shaded)
     ref = ref_assemble_params(grid, occ, obs, surf, shaded)
-    assert new.dtype == torch.float32 and new.shape == (*grid.shape, N_CHANNELS)
-    assert torch.equal(new, ref)
+    assert new.dtype == np.float32 and new.shape == (*grid.shape, N_CHANNELS)
+    assert np.array_equal(new, ref.numpy())
 
 
 def test_sky_carved_equals_the_reference():
