@@ -2,7 +2,8 @@
 
 Each check runs a fresh interpreter (the test process has long since imported everything) and reads its
 ``sys.modules``: torch, scipy and embree are the slow imports (~1 s, ~0.2 s, ~0.1 s), and the batch
-machinery / pipeline / dataset reader pull them in.
+machinery / pipeline / dataset reader pull them in. The default ``insert`` on a bundled scene runs without
+torch at all.
 """
 
 from __future__ import annotations
@@ -65,6 +66,20 @@ def test_command_help_loads_no_heavy_modules(command):
     result = loaded_after(run_cli([command, "--help"]))
     assert "Usage: " in result["stdout"] and command in result["stdout"]
     assert heavy_in(result["modules"], HEAVY) == []
+
+
+@pytest.mark.parametrize("scene", ["sample-sunny", "sample-lowsun", "sample-overcast"])
+def test_the_default_insert_on_a_bundled_scene_never_imports_torch(scene, tmp_path):
+    """The volume levels (L2/L3) query the light volume with numpy; torch is for training and the sky network
+    (L1 without metadata), which the bundled scenes (location and timestamp known) never run."""
+    out = tmp_path / scene
+    result = loaded_after(run_cli(["insert", "--scene", scene, "--out", str(out)]))
+    labels = json.loads((out / "labels.json").read_text())
+    assert labels["objects"] and (out / "image.jpg").is_file()
+    assert heavy_in(result["modules"], ("torch",)) == [], labels["lighting"]["level"]
+    assert "streetaug.augment.lighting.skynet.predict" not in result["modules"]
+    if scene == "sample-sunny":  # the volume really ran
+        assert labels["lighting"]["level"] in ("L2", "L3") and "streetaug.augment.lighting.volume" in result["modules"]
 
 
 def test_a_command_imports_only_its_own_module():

@@ -20,11 +20,11 @@ from __future__ import annotations
 
 import cv2
 import numpy as np
-import torch
 
 from ...datasets.sample import CameraView
 from ..core import hdr_to_ldr, invert_transform, pixel_rays
 from .types import SampleLighting
+from .volume import as_numpy
 
 PREDICTED_WIDTH_PX = 320
 
@@ -89,8 +89,7 @@ def predicted_radiance(lighting: SampleLighting, view: CameraView, width: int = 
     T = invert_transform(lighting.T_global_from_vol) @ np.asarray(view.T_global_from_cam)
     centre = lighting.hybrid.lift_out_of_solid(T[:3, 3])
     dirs = rays @ T[:3, :3].T
-    with torch.no_grad():
-        rad = lighting.hybrid.radiance(np.repeat(centre[None], len(dirs), axis=0), dirs, include_sun=False).numpy()
+    rad = as_numpy(lighting.hybrid.radiance(np.repeat(centre[None], len(dirs), axis=0), dirs, include_sun=False))
     rad = rad.reshape(h, width, 3)
     return rad * float(lighting.exposure_ratio.get(view.channel, 1.0)) if same else auto_exposed(lighting, view, rad)
 

@@ -16,7 +16,7 @@ from ..core import check_shape, invert_transform
 from ...datasets.sample import CameraView
 from .light import DistantLight, SunLight
 
-if TYPE_CHECKING:  # the volume imports torch: only for the annotations here
+if TYPE_CHECKING:  # only for the annotations here: the volume levels load the volume module
     from .volume import HybridLighting
 
 Level = Literal["L0", "L1", "L2", "L3"]
@@ -143,7 +143,7 @@ class LightingEstimate:
             return self.light_cam
         T = np.asarray(self.T_vol_from_cam)
         p_vol = self.hybrid.lift_out_of_solid(T[:3, :3] @ p + T[:3, 3])
-        from .volume import world_to_frame_envmap  # defers torch: only a volume level needs it
+        from .volume import world_to_frame_envmap  # only a volume level needs it
 
         env_world = self.hybrid.envmap_at_cached(p_vol, height, width)  # shared by the cameras seeing the point
         env = world_to_frame_envmap(env_world, T[:3, :3], height, width) * np.float32(self.radiometric_scale)
@@ -233,7 +233,7 @@ class SampleLighting:
                        reason=join_reasons(ref.reason, note), fit=None)
 
     def _from_hybrid(self, view: CameraView, same: bool) -> LightingEstimate:
-        from .volume import world_to_frame_envmap  # defers torch: only a volume level needs it
+        from .volume import as_numpy, world_to_frame_envmap  # only a volume level needs them
 
         T_vol_from_cam = invert_transform(self.T_global_from_vol) @ np.asarray(view.T_global_from_cam)
         R_vol_from_cam = T_vol_from_cam[:3, :3]
@@ -244,7 +244,7 @@ class SampleLighting:
         sun = sun_dir_cam = None
         if hybrid.sun_dir is not None:
             sun_dir_cam = R_vol_from_cam.T @ hybrid.sun_dir
-            sun = SunLight(sun_dir_cam, hybrid.sun_irradiance.detach().numpy().astype(np.float64) * ratio,
+            sun = SunLight(sun_dir_cam, as_numpy(hybrid.sun_irradiance).astype(np.float64) * ratio,
                            hybrid.sun_half_angle_rad, float(self.sun_visibility))
         params = dict(self.params)
         if same:

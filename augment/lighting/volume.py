@@ -259,7 +259,7 @@ def world_to_frame_envmap(env_world: np.ndarray | torch.Tensor, R_vol_from_frame
     """A world-convention (H, W, C) map resampled (bilinear) into the camera-convention map (height, width, C) of
     the frame whose directions rotate into the volume frame by ``R_vol_from_frame`` (float32, numpy)."""
     d = camera_envmap_directions(height, width).reshape(-1, 3) @ np.asarray(R_vol_from_frame, np.float64).T
-    env = np.asarray(_as_numpy(env_world), np.float32)
+    env = np.asarray(as_numpy(env_world), np.float32)
     out = sample_world_equirect(env, d.astype(np.float32))
     return out.reshape(height, width, -1).astype(np.float32, copy=False)
 
@@ -304,7 +304,7 @@ class NumpyBackend:
     @staticmethod
     def array(x, dtype: np.dtype | None = None) -> np.ndarray:
         """``x`` as a numpy array (no copy where possible), of ``dtype`` if given."""
-        return np.asarray(_as_numpy(x), dtype=dtype)
+        return np.asarray(as_numpy(x), dtype=dtype)
 
     @staticmethod
     def rays(points, dirs, dtype: np.dtype) -> tuple[np.ndarray, np.ndarray]:
@@ -514,7 +514,7 @@ class HybridLighting:
         dirs = np.array(dirs)
         dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
         pts = np.repeat(np.asarray(point, dtype=np.float64)[None], len(dirs), axis=0)
-        return float(_as_numpy(self.transmittance(pts, dirs)).mean())
+        return float(as_numpy(self.transmittance(pts, dirs)).mean())
 
     # ------------------------------------------------------------------ local environment maps
 
@@ -531,7 +531,7 @@ class HybridLighting:
             d = world_envmap_directions(height, width).reshape(-1, 3)
         else:
             d = camera_envmap_directions(height, width).reshape(-1, 3) @ np.asarray(R_vol_from_frame).T
-        rad = _as_numpy(self.radiance(np.repeat(p[None], len(d), axis=0), d, include_sun=False))
+        rad = as_numpy(self.radiance(np.repeat(p[None], len(d), axis=0), d, include_sun=False))
         return rad.reshape(height, width, 3).astype(np.float32)
 
     def envmap_at_cached(self, point: np.ndarray, height: int = 128, width: int = 256) -> np.ndarray:
@@ -558,7 +558,7 @@ class HybridLighting:
         idx = np.floor(self.grid.to_index(p)).astype(np.int64)
         if np.any(idx[:2] < 0) or idx[0] >= self.grid.shape[0] or idx[1] >= self.grid.shape[1]:
             return p
-        column = _as_numpy(self.params[int(idx[0]), int(idx[1]), :, CH_ALPHA])
+        column = as_numpy(self.params[int(idx[0]), int(idx[1]), :, CH_ALPHA])
         k = int(np.clip(idx[2], 0, self.grid.shape[2] - 1))
         steps = 0
         while k < self.grid.shape[2] and column[k] >= 0.5 and steps < max_steps:
@@ -579,10 +579,10 @@ class HybridLighting:
         Empty voxels (alpha 0) do not affect the radiance; they load back as :func:`empty_params` voxels.
         """
         out = Path(out_dir)
-        write_exr(out / "sky_world.exr", _as_numpy(self.sky_world).astype(np.float32))
+        write_exr(out / "sky_world.exr", as_numpy(self.sky_world).astype(np.float32))
         files = {"sky_world": "sky_world.exr"}
         if self.params is not None:
-            flat = _as_numpy(self.params).reshape(-1, N_CHANNELS)
+            flat = as_numpy(self.params).reshape(-1, N_CHANNELS)
             keep = np.flatnonzero(flat[:, CH_ALPHA] > 0)
             import io
 
@@ -600,7 +600,7 @@ class HybridLighting:
             "sky_convention": "world z-up equirect: lon = atan2(dy, dx), lat = asin(dz); sun excluded",
             "sun": None if self.sun_dir is None else {
                 "direction": [float(v) for v in self.sun_dir],
-                "irradiance_rgb": [float(v) for v in _as_numpy(self.sun_irradiance)],
+                "irradiance_rgb": [float(v) for v in as_numpy(self.sun_irradiance)],
                 "half_angle_rad": float(self.sun_half_angle_rad),
             },
             "grid": None if self.grid is None else self.grid.to_json(),
@@ -659,7 +659,7 @@ def _is_tensor(x) -> bool:
     return torch is not None and isinstance(x, torch.Tensor)
 
 
-def _as_numpy(x) -> np.ndarray:
+def as_numpy(x) -> np.ndarray:
     """A tensor's values as a numpy array (detached, on the CPU; no copy there), or ``np.asarray(x)``."""
     return x.detach().cpu().numpy() if _is_tensor(x) else np.asarray(x)
 
@@ -682,7 +682,7 @@ def _read_only(x) -> np.ndarray:
 
 def _coordinates(points: np.ndarray | torch.Tensor) -> np.ndarray:
     """Points (..., 3) as a float numpy array (float64 unless float32 or float64 already; no copy for a tensor)."""
-    p = _as_numpy(points)
+    p = as_numpy(points)
     return p if p.dtype in (np.float32, np.float64) else p.astype(np.float64)
 
 
