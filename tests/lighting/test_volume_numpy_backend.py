@@ -174,3 +174,32 @@ def test_the_levels_volumes_give_the_same_light_on_both_backends(bundled_hybrids
     _assert_same(h_np.transmittance(pts, d), h_t.transmittance(pts, d))
     a, b = h_np.radiance(pts, d), h_t.radiance(pts, d)
     np.testing.assert_allclose(a, b.numpy(), rtol=RTOL, atol=ATOL * float(np.abs(b.numpy()).max()))
+
+
+# ----------------------------------------------------------------------------- the shading fit without scipy.optimize
+
+
+def test_two_variable_nnls_equals_scipy():
+    from scipy.optimize import nnls
+
+    from streetaug.augment.lighting.build import nnls_2
+
+    rng = np.random.default_rng(7)
+    active = 0
+    for trial in range(300):
+        n = int(rng.integers(2, 60))
+        X = np.abs(rng.normal(size=(n, 2))) * rng.uniform(0.1, 3.0, 2)
+        if trial % 10 == 0:
+            X[:, 1] = X[:, 0] * 0.5 + 1e-3 * rng.normal(size=n)  # nearly collinear
+        y = X @ rng.normal(0.3, 1.0, 2) + 0.1 * rng.normal(size=n)
+        want, _ = nnls(X, y)
+        got = nnls_2(X, y)
+        active += int(np.any(want == 0))
+        assert np.all(got >= 0)
+        # the same optimum: equal residuals (unique minimiser for full-rank X)
+        r_got, r_want = np.sum((X @ got - y) ** 2), np.sum((X @ want - y) ** 2)
+        assert r_got <= r_want * (1 + 1e-9) + 1e-12, trial
+        if trial % 10:
+            np.testing.assert_allclose(got, want, rtol=1e-7, atol=1e-9)
+    assert 30 < active < 270  # both the interior and the constrained cases were exercised
+    assert np.array_equal(nnls_2(np.zeros((5, 2)), np.ones(5)), [0.0, 0.0])
