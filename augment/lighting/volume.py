@@ -248,10 +248,14 @@ def _voxel_centres(grid: LogGrid) -> np.ndarray:
 # ----------------------------------------------------------------------------- sky
 
 
+@functools.lru_cache(maxsize=8)
 def world_envmap_directions(height: int, width: int) -> np.ndarray:
-    """Unit z-up direction (H, W, 3) of every pixel centre of a world-convention equirect map."""
+    """Unit z-up direction (H, W, 3) float64 of every pixel centre of a world-convention equirect map; read-only,
+    cached (the sky dome, its irradiance and every local env map use the same few sizes)."""
     lon, lat = equirect_pixel_lonlat(height, width)
-    return lonlat_to_world_dir(lon, lat)
+    out = lonlat_to_world_dir(lon, lat)
+    out.flags.writeable = False
+    return out
 
 
 def world_to_frame_envmap(env_world: np.ndarray | torch.Tensor, R_vol_from_frame: np.ndarray, height: int,
