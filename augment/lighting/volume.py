@@ -549,6 +549,9 @@ class HybridLighting:
         key = (tuple(np.round(p, 3).tolist()), height, width, versions)
         hit = self._envmap_cache.get(key)
         if hit is None or any(a is not b for a, b in zip(hit[0], anchors)):  # ids of live objects only
+            # maps of replaced arrays are stale: dropped (they would keep the old arrays alive)
+            self._envmap_cache = {k: v for k, v in self._envmap_cache.items()
+                                  if all(a is b for a, b in zip(v[0], anchors))}
             if len(self._envmap_cache) >= ENVMAP_CACHE_SIZE:
                 self._envmap_cache.pop(next(iter(self._envmap_cache)))
             hit = self._envmap_cache[key] = (anchors, self.envmap_at(p, height, width))

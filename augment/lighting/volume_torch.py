@@ -46,8 +46,11 @@ class TorchBackend:
 
     @staticmethod
     def array(x, dtype: torch.dtype | None = None) -> torch.Tensor:
-        """``x`` as a tensor (shared memory where possible), of ``dtype`` if given."""
-        return torch.as_tensor(x if torch.is_tensor(x) else np.asarray(x), dtype=dtype)
+        """``x`` as a tensor (shared memory where possible: not with a read-only array), of ``dtype`` if given."""
+        if not torch.is_tensor(x):
+            x = np.asarray(x)
+            x = x if x.flags.writeable else x.copy()
+        return torch.as_tensor(x, dtype=dtype)
 
     @staticmethod
     def rays(points, dirs, dtype: torch.dtype) -> tuple[torch.Tensor, torch.Tensor]:

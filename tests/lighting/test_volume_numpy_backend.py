@@ -106,7 +106,9 @@ def test_local_envmaps_match_and_the_cache_sees_new_arrays():
     assert h_np.envmap_at_cached(p, 32, 64) is first
     h_np.params = np.array(h_np.params) * np.float32(2.0)  # a new array: a new version
     h_np.__post_init__()
-    assert h_np.envmap_at_cached(p, 32, 64) is not first
+    second = h_np.envmap_at_cached(p, 32, 64)
+    assert second is not first and not np.allclose(second, first)
+    assert len(h_np._envmap_cache) == 1  # the stale map (and the old array) dropped
 
 
 def test_equirect_lookup_and_rotation_match_the_torch_version():
