@@ -63,6 +63,35 @@ def summarize(rows: list[LogRow], this_run: dict | None = None) -> dict:
     }
 
 
+def worker_timeline(rows: list[LogRow], dispatched_at: float, ended_at: float, workers: int | None = None) -> dict:
+    """How busy the workers were between the first task's dispatch and the last result (Unix times).
+
+    Busy time is the sum of the tasks' own wall spans (``task_span``), so another job sharing the cores
+    stretches busy and total time alike; the CPU-based ``busy_workers`` drops instead. Each worker's idle
+    time splits into ``startup`` (dispatch to its first task: spawning, imports), ``waiting`` (between its
+    tasks: no task ready) and ``tail`` (its last task done, others still working; then the last result's
+    delivery). ``workers``: the executor's worker count (a worker that got no task is idle throughout).
+    """
+    spans: dict[str, dict[str, tuple[float, float]]] = {}
+    for r in rows:
+        if r.task_span is not None and r.worker is not None:
+            spans.setdefault(r.worker, {})[r.sample_token] = r.task_span
+    wall = max(ended_at - dispatched_at, 1e-9)
+    n = max(workers or 0, len(spans))
+    idle = {"startup": 0.0, "waiting": 0.0, "tail": 0.0}
+    busy = 0.0
+    for by_sample in spans.values():
+        ordered = sorted(by_sample.values())
+        busy += sum(end - start for start, end in ordered)
+        idle["startup"] += max(ordered[0][0] - dispatched_at, 0.0)
+        idle["waiting"] += sum(max(b[0] - a[1], 0.0) for a, b in zip(ordered, ordered[1:]))
+        idle["tail"] += max(ended_at - ordered[-1][1], 0.0)
+    idle["startup"] += (n - len(spans)) * wall  # workers that never got a task
+    return {"workers": n, "tasks": sum(map(len, spans.values())), "busy_s": round(busy, 2),
+            "busy_fraction": round(busy / (n * wall), 3) if n else None, "busy_workers": round(busy / wall, 2),
+            "idle_s": {k: round(v, 2) for k, v in idle.items()}}
+
+
 def per_class(rows: list[LogRow], objects: list) -> dict:
     """``objects_per_category`` (nuScenes category -> objects inserted) and ``classes_not_placed`` (detection
     class -> the most common reasons an object of it found no place, with counts)."""
@@ -91,7 +120,7 @@ def format_summary(summary: dict) -> str:
         rate = run.get("images_per_s")
         lines.append(f"  this run: {run.get('images', 0)} images ({run.get('samples', 0)} samples) in "
                      f"{run.get('wall_s', 0):.1f} s" + (f" = {rate:.2f} img/s" if rate else "")
-                     + f" on {run.get('executor', '?')} ({run.get('busy_workers')} busy)"
+                     + f" on {run.get('executor', '?')} ({_busy(run)})"
                      + f"; {run.get('resumed_samples', 0)} samples already done")
     for i, (key, n) in enumerate(list(summary.get("reasons", {}).items())[:6]):
         lines.append(("  reasons:  " if i == 0 else "            ") + f"{n:4d}  {key}")
@@ -124,6 +153,16 @@ def format_summary(summary: dict) -> str:
         rss = [w["peak_rss_mb"] for w in workers.values()]
         lines.append(f"  workers:  {len(workers)}, peak RSS {min(rss):.0f}-{max(rss):.0f} MiB")
     return "\n".join(lines)
+
+
+def _busy(run: dict) -> str:
+    """How busy the workers were: by their tasks' wall time (and CPU, which other jobs on the cores lower)."""
+    timeline = run.get("timeline") or {}
+    if timeline.get("busy_fraction") is None:
+        return f"{run.get('busy_workers')} busy"
+    idle = timeline["idle_s"]
+    return (f"{timeline['busy_workers']} of {timeline['workers']} busy, {run.get('busy_workers')} by CPU; idle s: "
+            + ", ".join(f"{k} {v:.1f}" for k, v in idle.items()))
 
 
 def contact_sheet(out_dir: Path, rows: list[LogRow], n: int, seed: int, thumb_width: int = 400) -> Path | None:

@@ -135,6 +135,8 @@ class LogRow:
         n_objects_visible: objects with a label in this image (ok rows).
         placement_report: rule name -> candidates rejected (``plan.jsonl``).
         seconds, cpu_s: the sample's wall and CPU seconds divided among its cameras.
+        task_span: (start, end) Unix time (seconds) of the sample's task in its worker (the same on each of its
+            rows): the batch's worker timeline (:func:`~.report.worker_timeline`).
         worker, peak_rss_mb: the worker (``host:pid``) and its peak resident memory.
         sweep_files: ``--sweeps``: sweep ``sample_data`` token -> its new file, for the sweeps before this
             sample of this camera (the LiDAR sweeps on every camera row of the sample); also in ``files``.
@@ -164,6 +166,7 @@ class LogRow:
     sweep_files: dict[str, str] | None = None
     sweeps_note: str | None = None
     class_reasons: dict[str, str] | None = None
+    task_span: tuple[float, float] | None = None
     extra: dict[str, Any] = field(default_factory=dict)
 
     @property
@@ -191,6 +194,7 @@ class LogRow:
             "file_checks": None if self.file_checks is None else {k: dict(v) for k, v in self.file_checks.items()},
             "sweep_files": None if self.sweep_files is None else dict(self.sweep_files), "sweeps_note": self.sweeps_note,
             "class_reasons": dict(self.class_reasons) if self.class_reasons else None,
+            "task_span": None if self.task_span is None else list(self.task_span),
         }
         doc = _drop_none(doc)
         if self.status in ("planned", "no_placement"):
@@ -214,5 +218,6 @@ class LogRow:
             peak_rss_mb=doc.get("peak_rss_mb"), file_checks=doc.get("file_checks"),
             sweep_files=doc.get("sweep_files"), sweeps_note=doc.get("sweeps_note"),
             class_reasons=doc.get("class_reasons"),
+            task_span=None if doc.get("task_span") is None else tuple(doc["task_span"]),
             extra={k: v for k, v in doc.items() if k not in known},
         )

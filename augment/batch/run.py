@@ -41,7 +41,7 @@ from .execute import run_dask, run_inline, run_processes
 from .layout import (LIDARSEG_FOLDER, LOG_FILE, PLAN_FILE, SUMMARY_FILE, check_unique_outputs, labels_file,
                      output_file, shard_dir)
 from .log import append_rows, compact_log, done_samples, latest_rows, read_log, write_log
-from .report import contact_sheet, summarize
+from .report import contact_sheet, summarize, worker_timeline
 from .row import LogRow
 from .tracks import SceneTracks, read_scene_tracks, saved_scene_tracks, scene_groups, scene_tables, \
     summarize_tracks, write_scene_tracks
@@ -166,6 +166,7 @@ def run_batch(config: BatchConfig, out_dir: str | Path, run: RunOptions = RunOpt
 
 
 def _run_locked(config: BatchConfig, out_dir: Path, run: RunOptions, echo: Callable[[str], None]) -> dict:
+    started = time.perf_counter()
     reader = NuScenesReader(config.dataroot, config.version)
     _check_cameras(reader, config.cameras)
     check_unique_outputs(planned_outputs(reader, planned_samples(reader, config.limit), config.cameras))
@@ -221,7 +222,9 @@ def _run_locked(config: BatchConfig, out_dir: Path, run: RunOptions, echo: Calla
         executor = "1 process (inline)"
         results = run_inline(process_sample, tasks)
     results = chain(results, unsliceable)  # filled while the tasks are drawn: read after them
-    return _collect(config, out_dir, run, reader, log_path, results, cameras, tokens, executor)
+    n_workers = run.dask_local if run.dask_local else None if run.scheduler else workers
+    return _collect(config, out_dir, run, reader, log_path, results, cameras, tokens, executor, n_workers,
+                    time.perf_counter() - started)
 
 
 def plan_scenes(config: BatchConfig, out_dir: Path, reader: NuScenesReader, slicer: TableSlicer,
@@ -266,10 +269,14 @@ def plan_scenes(config: BatchConfig, out_dir: Path, reader: NuScenesReader, slic
 
 def _collect(config: BatchConfig, out_dir: Path, run: RunOptions, reader: NuScenesReader, log_path: Path,
              results: Iterable[list[LogRow]], cameras: dict[str, list[str]], tokens: list[str],
-             executor: str) -> dict:
-    """Log the results as they come, then write the plan, the shard's summary or the dataset."""
+             executor: str, n_workers: int | None = None, plan_s: float = 0.0) -> dict:
+    """Log the results as they come, then write the plan, the shard's summary or the dataset.
+
+    ``n_workers``: the executor's workers (None: a Dask scheduler's, counted from the results); ``plan_s``:
+    the driver's seconds before the first dispatch (tables, checks, resume, track plans).
+    """
     pending = list(cameras)
-    t0 = time.perf_counter()
+    t0, dispatched_at = time.perf_counter(), time.time()
     status: Counter = Counter()
     new_rows: list[LogRow] = []
     first_result_s = None  # worker start-up + the first sample
@@ -284,7 +291,7 @@ def _collect(config: BatchConfig, out_dir: Path, run: RunOptions, reader: NuScen
             status.update(r.status for r in rows)
             bar.update(len(rows))
             bar.set_postfix({k: status[k] for k in sorted(status)}, refresh=False)
-    wall = time.perf_counter() - t0
+    wall, ended_at = time.perf_counter() - t0, time.time()
     cpu_s = sum(r.cpu_s or 0.0 for r in new_rows)
     this_run = {"samples": len(pending), "images": len(new_rows), "resumed_samples": len(tokens) - len(pending),
                 "wall_s": round(wall, 3),
@@ -295,7 +302,10 @@ def _collect(config: BatchConfig, out_dir: Path, run: RunOptions, reader: NuScen
                 "steady_images_per_s": round((len(new_rows) - first_images) / (wall - first_result_s), 4)
                 if first_result_s is not None and wall > first_result_s and len(new_rows) > first_images else None,
                 # worker CPU seconds per wall second: ~ the number of workers when none waits for a core
-                "busy_workers": round(cpu_s / wall, 2) if wall > 0 else None}
+                "busy_workers": round(cpu_s / wall, 2) if wall > 0 else None,
+                # the tasks' wall spans: busy_fraction ~ 1 when no worker waits for work (load-independent)
+                "timeline": worker_timeline(new_rows, dispatched_at, ended_at, n_workers),
+                "plan_s": round(plan_s, 3)}
     if run.dry_run:
         return _write_plan(out_dir, new_rows, tokens, this_run)
     if run.shard is not None:
@@ -308,6 +318,7 @@ def _collect(config: BatchConfig, out_dir: Path, run: RunOptions, reader: NuScen
 def finalize(out_dir: Path, config: BatchConfig, reader: NuScenesReader, rows: list[LogRow], this_run: dict,
              contact_sheet_n: int = 12) -> dict:
     """Write the nuScenes tables, ``summary.json`` and the contact sheet from the final log rows."""
+    started = time.perf_counter()
     order = {t: i for i, t in enumerate(reader.sample_tokens())}
     rows = sorted(latest_rows(rows).values(), key=lambda r: (order.get(r.sample_token, len(order)), r.camera))
     augmented = {r.sample_data_token: r.image for r in rows if r.status == "ok"}
@@ -348,6 +359,7 @@ def finalize(out_dir: Path, config: BatchConfig, reader: NuScenesReader, rows: l
                                  "reason": next(iter(notes.values()), None)}  # e.g. the files are absent
         tracks_sheet = track_sheet(out_dir, rows, scenes) if contact_sheet_n > 0 else None
         summary["outputs"]["tracks_sheet"] = tracks_sheet.name if tracks_sheet else None
+    summary["this_run"]["finalize_s"] = round(time.perf_counter() - started, 3)  # tables, sheets (driver only)
     write_json_atomic(out_dir / SUMMARY_FILE, summary)
     return summary
 

@@ -110,7 +110,7 @@ def process_sample(config: BatchConfig, out_dir: str, token: str, cameras: list[
     # send this function to its workers and must not pay for it.
     from .job import augment_sample, augment_track_sample
 
-    t0, cpu0 = time.perf_counter(), time.process_time()
+    started, t0, cpu0 = time.time(), time.perf_counter(), time.process_time()
     try:
         reader = dataset_reader(config).with_tables(tables)
         if scene_tracks is not None:
@@ -126,8 +126,9 @@ def process_sample(config: BatchConfig, out_dir: str, token: str, cameras: list[
     n = max(len(rows), 1)
     seconds, cpu_s = (time.perf_counter() - t0) / n, (time.process_time() - cpu0) / n
     worker, rss = worker_id(), round(peak_rss_mb(), 1)
+    span = (round(started, 3), round(started + time.perf_counter() - t0, 3))
     return [replace(row, timing_s=row.timing_s or {"total": seconds}, seconds=seconds, cpu_s=cpu_s, worker=worker,
-                    peak_rss_mb=rss) for row in rows]
+                    peak_rss_mb=rss, task_span=span) for row in rows]
 
 
 def plan_scene(config: BatchConfig, scene_token: str, scene_name: str, sample_tokens: list[str],

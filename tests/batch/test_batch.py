@@ -37,7 +37,7 @@ CAMERAS = ("CAM_FRONT", "CAM_BACK")
 N_SAMPLES = 2  # of the 3 bundled scenes: enough for 2 workers and shards, fast
 # file_checks: the sha256 of each output, labels.json included, whose "timing_s" varies (the images' and
 # sweeps' bytes are compared by tree_hash)
-VOLATILE = ("timing_s", "seconds", "cpu_s", "worker", "peak_rss_mb", "file_checks")
+VOLATILE = ("timing_s", "seconds", "cpu_s", "worker", "peak_rss_mb", "file_checks", "task_span")
 QUIET = dict(progress=False, contact_sheet=4)
 
 
