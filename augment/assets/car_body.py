@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.interpolate import PchipInterpolator
 
-from .mesh_parts import MeshPart, grid_faces, signed_volume, weld_vertices
+from .mesh_parts import MeshPart, cut_along_levels, grid_faces, signed_volume, weld_vertices
 from .validate import face_normals, smooth_vertex_normals
 
 # Material slots of a procedural car (indices into its material table).  The first seven are the
@@ -233,6 +233,9 @@ _N_LOW, _N_UP = 5.0, 3.2
 # material boundaries along them are straight, not staircased.
 _SEG_ROWS = (3, 3, 6, 4, 6)
 _RAIL = 0.07  # roof rail height above the side glass (m)
+LIP_TOP = 0.75  # the bumpers' black lower lip reaches at most this fraction of the bumper line's height
+REAR_TURN_DEG = 45.0  # the rear window's side edges: where the plan outline has turned this far from straight back
+C_PILLAR_M = 0.15  # least length of the C (D) pillar between the side glass and the rear window's slope (m)
 
 
 def _bumper_line(spec: BodySpec) -> float:
@@ -293,13 +296,66 @@ def body_part(spec: BodySpec) -> MeshPart:
     n_sec = phi.shape[1]
     F = grid_faces(len(d), n_sec, wrap_cols=True)
     n_quads = len(F) // 2
-    quad_mat = body_materials(spec, V, F[:n_quads], F[n_quads:], seg, pos, n_sec)
-    fm = np.concatenate([quad_mat, quad_mat])
+    quads = _quad_frame(spec, V, F[:n_quads], F[n_quads:], seg, pos, n_sec)
+    quads = {k: np.concatenate([v, v]) for k, v in quads.items()}  # both triangles of a quad
     V, F, keep = weld_vertices(V, F)
-    fm = fm[keep]
+    quads = {k: v[keep] for k, v in quads.items()}
     if signed_volume(V, F) < 0:
         F = F[:, ::-1].copy()
-    return MeshPart(V, F, fm, smooth_vertex_normals(V, F))
+    # Window, pillar and lip outlines cut the triangles they cross (their edges follow the outlines, not the
+    # loft's grid: per-face materials had left sawtooth edges where an outline ran diagonally across it).
+    N = smooth_vertex_normals(V, F)
+    V, F, N, levels, parent = cut_along_levels(V, F, N, outline_levels(spec, V, N))
+    inside = levels[F].mean(axis=1) < 0.0
+    fm = body_materials(spec, {k: v[parent] for k, v in quads.items()}, inside)
+    return MeshPart(V, F, fm, N)
+
+
+# Columns of :func:`outline_levels`.
+SIDE_GLASS, B_PILLAR, WINDSCREEN, REAR_WINDOW, UNDERSIDE, BUMPER_LIP = range(6)
+
+
+def outline_levels(spec: BodySpec, V: np.ndarray, N: np.ndarray) -> np.ndarray:
+    """Per body vertex (V, 6), a function that is < 0 inside the region and 0 on its outline: side glass, B
+    pillar, windscreen, rear window, underside (faces looking down) and the bumpers' lower lip (columns
+    ``SIDE_GLASS`` ... ``BUMPER_LIP``).  Mostly distances (m) to straight or leaning lines on the body, with
+    the smooth normal ``N`` (V, 3) for where a region turns round the body (glass faces sideways / forwards /
+    backwards); a region is the intersection of its terms (their maximum)."""
+    x, y, z = np.asarray(V, np.float64).T
+    nx, ny, nz = np.asarray(N, np.float64).T
+    d = spec.length / 2 - x
+    ay = np.abs(y)
+    top, bot, _, belt = body_profiles(spec, d)
+    e0, e1 = side_window_limits(spec, z)
+    band = np.maximum(belt - z, z - (top - _RAIL))  # between the belt line and the roof rail
+    sideways = 0.3 - np.abs(ny)
+    pillars = np.max([0.06 - np.abs(d - dp) for dp in spec.pillars], axis=0)
+    # The C (D) pillar: the side glass ends C_PILLAR_M before the rear window's slope comes down to its height.
+    slope = z + _RAIL - _profile_curves(spec)[0](np.clip(d + C_PILLAR_M, 0.0, spec.length))
+    side = np.max([e0 - d, d - e1, band, sideways, pillars, slope], axis=0)
+    b_pillar = np.max([np.abs(d - spec.pillars[0]) - 0.06, band, sideways], axis=0)
+    taper = tumblehome_taper(spec, z, belt)
+    full_hw = 0.5 * spec.width * taper
+    windscreen = np.max([0.3 - nx, ay - (full_hw - 0.13), spec.d_ws - 0.02 - d, d - spec.d_roof_front - 0.02,
+                         belt - z], axis=0)
+    # The rear window: inside D / C pillars, and not wider than the rear end's flat part (in plan view, where the
+    # outline's normal is within REAR_TURN_DEG of straight back; times the tumblehome), so it does not wrap round
+    # the rear corners.  Both bounds are linear in y: the rear face of a van or an SUV is one fan of triangles
+    # from the end line, and a margin from the section's own half width (0 at the very end, with an infinite
+    # slope) or from the normal's turn left holes or wavy edges in the window once sampled at its vertices.
+    rear = np.max([nx + 0.3, ay - (full_hw - 0.16), ay - plan_corner_y(spec) * taper, spec.d_roof_back - 0.02 - d,
+                   belt + 0.04 - z], axis=0)
+    under = nz + 0.8
+    # The lip: the bumpers' underbody rows (below the section's -45 deg row: their faces tilt down), not over the
+    # arches, and at most LIP_TOP x the bumper line high: where the body closes at its ends the rows rise (by
+    # ~15 cm over the last 30 cm), and following them (or a normal threshold) left a spike under the plates.
+    d_front, d_rear_axle = axle_distances(spec)
+    ra = spec.wheel_radius + 0.05
+    zc, hz = (top + bot) / 2, (top - bot) / 2
+    z_q = zc - hz * np.sin(np.pi / 4) ** (2.0 / _N_LOW)
+    ends = np.minimum(d - (d_front - ra - 0.02), d_rear_axle + ra + 0.02 - d)
+    lip = np.maximum(ends, z - np.minimum(z_q, LIP_TOP * _bumper_line(spec)))
+    return np.stack([side, b_pillar, windscreen, rear, under, lip], axis=1)
 
 
 def tumblehome_taper(spec: BodySpec, z: np.ndarray, belt: np.ndarray) -> np.ndarray:
@@ -308,13 +364,20 @@ def tumblehome_taper(spec: BodySpec, z: np.ndarray, belt: np.ndarray) -> np.ndar
     return 1.0 - spec.tumblehome * np.clip((z - belt) / cabin_h, 0.0, 1.0) ** 1.1
 
 
-def body_materials(spec: BodySpec, V: np.ndarray, tri_a: np.ndarray, tri_b: np.ndarray, seg: np.ndarray,
-                    pos: np.ndarray, n_sec: int) -> np.ndarray:
-    """Material per loft quad (triangles ``tri_a``, ``tri_b``) from its position, normal and section row.
+def plan_corner_y(spec: BodySpec) -> float:
+    """|y| (m) where the plan view's superellipse outline (half axes L / 2, W / 2) has turned ``REAR_TURN_DEG``
+    from facing straight back: the end of the rear's flat part."""
+    a, b, p = spec.length / 2, spec.width / 2, spec.plan_exponent
+    r = (np.tan(np.radians(REAR_TURN_DEG)) * b / a) ** (1.0 / (p - 1.0))  # (y / b) / (x / a) there
+    return float(b * r * (1.0 + r**p) ** (-1.0 / p))
 
-    ``seg`` / ``pos``: per section vertex, the row segment (0 underbody, 1 lower side, 2 up to the
-    belt line, 3 side glass, 4 roof) and the row index inside it.
-    """
+
+def _quad_frame(spec: BodySpec, V: np.ndarray, tri_a: np.ndarray, tri_b: np.ndarray, seg: np.ndarray,
+                pos: np.ndarray, n_sec: int) -> dict[str, np.ndarray]:
+    """Per loft quad (triangles ``tri_a``, ``tri_b``): outward unit normal ``n`` (Q, 3), centroid ``d``, ``y``,
+    ``z`` (Q,), and ``kind`` / ``kind_hi`` / ``row`` (Q,): the lower and upper row segment (0 underbody, 1 lower
+    side, 2 up to the belt line, 3 side glass, 4 roof) and the lower row's index in its segment, from ``seg`` /
+    ``pos`` (per section vertex)."""
     na, aa = face_normals(V, tri_a)
     nb, ab = face_normals(V, tri_b)
     n = na * aa[:, None] + nb * ab[:, None]
@@ -323,42 +386,31 @@ def body_materials(spec: BodySpec, V: np.ndarray, tri_a: np.ndarray, tri_b: np.n
     x, y, z = cen.T
     # Outward normal: the loft winding may be inverted; fix the sign by the section centre.
     outward = np.sign(np.einsum("ij,ij->i", n[:, 1:], np.stack([y, z - 0.7], 1)) + 1e-12)
-    n = n * outward[:, None]
-    d = spec.length / 2 - x
-    _, _, half_w_d, belt = body_profiles(spec, d)
-    ay = np.abs(y)
     c0 = tri_a[:, 0] % n_sec
     c1 = (c0 + 1) % n_sec
     # The quad's lower row (its two columns are mirror-symmetric on the left / right halves).
     lower_first = (seg[c0] < seg[c1]) | ((seg[c0] == seg[c1]) & (pos[c0] <= pos[c1]))
-    kind = np.where(lower_first, seg[c0], seg[c1])
-    row = np.where(lower_first, pos[c0], pos[c1])
-    kind_hi = np.maximum(seg[c0], seg[c1])
-    mat = np.full(len(tri_a), PAINT, dtype=np.int64)
+    return {"n": n * outward[:, None], "d": spec.length / 2 - x, "y": y, "z": z,
+            "kind": np.where(lower_first, seg[c0], seg[c1]), "kind_hi": np.maximum(seg[c0], seg[c1]),
+            "row": np.where(lower_first, pos[c0], pos[c1])}
 
-    # Greenhouse: side glass = the glass rows between the window edges; windscreen / rear window =
-    # forward / backward facing quads above the belt, inside the pillars (measured from the full width).
-    e = side_window_edges(spec)
-    # The side glass's front / rear edges lean with the windscreen / rear window (A and C pillars).
-    e0, e1 = side_window_limits(spec, z)
-    in_side_x = (d > e0) & (d < e1)
-    for dp in spec.pillars:
-        in_side_x &= np.abs(d - dp) > 0.06
-    side = (kind == 3) & (kind_hi == 3) & in_side_x & (np.abs(n[:, 1]) > 0.3)
-    full_hw = 0.5 * spec.width * tumblehome_taper(spec, z, belt)
-    above_belt = kind >= 3
-    windscreen = (above_belt & (n[:, 0] > 0.3) & (ay < full_hw - 0.13)
-                  & (d > spec.d_ws - 0.02) & (d < spec.d_roof_front + 0.02))
-    # The rear window: inside D / C pillars measured from the section's own (plan-rounded) half width,
-    # so it does not wrap round the rear corners.
-    local_hw = half_w_d * tumblehome_taper(spec, z, belt)
-    rear = (above_belt & (n[:, 0] < -0.3) & (ay < np.minimum(full_hw - 0.16, local_hw - 0.12))
-            & (d > spec.d_roof_back - 0.02) & (z > belt + 0.04))
-    mat[side | windscreen] = GLASS
+
+def body_materials(spec: BodySpec, quad: dict[str, np.ndarray], inside: np.ndarray) -> np.ndarray:
+    """Material per body face from its loft quad's frame ``quad`` (:func:`_quad_frame`, one row per face) and
+    the regions it lies in, ``inside`` (F, 6) bool (columns of :func:`outline_levels`)."""
+    n, d, y, z, kind, row = (quad[k] for k in ("n", "d", "y", "z", "kind", "row"))
+    _, _, _, belt = body_profiles(spec, d)
+    ay = np.abs(y)
+    mat = np.full(len(d), PAINT, dtype=np.int64)
+
+    # Greenhouse: side glass between the window edges (leaning with the windscreen and rear window: A and C
+    # pillars) and the B (C) pillars; windscreen / rear window facing forwards / backwards above the belt.
+    side = inside[:, SIDE_GLASS]
+    mat[side | inside[:, WINDSCREEN]] = GLASS
     # Behind the B pillar (rear doors, rear quarter) and the rear window: the (often tinted) rear glass.
-    mat[(side & (d > spec.pillars[0])) | rear] = GLASS_REAR
+    mat[(side & (d > spec.pillars[0])) | inside[:, REAR_WINDOW]] = GLASS_REAR
     # The B pillar between the side windows: black.
-    mat[(kind == 3) & (kind_hi == 3) & (np.abs(d - spec.pillars[0]) <= 0.06) & (np.abs(n[:, 1]) > 0.3)] = TRIM
+    mat[inside[:, B_PILLAR]] = TRIM
 
     # Panel gaps: thin dark strips at the cut lines (door shut lines on the sides below the belt line,
     # bonnet and boot edges on top).
@@ -374,13 +426,10 @@ def body_materials(spec: BodySpec, V: np.ndarray, tri_a: np.ndarray, tri_b: np.n
     # faces that tilt down: a black valance), grille.  The bumpers and sills above are painted: black trim up
     # to the bumper line and along the whole sill made ~half of the lowest 30 % of a car's image black (L* ~18
     # vs ~32 for the real cars of scene-0916, whose bumpers and sills are mostly body-coloured).
-    d_front, d_rear_axle = axle_distances(spec)
-    ra = spec.wheel_radius + 0.05
-    under = n[:, 2] < -0.8  # the sill's rounded lower edge (visible from a camera's height) is painted
-    bumper = (kind == 0) & (n[:, 2] < -0.3) & ((d < d_front - ra - 0.02) | (d > d_rear_axle + ra + 0.02))
+    under = inside[:, UNDERSIDE]  # the sill's rounded lower edge (visible from a camera's height) is painted
     front = (d < 0.45) & (n[:, 0] > 0.25)
     grille = front & (kind == 2) & (row <= 1) & (ay < 0.22 * spec.width)
-    mat[under | bumper | grille] = TRIM
+    mat[under | inside[:, BUMPER_LIP] | grille] = TRIM
 
     # Lights: head lights in the lowest rows above the bumper line at the front corners,
     # tail lights just under the belt line at the rear corners.
@@ -410,9 +459,10 @@ def section_half_width(spec: BodySpec, d: np.ndarray, z: np.ndarray) -> np.ndarr
 
 
 __all__ = [
-    "BODY_SPECS", "BODY_WEIGHTS", "BRAKE", "BodySpec", "CHROME", "DASH", "GAP", "GAP_HALF_M", "GLASS", "GLASS_REAR",
-    "HEADLIGHT", "INTERIOR", "N_SLOTS", "PAINT", "PAINT_LOWER", "PLATE_BAND", "PLATE_FRONT", "PLATE_INK",
-    "PLATE_REAR", "REFLECTOR", "RIM", "TAILLIGHT", "TRIM", "TYRE", "axle_distances", "body_materials", "body_part",
-    "body_profiles", "hatchback_spec", "jitter_spec", "loft_stations", "panel_gaps", "section_half_width",
-    "sedan_spec", "side_window_edges", "side_window_limits", "suv_spec", "tumblehome_taper", "van_spec",
+    "BODY_SPECS", "BODY_WEIGHTS", "BRAKE", "BUMPER_LIP", "B_PILLAR", "BodySpec", "CHROME", "DASH", "GAP", "GAP_HALF_M",
+    "GLASS", "GLASS_REAR", "HEADLIGHT", "INTERIOR", "N_SLOTS", "PAINT", "PAINT_LOWER", "PLATE_BAND", "PLATE_FRONT",
+    "PLATE_INK", "PLATE_REAR", "REAR_WINDOW", "REFLECTOR", "RIM", "SIDE_GLASS", "TAILLIGHT", "TRIM", "TYRE", "UNDERSIDE",
+    "WINDSCREEN", "axle_distances", "body_materials", "body_part", "body_profiles", "hatchback_spec", "jitter_spec",
+    "loft_stations", "outline_levels", "panel_gaps", "plan_corner_y", "section_half_width", "sedan_spec", "side_window_edges",
+    "side_window_limits", "suv_spec", "tumblehome_taper", "van_spec",
 ]

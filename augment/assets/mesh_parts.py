@@ -79,6 +79,75 @@ def weld_vertices(V: np.ndarray, F: np.ndarray, tol: float = 1e-7) -> tuple[np.n
     return V[first], F[ok], ok
 
 
+def cut_along_levels(V: np.ndarray, F: np.ndarray, N: np.ndarray, levels: np.ndarray, snap: float = 0.05
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Cut a triangle mesh along the zero levels of per-vertex functions, so regions they bound have clean outlines.
+
+    Each column of ``levels`` (V, L) is a function on the mesh, linear on every triangle; in turn along each
+    column's zero level, every edge whose ends have opposite signs gets one vertex at the crossing (shared by
+    the edge's triangles: a closed mesh stays closed) and every crossed triangle becomes three (two when the
+    level passes through one of its vertices).  A crossing closer than ``snap`` x the edge's length to an end
+    moves onto that end (its value becomes 0), so no slivers are made.  Positions do not change; new vertices
+    get the linear interpolation of the normals and of every column's values (0 in the column cut).
+
+    Args:
+        V, F, N: (V, 3) positions, (F, 3) counter-clockwise faces, (V, 3) unit smooth normals.
+        levels: (V, L) float64 values; a face's side of level k is the sign of its vertices' mean value.
+
+    Returns:
+        (V', F', N', levels' (V', L), parent (F',) index into ``F`` of the face each new face was cut from).
+    """
+    V, N, lv = np.asarray(V, np.float64), np.asarray(N, np.float64), np.array(levels, np.float64, ndmin=2)
+    F = np.asarray(F, np.int64)
+    parent = np.arange(len(F))
+    for k in range(lv.shape[1]):
+        lv[np.abs(lv[:, k]) < 1e-9, k] = 0.0
+        neg, pos = lv[:, k] < 0.0, lv[:, k] > 0.0
+        # Only faces with values of both signs can have a crossed edge (both faces of one have).
+        mixed = (neg[F[:, 0]] | neg[F[:, 1]] | neg[F[:, 2]]) & (pos[F[:, 0]] | pos[F[:, 1]] | pos[F[:, 2]])
+        if not mixed.any():
+            continue
+        Fm, pm = F[mixed], parent[mixed]
+        edges = np.sort(Fm[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+        keys, inv = np.unique(edges[:, 0] * len(V) + edges[:, 1], return_inverse=True)  # 1-D keys: fast
+        uniq = np.stack([keys // len(V), keys % len(V)], axis=1)
+        inv = inv.reshape(-1, 3)  # face edge j joins its vertices j and j + 1
+        fa, fb = lv[uniq[:, 0], k], lv[uniq[:, 1], k]
+        cross = fa * fb < 0
+        t = np.where(cross, fa / np.where(cross, fa - fb, 1.0), 0.0)
+        # Snapping an end to 0 only removes crossings (an edge with a zero end has none); the others keep their t.
+        lv[np.concatenate([uniq[cross & (t < snap), 0], uniq[cross & (t > 1.0 - snap), 1]]), k] = 0.0
+        cross &= (lv[uniq[:, 0], k] != 0.0) & (lv[uniq[:, 1], k] != 0.0)
+        ce = np.flatnonzero(cross)
+        a, b, tc = uniq[ce, 0], uniq[ce, 1], t[ce][:, None]
+        new_idx = np.full(len(uniq), -1, np.int64)
+        new_idx[ce] = len(V) + np.arange(len(ce))
+        n_new = N[a] + tc * (N[b] - N[a])
+        N = np.concatenate([N, n_new / np.maximum(np.linalg.norm(n_new, axis=1, keepdims=True), 1e-12)])
+        V = np.concatenate([V, V[a] + tc * (V[b] - V[a])])
+        lv_new = lv[a] + tc * (lv[b] - lv[a])
+        lv_new[:, k] = 0.0
+        lv = np.concatenate([lv, lv_new])
+        m = new_idx[inv]  # (mixed faces, 3) new vertex on each face edge, -1 where not crossed
+        n_cross = (m >= 0).sum(axis=1)
+        out_F, out_p = [F[~mixed], Fm[n_cross == 0]], [parent[~mixed], pm[n_cross == 0]]
+        # Two crossed edges: the vertex between them (i) gets a triangle, the rest of the face a quad.
+        two = np.flatnonzero(n_cross == 2)
+        i = (np.argmin(m[two] >= 0, axis=1) + 2) % 3  # the edge not crossed is opposite vertex i
+        va, vb, vc = Fm[two, i], Fm[two, (i + 1) % 3], Fm[two, (i + 2) % 3]
+        m_ab, m_ca = m[two, i], m[two, (i + 2) % 3]
+        out_F += [np.stack([va, m_ab, m_ca], 1), np.stack([m_ab, vb, vc], 1), np.stack([m_ab, vc, m_ca], 1)]
+        out_p += [pm[two]] * 3
+        # One crossed edge (j): the level runs from its crossing through the opposite vertex.
+        one = np.flatnonzero(n_cross == 1)
+        j = np.argmax(m[one] >= 0, axis=1)
+        v0, v1, v2, mj = Fm[one, j], Fm[one, (j + 1) % 3], Fm[one, (j + 2) % 3], m[one, j]
+        out_F += [np.stack([v0, mj, v2], 1), np.stack([mj, v1, v2], 1)]
+        out_p += [pm[one]] * 2
+        F, parent = np.concatenate(out_F), np.concatenate(out_p)
+    return V, F, N, lv, parent
+
+
 def box_mesh(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """An axis-aligned box: 24 vertices (flat-shaded faces), 12 outward triangles."""
     corners = np.array([[i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)], dtype=np.float64)
@@ -96,5 +165,5 @@ def box_mesh(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return V, F
 
 
-__all__ = ["MeshPart", "box_mesh", "grid_faces", "merge_parts", "orient_outward", "signed_volume", "target_wlh",
+__all__ = ["MeshPart", "box_mesh", "cut_along_levels", "grid_faces", "merge_parts", "orient_outward", "signed_volume", "target_wlh",
            "weld_vertices"]
