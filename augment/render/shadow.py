@@ -370,6 +370,7 @@ GROUND_SNAP_END_M = 0.5  # ... and from this far on as the depth map says (smoot
 REFINE_RANGE_SIGMA = 0.12  # deficit difference (fraction of E) the refined band's smoothing does not cross
 SKY_COARSE_STEP = 4  # the sky deficit is first evaluated every this many cells ...
 SKY_COARSE_TOL = 0.01  # ... and at every cell where those nodes differ by more than this (fraction of E)
+SKY_ROTATIONS = 128  # the sky spiral of a ground point is rotated by one of this many angles (random per point)
 SKY_REFINE_JUMP = 0.08  # sky-occlusion change (fraction of E) between neighbouring cells that asks for full resolution
 
 
@@ -461,7 +462,10 @@ def _sky_deficit(p_obj: np.ndarray, n_obj: np.ndarray, light: DistantLight, prep
     cos_max = np.where(inside, 0.0, np.sqrt(np.clip(1.0 - (radius / np.maximum(dist, 1e-9)) ** 2, 0.0, 1.0)))
     k = (np.arange(n_dirs) + 0.5) / n_dirs
     z = 1.0 - k[None] * (1.0 - cos_max)[:, None]  # (P, N) uniform in solid angle inside the cap
-    phi = GOLDEN_ANGLE * np.arange(n_dirs)[None] + rng.random(P)[:, None] * 2 * np.pi
+    # Each point's spiral is rotated by one of SKY_ROTATIONS angles: under the object (the whole hemisphere)
+    # the direction sets are then a small table, whose sky integrals are computed once (below).
+    rot = rng.integers(0, SKY_ROTATIONS, P)
+    phi = GOLDEN_ANGLE * np.arange(n_dirs)[None] + (rot * (2 * np.pi / SKY_ROTATIONS))[:, None]
     rr = np.sqrt(np.clip(1.0 - z * z, 0.0, 1.0))
     local = np.stack([rr * np.cos(phi), rr * np.sin(phi), z], axis=2).reshape(-1, 3)
     dirs_all = to_world(local, np.repeat(axis, n_dirs, axis=0))
@@ -484,12 +488,27 @@ def _sky_deficit(p_obj: np.ndarray, n_obj: np.ndarray, light: DistantLight, prep
     A, B = bounce.radiance(face, dirs_obj[bi])
     # Each direction stands for a cell of the cone: use the sky averaged over cells of about that size
     # (a box-filtered map), not a point sample of a possibly spiky panorama.
-    L = sample_equirect(_cell_filtered_env(light.envmap, n_dirs), *camera_dir_to_lonlat(dirs_obj[bi] @ R.T))
-    wgt = weight_all[live[bi]]
+    env = _cell_filtered_env(light.envmap, n_dirs)
     pix = live[bi] // n_dirs
+    wgt = weight_all[live[bi]]
+    L = np.empty((len(bi), 3))
+    hemi = inside[pix]
+    if hemi.any():
+        table, E_hat = _hemisphere_sky(env, n_obj, R, n_dirs, z[np.flatnonzero(inside)[0]])
+        L[hemi] = table[rot[pix[hemi]], live[bi[hemi]] % n_dirs]
+    if not hemi.all():
+        L[~hemi] = sample_equirect(env, *camera_dir_to_lonlat(dirs_obj[bi[~hemi]] @ R.T))
     for k in range(3):
         D0[:, k] = np.bincount(pix, weights=(L[:, k] - A[:, k]) * wgt, minlength=P)
         C[:, k] = np.bincount(pix, weights=B[:, k] * wgt, minlength=P)
+    if hemi.any():
+        # Under the object the deficit is the blocked share of the sky these directions see (their own sky
+        # integral E_hat) times the exact sky irradiance E: a ratio estimator.  A point that sees no sky gets
+        # exactly its bounce light, instead of E minus a sampled estimate of E, whose few-per-cent integration
+        # error is the whole signal in a deep shadow (blotches, clipped to black).
+        scale = bounce.env.sky_irradiance(R @ n_obj)[None] / np.maximum(E_hat[rot], 1e-12)
+        D0[inside] *= scale[inside]
+        C[inside] *= scale[inside]
     if not fade:
         return D0, C
     # Truncated at the sky radius of the shadow's pixel box, smoothly (no step at the box's edge).
@@ -609,6 +628,20 @@ def _sun_block_weight(prep: PreparedAsset, org: np.ndarray, dirs: np.ndarray, n_
     hits = prep.scene.intersect(org, dirs)
     horiz = hits.t * np.sqrt(np.clip(1.0 - (dirs @ n_obj) ** 2, 0.0, 1.0))
     return np.where(hits.hit, fade_weight(np.where(hits.hit, horiz, 0.0), fade_m, SUN_FADE_START), 0.0)
+
+
+def _hemisphere_sky(env: np.ndarray, n_obj: np.ndarray, R: np.ndarray, n_dirs: int,
+                    z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The sky seen by the spiral of points inside the object's bounding sphere (the whole hemisphere around
+    ``n_obj``), for each of the :data:`SKY_ROTATIONS` rotations: radiance (SKY_ROTATIONS, n_dirs, 3) of the
+    cell-filtered map ``env`` along each direction, and the sky irradiance (SKY_ROTATIONS, 3) they estimate
+    (each standing for ``2 pi / n_dirs`` sr, with its cosine ``z`` (n_dirs,))."""
+    phi = GOLDEN_ANGLE * np.arange(n_dirs)[None] + (np.arange(SKY_ROTATIONS) * (2 * np.pi / SKY_ROTATIONS))[:, None]
+    rr = np.sqrt(np.clip(1.0 - z * z, 0.0, 1.0))[None]
+    local = np.stack([rr * np.cos(phi), rr * np.sin(phi), np.broadcast_to(z[None], phi.shape)], axis=2).reshape(-1, 3)
+    dirs = to_world(local, np.broadcast_to(n_obj, local.shape))
+    L = sample_equirect(env, *camera_dir_to_lonlat(dirs @ R.T)).reshape(SKY_ROTATIONS, n_dirs, 3)
+    return L, np.einsum("rkc,k->rc", L, 2 * np.pi / n_dirs * z)
 
 
 def _cell_filtered_env(envmap: np.ndarray, n_dirs: int) -> np.ndarray:
