@@ -65,6 +65,8 @@ DEFAULT_SAMPLES = 128
 ENVMAP_CACHE_SIZE = 32  # local env maps kept per HybridLighting (a sample has a handful of objects)
 CHUNK_RAYS = 16384
 INDEX_CHUNK = 65536  # points per block of the voxel look-up (fits the cache)
+MARCH_BLOCK = 16  # samples per ray marched at a time by the numpy backend (then finished rays are dropped)
+TOP_MARGIN_M = 0.01  # a sample this far above the highest occupied layer is certainly in empty space
 VOLUME_SCHEMA = "streetaug.hybrid_lighting/1"
 
 
@@ -337,18 +339,68 @@ class NumpyBackend:
         return rgb
 
     @staticmethod
-    def march(h: "HybridLighting", points: np.ndarray, dirs: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def _sample_t(h: "HybridLighting", points: np.ndarray, dirs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(t_exit (N,), frac (K,)): sample k of a ray lies at ``t_exit * frac[k]``."""
         lo, hi = (b.astype(points.dtype) for b in h.grid.bounds())
         safe = np.where(np.abs(dirs) < 1e-12, dirs.dtype.type(1e-12), dirs)
         t_hi = np.maximum((lo - points) / safe, (hi - points) / safe)
         t_exit = np.maximum(t_hi.min(axis=1), 0.0)  # (N,)
         K = h.n_samples
-        frac = (np.arange(K, dtype=points.dtype) + 0.5) / K
+        return t_exit, (np.arange(K, dtype=points.dtype) + 0.5) / K
+
+    @staticmethod
+    def march(h: "HybridLighting", points: np.ndarray, dirs: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        t_exit, frac = NumpyBackend._sample_t(h, points, dirs)
         t = t_exit[:, None] * frac[None]
         flat, inside = h.grid.flat_index_xyz(*(points[:, a, None] + t * dirs[:, a, None] for a in range(3)))
         alpha = h._alpha_flat().take(flat)
         np.multiply(alpha, inside, out=alpha)
         return flat, alpha, inside
+
+    @staticmethod
+    def march_weights(h: "HybridLighting", points: np.ndarray, dirs: np.ndarray,
+                      need_weights: bool = True) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None, np.ndarray | None]:
+        """Eq. 1's compositing along rays: (tau_K (N,), and the samples with a weight ``tau_{k-1} alpha_k > 0``:
+        ray (M,), flat voxel (M,), weight (M,), sorted by ray then sample).
+
+        The same numbers as compositing :meth:`march`'s (N, K) samples at once, computed in blocks of
+        ``MARCH_BLOCK`` samples: a ray leaves the march once nothing after can add anything -- its transmittance
+        is exactly 0 (it entered a solid voxel), or it climbs above the highest occupied layer (every later
+        sample is empty: alpha 0, a factor of exactly 1)."""
+        t_exit, frac = NumpyBackend._sample_t(h, points, dirs)
+        alpha_flat, z_top = h._alpha_flat(), h._occupied_top_m() + TOP_MARGIN_M
+        tau = np.ones(len(points), points.dtype)
+        rising = dirs[:, 2] > 0
+        active = np.arange(len(points))
+        rays, flats, weights = [], [], []
+        for k0 in range(0, len(frac), MARCH_BLOCK):
+            if k0:  # drop the finished rays
+                z_next = points[active, 2] + (t_exit[active] * frac[k0]) * dirs[active, 2]
+                active = active[(tau[active] != 0) & ~(rising[active] & (z_next > z_top))]
+            if not len(active):
+                break
+            t = t_exit[active, None] * frac[None, k0 : k0 + MARCH_BLOCK]
+            p, d = points[active], dirs[active]
+            flat, inside = h.grid.flat_index_xyz(*(p[:, a, None] + t * d[:, a, None] for a in range(3)))
+            alpha = alpha_flat.take(flat)
+            np.multiply(alpha, inside, out=alpha)
+            trans = np.empty((len(active), alpha.shape[1] + 1), points.dtype)
+            trans[:, 0] = tau[active]  # tau_{k0-1}: the product continues exactly as one cumprod over all K
+            np.subtract(1.0, alpha, out=trans[:, 1:])
+            np.cumprod(trans, axis=1, out=trans)
+            tau[active] = trans[:, -1]
+            if need_weights:
+                alpha *= trans[:, :-1]  # the weights tau_{k-1} alpha_k
+                sample = np.flatnonzero(alpha > 0)  # row-major: ray ascending, then k
+                rays.append(active.take(sample // alpha.shape[1]))
+                flats.append(flat.reshape(-1).take(sample))
+                weights.append(alpha.reshape(-1).take(sample))
+        if not need_weights:
+            return tau, None, None, None
+        ray = np.concatenate(rays) if rays else np.zeros(0, np.int64)
+        order = np.argsort(ray, kind="stable")  # (ray, block, k) = (ray, k)
+        cat = (lambda parts, dtype: np.concatenate(parts).take(order) if parts else np.zeros(0, dtype))
+        return tau, ray.take(order), cat(flats, np.int64), cat(weights, points.dtype)
 
     @staticmethod
     def radiance_chunk(h: "HybridLighting", points: np.ndarray, dirs: np.ndarray, include_sun: bool) -> np.ndarray:
@@ -366,30 +418,23 @@ class NumpyBackend:
         env = NumpyBackend.env_radiance(h, dirs, include_sun)
         if h.params is None:
             return env
-        flat, alpha, _ = NumpyBackend.march(h, points, dirs)
-        trans = np.subtract(1.0, alpha)
-        np.cumprod(trans, axis=1, out=trans)  # tau_k
-        weight = alpha
-        weight[:, 1:] *= trans[:, :-1]  # tau_{k-1} alpha_k (alpha is this call's own array)
-        sample = np.flatnonzero(weight > 0)  # (ray, k) row-major: ray ascending
-        out = trans[:, -1:] * env
-        if len(sample):
-            ray = sample // weight.shape[1]
-            vox = h.params.reshape(-1, N_CHANNELS).take(flat.reshape(-1).take(sample), axis=0)
+        tau, ray, flat, weight = NumpyBackend.march_weights(h, points, dirs)
+        out = tau[:, None] * env
+        if len(ray):
+            vox = h.params.reshape(-1, N_CHANNELS).take(flat, axis=0)
             axis = vox[:, CH_AXIS]
             axis = axis / np.maximum(np.sqrt(np.einsum("ij,ij->i", axis, axis)), 1e-9)[:, None]
             cosang = -np.einsum("ij,ij->i", dirs.take(ray, axis=0), axis)  # G(-l): leaving the voxel to the point
             sigma2 = np.maximum(np.square(vox[:, CH_SIGMA]), 1e-6)
             lobe = vox[:, CH_COLOR] * np.exp(-(1.0 - cosang) / sigma2)[:, None]
-            lobe *= weight.reshape(-1).take(sample)[:, None]
+            lobe *= weight[:, None]
             first = np.flatnonzero(np.r_[True, ray[1:] != ray[:-1]])  # each ray's first sample
             out[ray[first]] += np.add.reduceat(lobe, first, axis=0)
         return out
 
     @staticmethod
     def transmittance_chunk(h: "HybridLighting", points: np.ndarray, dirs: np.ndarray) -> np.ndarray:
-        _, alpha, _ = NumpyBackend.march(h, points, dirs)
-        return np.prod(1.0 - alpha, axis=1)
+        return NumpyBackend.march_weights(h, points, dirs, need_weights=False)[0]
 
     @staticmethod
     def version(x: np.ndarray | None) -> int:
@@ -462,8 +507,16 @@ class HybridLighting:
     def _alpha_flat(self) -> np.ndarray:
         """The occupancy channel (X*Y*Z,) of the numpy parameters, contiguous (cached per parameter array)."""
         if self._alpha[0] is not self.params:
-            self._alpha = (self.params, np.ascontiguousarray(self.params.reshape(-1, N_CHANNELS)[:, CH_ALPHA]))
+            alpha = np.ascontiguousarray(self.params.reshape(-1, N_CHANNELS)[:, CH_ALPHA])
+            layers = np.flatnonzero((alpha.reshape(self.grid.shape) != 0).any(axis=(0, 1)))
+            top_m = self.grid.axis_edges()[2][layers[-1] + 1] if len(layers) else -np.inf
+            self._alpha = (self.params, alpha, float(top_m))
         return self._alpha[1]
+
+    def _occupied_top_m(self) -> float:
+        """Upper edge (metres) of the highest voxel layer with any non-zero alpha (-inf if none)."""
+        self._alpha_flat()
+        return self._alpha[2]
 
     # ------------------------------------------------------------------ environment
 
