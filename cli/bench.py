@@ -40,7 +40,7 @@ def bench(scenes, seeds, levels, presets, small, out, debug):
       streetaug bench --out benchmarks/results
       streetaug bench --small --out /tmp/bench
     """
-    # Deferred: the sweep loads torch (the learned sky model); `streetaug --help` must not.
+    # Deferred: the sweep loads scipy (torch only if the sky network runs); `streetaug --help` must not.
     from streetaug.augment.evaluation import speed_accuracy as sa
     from streetaug.augment.scenegen.make import SAMPLE_SCENES
     from streetaug.datasets.bundled import bundled_dataroot

@@ -164,7 +164,7 @@ def insert(dataroot, version, scene, sample_token, camera, asset, assets_dir, as
       streetaug insert --image img.png --intrinsics 1266,1266,816,491 --depth depth.exr \\
           --envmap env.exr --asset car.glb --pose-camera 0.5,1.5,15,90 --out out/img
     """
-    # Deferred: the pipeline loads torch (the learned sky model), the assets scipy; `streetaug --help` must not.
+    # Deferred: the pipeline and the assets load scipy (torch only if the sky network runs); `--help` must not.
     with library_imports():
         from streetaug.augment.assets.classes import ClassMix
         from streetaug.augment.assets.select import load_asset_options, select_assets

@@ -31,7 +31,7 @@ def stability(dataroot, version, scene, sample_token, camera, families, failure_
     Example:
       streetaug stability --scene sample-sunny --out out/stability
     """
-    # Deferred: the insertion loads torch (the learned sky model), the assets scipy; `streetaug --help` must not.
+    # Deferred: the insertion and the assets load scipy (torch only if the sky network runs); `--help` must not.
     from streetaug.augment.assets.select import select_assets
     from streetaug.augment.evaluation.failure_modes import write_failure_modes
     from streetaug.augment.evaluation.stability import write_stability_report
