@@ -235,6 +235,8 @@ _SEG_ROWS = (3, 3, 6, 4, 6)
 _RAIL = 0.07  # roof rail height above the side glass (m)
 LIP_TOP = 0.75  # the bumpers' black lower lip reaches at most this fraction of the bumper line's height
 REAR_TURN_DEG = 45.0  # the rear window's side edges: where the plan outline has turned this far from straight back
+_NORMAL_M = 0.1  # metres per unit of normal change in the outline functions
+A_PILLAR_M = 0.10  # least length of the A pillar between the windscreen's slope and the side glass (m)
 C_PILLAR_M = 0.15  # least length of the C (D) pillar between the side glass and the rear window's slope (m)
 
 
@@ -326,25 +328,30 @@ def outline_levels(spec: BodySpec, V: np.ndarray, N: np.ndarray) -> np.ndarray:
     d = spec.length / 2 - x
     ay = np.abs(y)
     top, bot, _, belt = body_profiles(spec, d)
-    e0, e1 = side_window_limits(spec, z)
-    band = np.maximum(belt - z, z - (top - _RAIL))  # between the belt line and the roof rail
-    sideways = 0.3 - np.abs(ny)
-    pillars = np.max([0.06 - np.abs(d - dp) for dp in spec.pillars], axis=0)
-    # The C (D) pillar: the side glass ends C_PILLAR_M before the rear window's slope comes down to its height.
-    slope = z + _RAIL - _profile_curves(spec)[0](np.clip(d + C_PILLAR_M, 0.0, spec.length))
-    side = np.max([e0 - d, d - e1, band, sideways, pillars, slope], axis=0)
-    b_pillar = np.max([np.abs(d - spec.pillars[0]) - 0.06, band, sideways], axis=0)
     taper = tumblehome_taper(spec, z, belt)
     full_hw = 0.5 * spec.width * taper
-    windscreen = np.max([0.3 - nx, ay - (full_hw - 0.13), spec.d_ws - 0.02 - d, d - spec.d_roof_front - 0.02,
-                         belt - z], axis=0)
+    # Normal terms are scaled to about metres (the normal turns by ~1 over the body's tightest corners' 10 cm), so
+    # where two terms meet at a region's corner the cut (linear along each edge) stays close to both.
+    windscreen = np.max([_NORMAL_M * (0.3 - nx), ay - (full_hw - 0.13), spec.d_ws - 0.02 - d,
+                         d - spec.d_roof_front - 0.02, belt - z], axis=0)
     # The rear window: inside D / C pillars, and not wider than the rear end's flat part (in plan view, where the
     # outline's normal is within REAR_TURN_DEG of straight back; times the tumblehome), so it does not wrap round
-    # the rear corners.  Both bounds are linear in y: the rear face of a van or an SUV is one fan of triangles
+    # the rear corners (5 cm inside that).  Both bounds are linear in y: the rear face of a van or an SUV is one fan of triangles
     # from the end line, and a margin from the section's own half width (0 at the very end, with an infinite
     # slope) or from the normal's turn left holes or wavy edges in the window once sampled at its vertices.
-    rear = np.max([nx + 0.3, ay - (full_hw - 0.16), ay - plan_corner_y(spec) * taper, spec.d_roof_back - 0.02 - d,
-                   belt + 0.04 - z], axis=0)
+    rear = np.max([_NORMAL_M * (nx + 0.3), ay - (full_hw - 0.16), ay - (plan_corner_y(spec) * taper - 0.05),
+                   spec.d_roof_back - 0.02 - d, belt + 0.04 - z], axis=0)
+    e0, e1 = side_window_limits(spec, z)
+    band = np.maximum(belt - z, z - (top - _RAIL))  # between the belt line and the roof rail
+    sideways = _NORMAL_M * (0.3 - np.abs(ny))
+    pillars = np.max([0.06 - np.abs(d - dp) for dp in spec.pillars], axis=0)
+    # The A and C (D) pillars: the side glass starts A_PILLAR_M behind the windscreen's slope and ends C_PILLAR_M
+    # before the rear window's slope come down to its height (without them the glass areas met at their corners).
+    roof = _profile_curves(spec)[0]
+    a_pillar = z + _RAIL - roof(np.clip(d - A_PILLAR_M, 0.0, spec.length))
+    c_pillar = z + _RAIL - roof(np.clip(d + C_PILLAR_M, 0.0, spec.length))
+    side = np.max([e0 - d, d - e1, band, sideways, pillars, a_pillar, c_pillar], axis=0)
+    b_pillar = np.max([np.abs(d - spec.pillars[0]) - 0.06, band, sideways], axis=0)
     under = nz + 0.8
     # The lip: the bumpers' underbody rows (below the section's -45 deg row: their faces tilt down), not over the
     # arches, and at most LIP_TOP x the bumper line high: where the body closes at its ends the rows rise (by
