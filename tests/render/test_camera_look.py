@@ -141,3 +141,25 @@ def test_jpeg_noise_survival_compensates_the_round_trip():
 
     assert abs(measured(s) - target) < 0.2 * target
     assert measured(target) < 0.75 * target
+
+
+def test_jpeg_round_trip_adds_no_colour_bias():
+    """Re-encoding a car's blocks (4:2:0, quality 80) quantises each flat colour's chroma to the DC step (a few
+    tenths of a* / b*) but adds no cast over colours and keeps their chroma (issue #20: no warm shift)."""
+    from streetaug.augment.evaluation.realism import srgb_to_lab
+    from streetaug.augment.render.camera_look import jpeg_round_trip
+
+    rng = np.random.default_rng(4)
+    colours = rng.integers(20, 235, (64, 3))
+    img = np.repeat(np.repeat(colours.reshape(8, 8, 3), 32, 0), 32, 1).astype(np.uint8)  # 32 x 32 px patches
+    out = jpeg_round_trip(img, np.ones(img.shape[:2], bool), 80)
+    def per_patch(image):  # mean CIELAB of each patch's middle (its edges share chroma with the neighbours)
+        lab = srgb_to_lab(image).astype(np.float64).reshape(8, 32, 8, 32, 3)
+        return lab[:, 8:24, :, 8:24].mean(axis=(1, 3)).reshape(64, 3)
+
+    a, b = per_patch(img), per_patch(out)
+    shift = b - a
+    assert np.all(np.abs(shift[:, 1:]) < 1.5), shift  # each colour: within a few DC steps
+    assert np.all(np.abs(shift[:, 1:].mean(axis=0)) < 0.15), shift.mean(axis=0)  # no cast over colours
+    chroma_in, chroma_out = np.hypot(a[:, 1], a[:, 2]), np.hypot(b[:, 1], b[:, 2])
+    assert chroma_out.mean() > 0.98 * chroma_in.mean()
