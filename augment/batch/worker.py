@@ -5,8 +5,9 @@ A task is (sample token, cameras, the sample's table rows): the driver cuts the 
 the source files (images, LiDAR, map) on its file system. The work itself is :mod:`.job`.
 
 Caches per worker process, all bounded: one reader per dataset (and its parsed map, one per location),
-assets and their BVHs (the ``assets`` loader's LRU cache; the renderer keeps each BVH on its asset). Lighting and scene depth are computed
-once per sample and camera and shared by every object rendered there.
+asset files and their BVHs (the ``assets`` loader's LRU cache; the renderer keeps each BVH on its asset);
+procedural objects only for ``--tracks`` (a sample's own are forgotten after it: :func:`release_sample_assets`).
+Lighting and scene depth are computed once per sample and camera and shared by every object rendered there.
 """
 
 from __future__ import annotations
@@ -94,6 +95,21 @@ def peak_rss_mb() -> float:
     return rss / 2**20 if sys.platform == "darwin" else rss / 1024
 
 
+def release_sample_assets() -> None:
+    """Forget the procedural objects this process built for a sample (objects per sample, not ``--tracks``).
+
+    ``select_assets`` keeps the last 64 procedural cars (256 objects of a class mix) with their ray-tracing
+    copies, ~3.5 MB each (2.5 MB mesh and BVH, the rest bounce data): up to 220 MB (cars) or ~900 MB per
+    worker. A sample's objects are drawn from 4096 seeds per sample and camera, so a later sample finds
+    one of them again in 1.6 % of its draws at best; a track's object is drawn again in every keyframe of its
+    scene, so ``--tracks`` keeps them.
+    """
+    from ..assets import select  # deferred: the procedural generators
+
+    for cached in (select._procedural, select._procedural_of):  # noqa: SLF001 - no public handle (see report)
+        cached.cache_clear()
+
+
 def process_sample(config: BatchConfig, out_dir: str, token: str, cameras: list[str], tables: dict,
                    dry_run: bool = False, fail_fast: bool = False, scene_tracks=None) -> list[LogRow]:
     """Augment ``cameras`` of sample ``token`` and write their images and labels under ``out_dir``.
@@ -123,6 +139,9 @@ def process_sample(config: BatchConfig, out_dir: str, token: str, cameras: list[
             raise
         reason = f"{type(e).__name__}: {e}".splitlines()[0][:300]
         rows = [LogRow(token, c, "failed", reason) for c in cameras]
+    finally:
+        if scene_tracks is None:
+            release_sample_assets()
     n = max(len(rows), 1)
     seconds, cpu_s = (time.perf_counter() - t0) / n, (time.process_time() - cpu0) / n
     worker, rss = worker_id(), round(peak_rss_mb(), 1)
