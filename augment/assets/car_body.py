@@ -332,7 +332,10 @@ def outline_levels(spec: BodySpec, V: np.ndarray, N: np.ndarray) -> np.ndarray:
     full_hw = 0.5 * spec.width * taper
     # Normal terms are scaled to about metres (the normal turns by ~1 over the body's tightest corners' 10 cm), so
     # where two terms meet at a region's corner the cut (linear along each edge) stays close to both.
-    windscreen = np.max([_NORMAL_M * (0.3 - nx), ay - (full_hw - 0.13), spec.d_ws - 0.02 - d,
+    # The windscreen narrows towards the roof (8 cm each side more at the top than at the belt line), keeping an A
+    # pillar between it and the side glass where the roof's sides curve in.
+    up = np.clip((z - belt) / (spec.height - _RAIL - belt), 0.0, 1.0)
+    windscreen = np.max([_NORMAL_M * (0.3 - nx), ay - (full_hw - 0.13 - 0.08 * up), spec.d_ws - 0.02 - d,
                          d - spec.d_roof_front - 0.02, belt - z], axis=0)
     # The rear window: inside D / C pillars, and not wider than the rear end's flat part (in plan view, where the
     # outline's normal is within REAR_TURN_DEG of straight back; times the tumblehome), so it does not wrap round
