@@ -57,6 +57,9 @@ class DepthView:
         radiance: (h, w, 3) float32 linear radiance, reference scale.
         K: (3, 3) intrinsics of these images.
         T_vol_from_cam: (4, 4) camera -> volume frame.
+        backdrop_depth_m: (h, w) float32 a second surface behind the first (inf where none), or None: where a
+            near object's top meets the farther structure that continues above it, that structure goes on a
+            few rows down behind the object, so that no gap opens between the two (see :mod:`.observe`).
     """
 
     channel: str
@@ -64,15 +67,26 @@ class DepthView:
     radiance: np.ndarray
     K: np.ndarray
     T_vol_from_cam: np.ndarray
+    backdrop_depth_m: np.ndarray | None = None
 
 
 def depth_mesh(view: DepthView, step: int = GEOMETRY_STEP_PX) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """A view's depth as a grid mesh: (vertices (V, 3) volume frame, faces (F, 3) int64, pixel uv (V, 2)).
 
     Vertices sit at every ``step``-th pixel (rows and columns); a quad's two triangles are kept where all three
-    vertices have a finite depth and pass the depth-ratio test (see module doc).
+    vertices have a finite depth and pass the depth-ratio test (see module doc). The backdrop (if any) is a
+    second grid mesh of the same pixels, appended.
     """
-    depth = np.asarray(view.depth_m, dtype=np.float64)
+    v, f, uv = _grid_mesh(view, view.depth_m, step)
+    if view.backdrop_depth_m is None:
+        return v, f, uv
+    vb, fb, uvb = _grid_mesh(view, view.backdrop_depth_m, step)
+    return np.concatenate([v, vb]), np.concatenate([f, fb + len(v)]), np.concatenate([uv, uvb])
+
+
+def _grid_mesh(view: DepthView, depth_m: np.ndarray, step: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`depth_mesh` of one depth image (h, w) of ``view``."""
+    depth = np.asarray(depth_m, dtype=np.float64)
     check_shape(depth, ("H", "W"), "depth_m")
     rows = np.arange(0, depth.shape[0], step)
     cols = np.arange(0, depth.shape[1], step)

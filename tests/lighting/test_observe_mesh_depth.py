@@ -5,7 +5,14 @@ from __future__ import annotations
 import numpy as np
 
 from streetaug.augment.lighting import seen_surfaces as ss
-from streetaug.augment.lighting.observe import extend_facades, fill_structure_columns, mesh_depth, top_window_px
+from streetaug.augment.lighting.observe import (
+    TOP_FARTHEST_MAX_M,
+    extend_facades,
+    fill_structure_columns,
+    mesh_backdrop,
+    mesh_depth,
+    top_window_px,
+)
 from streetaug.augment.lighting.seen_surfaces import DepthView, SeenSurfaces
 
 W, H, F = 96, 64, 60.0
@@ -35,6 +42,50 @@ def test_above_a_low_object_the_mesh_continues_the_farthest_top_nearby():
     assert np.all(points_depth[3:14, 10:] == 8.0)
     # window 1 is the old rule
     assert np.array_equal(mesh_depth(depth, sky, 1), fill_structure_columns(extend_facades(depth, sky)[0], sky))
+
+
+def test_a_column_of_ground_up_to_the_horizon_is_not_continued_in_its_neighbours():
+    """The ground plane's depth near the horizon (here 2 km) is no structure: the neighbours keep their own."""
+    depth = np.full((20, 20), np.inf)
+    depth[8:, :] = 20.0
+    depth[8, 5] = 2000.0  # column 5: ground right up to its top
+    out = mesh_depth(depth, np.zeros((20, 20), bool), 11)
+    assert 2000.0 > TOP_FARTHEST_MAX_M
+    assert np.all(out[:8, :5] == 20.0) and np.all(out[:8, 6:] == 20.0) and np.all(out[:8, 5] == 2000.0)
+
+
+def test_backdrop_behind_a_near_top():
+    """Only in the columns whose continued depth is farther than their own top (beyond the mesh's depth-ratio
+    test): that depth over rows either side of the top, not into the sky."""
+    depth = np.full((20, 20), np.inf)
+    depth[8:, :10] = 30.0
+    depth[14:, 10:] = 8.0
+    sky = np.zeros((20, 20), bool)
+    sky[:12, 12] = True
+    bd = mesh_backdrop(depth, sky, 11, rows=2)
+    assert np.all(bd[12:17, 10:12] == 30.0) and np.all(bd[12:17, 13:15] == 30.0)
+    assert np.all(np.isinf(bd[:12])) and np.all(np.isinf(bd[17:])) and np.all(np.isinf(bd[:, 15:]))
+    assert np.all(np.isinf(bd[:, :10]))  # the facade's columns continue their own top
+    assert np.all(bd[12:17, 12] == 30.0) and np.all(np.isinf(bd[:12, 12]))  # no backdrop in the sky
+
+
+def test_from_its_own_centre_the_camera_sees_no_gap_at_a_near_top():
+    """Without the backdrop the mesh breaks between the car's top (8 m) and the wall continued above it
+    (30 m): rays from the camera's own centre through the break miss; with it every such ray hits."""
+    truth, measured = _scene()
+    sky = np.zeros((H, W), bool)
+    u, v = np.meshgrid(np.arange(50.0, 90.0, 0.5), np.arange(32.0, 40.0, 0.25))
+    rays = np.stack([(u.ravel() - K[0, 2]) / F, (v.ravel() - K[1, 2]) / F, np.ones(u.size)], axis=1)
+    dirs = rays @ T_VOL_FROM_CAM[:3, :3].T
+    dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
+    origins = np.repeat(CENTRE[None], len(dirs), axis=0)
+    view = _view(mesh_depth(measured, sky, 2 * W + 1), truth)
+    hit_without, _, _ = SeenSurfaces.from_views([view]).trace(origins, dirs)
+    assert not hit_without.all()
+    with_backdrop = DepthView(view.channel, view.depth_m, view.radiance, K, T_VOL_FROM_CAM,
+                              mesh_backdrop(measured, sky, 2 * W + 1))
+    hit, _, rgb = SeenSurfaces.from_views([with_backdrop]).trace(origins, dirs)
+    assert hit.all()
 
 
 def test_window_in_degrees():
