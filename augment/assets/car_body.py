@@ -5,7 +5,9 @@ above the belt line: the "tumblehome"), between a side-profile roof curve ``z_to
 underbody curve ``z_bot(x)`` that rises into wheel arches; its plan-view width rounds off at both
 ends, closing the surface.  Materials are assigned per face from its position and normal
 (windscreen / side windows / rear window with pillars in between, bumpers, grille, head and tail
-lights).  Distances ``d`` run from the nose (0) to the rear (``length``); the object frame has x front.
+lights); the outlines of the windows, the B pillar and the bumpers' lip (:func:`outline_levels`)
+first cut the triangles they cross, so those edges are clean lines, not the loft grid's staircase.
+Distances ``d`` run from the nose (0) to the rear (``length``); the object frame has x front.
 """
 
 from __future__ import annotations
@@ -337,11 +339,11 @@ def outline_levels(spec: BodySpec, V: np.ndarray, N: np.ndarray) -> np.ndarray:
     up = np.clip((z - belt) / (spec.height - _RAIL - belt), 0.0, 1.0)
     windscreen = np.max([_NORMAL_M * (0.3 - nx), ay - (full_hw - 0.13 - 0.08 * up), spec.d_ws - 0.02 - d,
                          d - spec.d_roof_front - 0.02, belt - z], axis=0)
-    # The rear window: inside D / C pillars, and not wider than the rear end's flat part (in plan view, where the
-    # outline's normal is within REAR_TURN_DEG of straight back; times the tumblehome), so it does not wrap round
-    # the rear corners (5 cm inside that).  Both bounds are linear in y: the rear face of a van or an SUV is one fan of triangles
-    # from the end line, and a margin from the section's own half width (0 at the very end, with an infinite
-    # slope) or from the normal's turn left holes or wavy edges in the window once sampled at its vertices.
+    # The rear window: inside D / C pillars, and 5 cm narrower than the rear end's flat part (in plan view, where
+    # the outline's normal is within REAR_TURN_DEG of straight back; times the tumblehome), so it does not wrap
+    # round the rear corners.  Both bounds are linear in y: the rear face of a van or an SUV is one fan of
+    # triangles from the end line, and a margin from the section's own half width (0 at the very end, with an
+    # infinite slope) or from the normal's turn left holes or wavy edges in the window once sampled at vertices.
     rear = np.max([_NORMAL_M * (nx + 0.3), ay - (full_hw - 0.16), ay - (plan_corner_y(spec) * taper - 0.05),
                    spec.d_roof_back - 0.02 - d, belt + 0.04 - z], axis=0)
     e0, e1 = side_window_limits(spec, z)
@@ -471,8 +473,8 @@ def section_half_width(spec: BodySpec, d: np.ndarray, z: np.ndarray) -> np.ndarr
 __all__ = [
     "BODY_SPECS", "BODY_WEIGHTS", "BRAKE", "BUMPER_LIP", "B_PILLAR", "BodySpec", "CHROME", "DASH", "GAP", "GAP_HALF_M",
     "GLASS", "GLASS_REAR", "HEADLIGHT", "INTERIOR", "N_SLOTS", "PAINT", "PAINT_LOWER", "PLATE_BAND", "PLATE_FRONT",
-    "PLATE_INK", "PLATE_REAR", "REAR_WINDOW", "REFLECTOR", "RIM", "SIDE_GLASS", "TAILLIGHT", "TRIM", "TYRE", "UNDERSIDE",
-    "WINDSCREEN", "axle_distances", "body_materials", "body_part", "body_profiles", "hatchback_spec", "jitter_spec",
-    "loft_stations", "outline_levels", "panel_gaps", "plan_corner_y", "section_half_width", "sedan_spec", "side_window_edges",
-    "side_window_limits", "suv_spec", "tumblehome_taper", "van_spec",
+    "PLATE_INK", "PLATE_REAR", "REAR_WINDOW", "REFLECTOR", "RIM", "SIDE_GLASS", "TAILLIGHT", "TRIM", "TYRE",
+    "UNDERSIDE", "WINDSCREEN", "axle_distances", "body_materials", "body_part", "body_profiles", "hatchback_spec",
+    "jitter_spec", "loft_stations", "outline_levels", "panel_gaps", "plan_corner_y", "section_half_width",
+    "sedan_spec", "side_window_edges", "side_window_limits", "suv_spec", "tumblehome_taper", "van_spec",
 ]

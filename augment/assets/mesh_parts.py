@@ -97,7 +97,8 @@ def cut_along_levels(V: np.ndarray, F: np.ndarray, N: np.ndarray, levels: np.nda
     Returns:
         (V', F', N', levels' (V', L), parent (F',) index into ``F`` of the face each new face was cut from).
     """
-    V, N, lv = np.asarray(V, np.float64), np.asarray(N, np.float64), np.array(levels, np.float64, ndmin=2)
+    V, N, lv = np.asarray(V, np.float64), np.asarray(N, np.float64), np.array(levels, np.float64)
+    lv = lv[:, None] if lv.ndim == 1 else lv
     F = np.asarray(F, np.int64)
     parent = np.arange(len(F))
     for k in range(lv.shape[1]):
@@ -165,5 +166,5 @@ def box_mesh(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return V, F
 
 
-__all__ = ["MeshPart", "box_mesh", "cut_along_levels", "grid_faces", "merge_parts", "orient_outward", "signed_volume", "target_wlh",
-           "weld_vertices"]
+__all__ = ["MeshPart", "box_mesh", "cut_along_levels", "grid_faces", "merge_parts", "orient_outward", "signed_volume",
+           "target_wlh", "weld_vertices"]
