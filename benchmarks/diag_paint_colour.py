@@ -4,6 +4,8 @@ Usage::
 
     nice python benchmarks/diag_paint_colour.py                                  # neutral grey paint
     nice python benchmarks/diag_paint_colour.py --paint 0.05,0.12,0.45 --keyframes 0,20   # a saturated blue
+    nice python benchmarks/diag_paint_colour.py --palette --n-objects 3     # the benchmark's cars, per material
+    nice python benchmarks/diag_paint_colour.py --real                      # the real cars: car / background
 
 Procedural cars of one paint (default a neutral grey, solid) are inserted into real scene-0916 images through
 the pipeline's library API (``insert_into_sample``, as ``bench_realism.py``); every ``render_insertion`` call is
@@ -15,12 +17,18 @@ contract's LDR (what the realism benchmark measures):
 * ``env_down``: the car's local environment looking down (``E(-up) / pi``: the ground the light model shows it);
 * ``env_up`` / ``env_side``: what a grey Lambertian facing up / sideways towards the camera receives
   (``E(n) + sun``);
-* ``sky``: the local map's upper hemisphere (mean radiance);
+* ``sky``: the local map's upper hemisphere (mean radiance); ``sky_photo`` / ``sky_env_there``: the photo's
+  unclipped pixels without depth in its upper half and the local map in the same directions;
 * ``airlight``: the veil's airlight colour (:func:`~streetaug.augment.render.veil.estimate_veil`) and its share
   ``haze`` at the car's depth;
 * ``paint_pred``: the paint's base colour x ``env_side`` / ``env_up`` irradiance (Lambertian prediction);
 * ``paint_render``: the rendered side paint's radiance before the veil, blur, noise and JPEG;
 * ``paint_final``: the final composite's side paint pixels.
+
+``--palette``: the realism benchmark's cars (``select_assets`` with the location) and its mask (the projected 3D
+box's hull): per material (``background`` where no part of the car is hit) the hull's share and mean CIELAB, and
+the car's own pixels alone.  ``--real``: the benchmark's real cars, their hull split into ``car`` (the scene depth
+puts the pixel inside the box grown by 0.3 m) and ``background``.
 
 Stages of the chain a cast can enter: the light (env vs road), the shading (render vs prediction), the camera
 look (final vs render).  Pictures are written nowhere (shared data); ``--out`` gets the per-car JSON.
@@ -42,7 +50,8 @@ import numpy as np  # noqa: E402
 ROOT = Path(__file__).resolve().parents[1]
 SEQ = (ROOT / ".." / "shared" / "data" / "nuscenes-seq").resolve()
 GREY_ALBEDO = 0.25
-KEYS = ("road", "env_down", "env_up", "env_side", "sky", "sky_photo", "sky_env_there", "airlight", "paint_pred", "paint_render", "paint_final")
+KEYS = ("road", "env_down", "env_up", "env_side", "sky", "sky_photo", "sky_env_there", "airlight", "paint_pred",
+        "paint_render", "paint_final")
 
 
 def chroma_of(rgb_lin: np.ndarray) -> list[float]:
@@ -276,6 +285,17 @@ def report_parts(cars: list[dict]) -> None:
     print(f"{len(cars)} cars: hull median a* {np.median(hull[:, 0]):.2f} b* {np.median(hull[:, 1]):.2f} chroma "
           f"{np.median(hull[:, 2]):.2f}; mean a* {hull[:, 0].mean():.2f} b* {hull[:, 1].mean():.2f}; the same hull "
           f"before insertion: a* {np.median(before[:, 0]):.2f} b* {np.median(before[:, 1]):.2f}")
+    body = []
+    for c in cars:
+        parts = {n: v for n, v in c["parts"].items() if n != "background"}
+        w = np.array([v[0] for v in parts.values()])
+        if w.sum() > 0:
+            body.append([float((np.array([v[k] for v in parts.values()]) * w).sum() / w.sum()) for k in (2, 3, 4)])
+    if body:
+        body = np.array(body)
+        print(f"  the car's own pixels (every part but the background): median a* {np.median(body[:, 0]):.2f} "
+              f"b* {np.median(body[:, 1]):.2f} C {np.median(body[:, 2]):.2f}; mean a* {body[:, 0].mean():.2f} "
+              f"b* {body[:, 1].mean():.2f} C {body[:, 2].mean():.2f}")
     names = sorted({n for c in cars for n in c["parts"]})
     rows = []
     for n in names:
@@ -291,8 +311,8 @@ def report_parts(cars: list[dict]) -> None:
     fam = {}
     for c in cars:
         fam.setdefault(c["paint"], []).append(c["hull"])
-    print("  by paint: " + ", ".join(f"{k} {len(v)}: b* {np.mean([h[1] for h in v]):.2f} C {np.mean([h[2] for h in v]):.2f}"
-                                   for k, v in sorted(fam.items())))
+    print("  by paint: " + ", ".join(f"{k} {len(v)}: b* {np.mean([h[1] for h in v]):.2f} "
+                                   f"C {np.mean([h[2] for h in v]):.2f}" for k, v in sorted(fam.items())))
 
 
 def main(argv=None) -> None:
