@@ -309,8 +309,17 @@ def body_part(spec: BodySpec) -> MeshPart:
     # Window, pillar and lip outlines cut the triangles they cross (their edges follow the outlines, not the
     # loft's grid: per-face materials had left sawtooth edges where an outline ran diagonally across it).
     N = smooth_vertex_normals(V, F)
-    V, F, N, levels, parent = cut_along_levels(V, F, N, outline_levels(spec, V, N))
-    inside = levels[F].mean(axis=1) < 0.0
+    V, F, N, levels, parent = cut_along_levels(V, F, N, outline_levels(spec, V, N), zero_tol=1e-4)
+    lv = levels[F]  # (F, 3 vertices, regions)
+    inside = lv.mean(axis=1) < 0.0
+    # A face with all three vertices on an outline (e.g. in a window's corner, two on the pillar line and one on the
+    # belt line) has no side by its vertices: the function at its centre decides.
+    tie = np.flatnonzero((np.abs(lv).max(axis=1) < 1e-9).any(axis=1))
+    if len(tie):
+        n_c = N[F[tie]].sum(axis=1)
+        at_centre = outline_levels(spec, V[F[tie]].mean(axis=1), n_c / np.linalg.norm(n_c, axis=1, keepdims=True))
+        on = np.abs(lv[tie]).max(axis=1) < 1e-9
+        inside[tie] = np.where(on, at_centre < 0.0, inside[tie])
     fm = body_materials(spec, {k: v[parent] for k, v in quads.items()}, inside)
     return MeshPart(V, F, fm, N)
 

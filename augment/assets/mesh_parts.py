@@ -79,15 +79,16 @@ def weld_vertices(V: np.ndarray, F: np.ndarray, tol: float = 1e-7) -> tuple[np.n
     return V[first], F[ok], ok
 
 
-def cut_along_levels(V: np.ndarray, F: np.ndarray, N: np.ndarray, levels: np.ndarray, snap: float = 0.05
-                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def cut_along_levels(V: np.ndarray, F: np.ndarray, N: np.ndarray, levels: np.ndarray, snap: float = 0.05,
+                     zero_tol: float = 1e-9) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Cut a triangle mesh along the zero levels of per-vertex functions, so regions they bound have clean outlines.
 
     Each column of ``levels`` (V, L) is a function on the mesh, linear on every triangle; in turn along each
     column's zero level, every edge whose ends have opposite signs gets one vertex at the crossing (shared by
     the edge's triangles: a closed mesh stays closed) and every crossed triangle becomes three (two when the
     level passes through one of its vertices).  A crossing closer than ``snap`` x the edge's length to an end
-    moves onto that end (its value becomes 0), so no slivers are made.  Positions do not change; new vertices
+    moves onto that end (its value becomes 0), so no slivers are made; so do values within ``zero_tol`` of 0
+    (a vertex that lies on a level up to rounding is on it).  Positions do not change; new vertices
     get the linear interpolation of the normals and of every column's values (0 in the column cut).
 
     Args:
@@ -102,7 +103,7 @@ def cut_along_levels(V: np.ndarray, F: np.ndarray, N: np.ndarray, levels: np.nda
     F = np.asarray(F, np.int64)
     parent = np.arange(len(F))
     for k in range(lv.shape[1]):
-        lv[np.abs(lv[:, k]) < 1e-9, k] = 0.0
+        lv[np.abs(lv[:, k]) < zero_tol, k] = 0.0
         neg, pos = lv[:, k] < 0.0, lv[:, k] > 0.0
         # Only faces with values of both signs can have a crossed edge (both faces of one have).
         mixed = (neg[F[:, 0]] | neg[F[:, 1]] | neg[F[:, 2]]) & (pos[F[:, 0]] | pos[F[:, 1]] | pos[F[:, 2]])
