@@ -3,8 +3,16 @@
 Calibrated on measured peak RSS of ``streetaug insert --image`` (a 4.4 m box at 15 m, focal length = the
 image side, so the object's screen size grows with the image): 1000 x 1000 px -> 420 MB (draft) /
 432 MB (default); 3000 x 3000 px -> 922 / 946 MB. That is ~360 MB of code and models plus ~63 bytes per
-image pixel (the image, its depth, mask, shadow and float32 HDR buffers). A batch worker with the six
-1600 x 900 nuScenes cameras of a sample in memory peaks at ~580 MB, as the estimate says.
+image pixel (the image, its depth, mask, shadow and float32 HDR buffers).
+
+A batch worker on the real scene-0916 (six 1600 x 900 cameras per sample, default quality, the sky model
+loaded) peaks at 1.29-1.45 GB, above the estimate (0.98 GB): ~370 MB of code, models and maps; ~17 MB per
+camera kept until the sample is written (image, depth, mask, shadow); ~66 MB per object already drawn in
+the camera being rendered (the renderer's full-frame layers, kept until the camera is done); and the
+render of one object, ~0.4-1 kB per camera sample of its pixel box: 564 MB when the object's box straddles
+the camera plane and its pixel box is the whole frame (``render.footprint.object_pixel_box``), 300 MB for a
+car filling a fifth of the frame. The estimate does not model the last two (they depend on where the
+objects are, not on the image size).
 """
 
 from __future__ import annotations

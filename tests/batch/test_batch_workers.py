@@ -3,9 +3,12 @@
 from __future__ import annotations
 
 import gc
+import os
+import time
 
 from streetaug.augment.assets.asset import Asset
 from streetaug.augment.batch import BatchConfig, LogRow, RunOptions, run_batch
+from streetaug.augment.batch.execute import run_processes
 from streetaug.augment.batch.report import worker_timeline
 from streetaug.datasets.bundled import BUNDLED_VERSION, bundled_dataroot
 
@@ -43,3 +46,29 @@ def test_timeline_splits_idle_time():
 def test_timeline_counts_a_worker_that_got_no_task_as_idle():
     timeline = worker_timeline([_row("a", "w1", (0.0, 10.0))], 0.0, 10.0, workers=2)
     assert timeline["busy_fraction"] == 0.5 and timeline["idle_s"]["startup"] == 10.0
+
+
+def _nap(seconds: float) -> tuple[int, float, float]:
+    start = time.time()
+    time.sleep(seconds)
+    return os.getpid(), start, time.time()
+
+
+def test_local_workers_stay_fed_with_items_of_very_different_cost():
+    """Long and short items mixed: a free worker takes the next item at once (no static split, no waiting for
+    the slow one), so the two finish within one long item of each other and neither waits between items."""
+    costs = [1.2] + [0.05] * 16 + [1.2, 0.05, 0.05, 0.6]
+    spans = list(run_processes(_nap, [(c,) for c in costs], workers=2))
+    assert len(spans) == len(costs)
+    by_worker: dict[int, list[tuple[float, float]]] = {}
+    for pid, start, end in spans:
+        by_worker.setdefault(pid, []).append((start, end))
+    assert len(by_worker) == 2
+    for items in by_worker.values():
+        items.sort()
+        gaps = [b[0] - a[1] for a, b in zip(items, items[1:])]
+        assert max(gaps, default=0.0) < 0.5, f"a worker waited {max(gaps):.2f} s for its next item"
+    last = sorted(max(end for _, end in items) for items in by_worker.values())
+    assert last[1] - last[0] < 1.2 + 0.5
+    busy = sum(end - start for _, start, end in spans)
+    assert busy > 0.95 * sum(costs)
