@@ -16,7 +16,6 @@ from dataclasses import dataclass, replace
 from typing import Sequence
 
 import numpy as np
-import torch
 
 from ...datasets.sample import CameraView, LidarSweep
 from ..core import (
@@ -160,7 +159,7 @@ def build_hybrid(ref_est: LightingEstimate, T_vol_from_cam: np.ndarray, observat
         sun_irr = np.asarray(ref_est.light_cam.sun.irradiance_rgb, dtype=np.float64) * factor
         out["sun_irradiance_factor"] = {"factor": factor, "from": how}
     light = DistantSun(sun_dir_vol, np.zeros(3) if sun_irr is None else sun_irr, sky_horizontal_irradiance_world(dome))
-    params_t, out["volume"] = build_volume(grid, observations, lidar_vol, light, dome, GROUND_ALBEDO)
+    params, out["volume"] = build_volume(grid, observations, lidar_vol, light, dome, GROUND_ALBEDO)
     timing["volume"] = time.perf_counter() - t
     t = time.perf_counter()
     surfaces = SeenSurfaces.from_views([o.depth_view for o in observations if o.depth_view is not None])
@@ -168,8 +167,8 @@ def build_hybrid(ref_est: LightingEstimate, T_vol_from_cam: np.ndarray, observat
     out["seen_surfaces"] = {"faces": 0 if surfaces is None else surfaces.n_faces,
                             "cameras": [] if surfaces is None else list(surfaces.channels)}
     hybrid = HybridLighting(
-        torch.from_numpy(dome), sun_dir_vol, None if sun_irr is None else torch.from_numpy(sun_irr.astype(np.float32)),
-        grid=grid, params=params_t, seen=surfaces,
+        dome, sun_dir_vol, None if sun_irr is None else sun_irr.astype(np.float32),
+        grid=grid, params=params, seen=surfaces,
     )
     return hybrid, out
 
