@@ -163,8 +163,8 @@ def compare(args) -> None:
     loads = [os.getloadavg()]
     for r in range(args.rounds):
         for name, shim in (("old", args.old), ("new", args.new)) if r % 2 == 0 else (("new", args.new), ("old", args.old)):
-            out = Path(f"/tmp/render_cost_{name}_{r}.json")
-            img = f"/tmp/render_cost_{name}.npz"
+            out = Path(args.work) / f"render_cost_{name}_{r}.json"
+            img = str(Path(args.work) / f"render_cost_{name}.npz")
             env = dict(os.environ, PYTHONPATH=shim, OMP_NUM_THREADS="1")
             cmd = [sys.executable, __file__, "replay", "--inputs", args.inputs, "--reps", str(args.reps),
                    "--result", str(out)] + (["--images", img] if r < 2 else [])
@@ -256,6 +256,7 @@ def main(argv=None) -> None:
     m.add_argument("--rounds", type=int, default=2)
     m.add_argument("--reps", type=int, default=1)
     m.add_argument("--json", default=str(ROOT / "benchmarks" / "results" / "render_cost_s6.json"))
+    m.add_argument("--work", default="/tmp", help="folder of the replays' results and images (outside the repository)")
     args = p.parse_args(argv)
     if args.cmd == "capture":
         capture(args)

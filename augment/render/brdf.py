@@ -250,10 +250,21 @@ def flake_lobe(n_h: np.ndarray, n_l: np.ndarray, n_v: np.ndarray, params: BRDFPa
 
 
 def flake_energy(n_dot_v: np.ndarray) -> np.ndarray:
-    """Directional albedo E (N,) of the white single-scattering flake lobe ``int D G / (4 n.l n.v) n.l dl``."""
-    x = np.asarray(n_dot_v, dtype=np.float64)
-    white = BRDFParams.uniform(len(x), base_color=(1.0, 1.0, 1.0), metallic=1.0, roughness=FLAKE_ROUGHNESS)
-    return specular_albedo(x, white)[:, 0]
+    """Directional albedo E (N,) of the white single-scattering flake lobe ``int D G / (4 n.l n.v) n.l dl``.
+
+    :func:`specular_albedo` of a white metal at :data:`FLAKE_ROUGHNESS`, read from its table's column at that
+    roughness (linear in n.v between the same nodes: the same values, ~10x cheaper than the 2-D lookup)."""
+    global _FLAKE_E_COLUMN
+    if _FLAKE_E_COLUMN is None:
+        size = ALBEDO_TABLE_SIZE
+        nodes = (np.arange(size) + 0.5) / size
+        white = BRDFParams.uniform(size, base_color=(1.0, 1.0, 1.0), metallic=1.0, roughness=FLAKE_ROUGHNESS)
+        _FLAKE_E_COLUMN = (nodes, specular_albedo(nodes, white)[:, 0])
+    nodes, values = _FLAKE_E_COLUMN
+    return np.interp(np.asarray(n_dot_v, dtype=np.float64), nodes, values)
+
+
+_FLAKE_E_COLUMN: tuple[np.ndarray, np.ndarray] | None = None
 
 
 _FLAKE_E_AVG: float | None = None

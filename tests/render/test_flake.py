@@ -173,3 +173,12 @@ def test_shading_under_a_uniform_sky_is_unbiased_with_flakes_and_mirror_variates
         albedo = np.mean([_albedo_sampled(np.array([np.sqrt(1 - c * c), 0.0, c]), BRDFParams.uniform(1, **kw), 20_000, i)
                           for i, c in enumerate(nv)], axis=0)
         np.testing.assert_allclose(np.mean(out, axis=0), 0.5 * albedo, rtol=0.04, atol=0.004)
+
+
+def test_flake_energy_column_equals_the_2d_albedo_table():
+    """The 1-D column lookup (the shader calls it per sample) gives the 2-D table's values, clamped the same."""
+    from streetaug.augment.render.brdf import BRDFParams, FLAKE_ROUGHNESS, specular_albedo
+
+    x = np.concatenate([np.linspace(-0.1, 1.1, 2001), [0.0, 1.0, 0.5 / 32, 1 - 0.5 / 32]])
+    white = BRDFParams.uniform(len(x), base_color=(1.0, 1.0, 1.0), metallic=1.0, roughness=FLAKE_ROUGHNESS)
+    np.testing.assert_allclose(flake_energy(x), specular_albedo(x, white)[:, 0], rtol=0, atol=1e-12)
