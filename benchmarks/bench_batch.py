@@ -4,6 +4,13 @@ worker, and the projected wall time / cost of all nuScenes trainval keyframes (3
 Usage: ``python benchmarks/bench_batch.py [--replicas 12] [--quality default] [--repeats 1]
 [--real] [--out benchmarks/results/batch_throughput.json]``
 
+A dataset of its own (e.g. the real scene-0916): ``python benchmarks/bench_batch.py --dataroot
+../shared/data/nuscenes-seq --version v1.0-mini [--limit 8] [--cameras CAM_FRONT,...] [--workers 2 1]
+--out ...``: the first ``--limit`` keyframes (all cameras unless ``--cameras``), one run per worker count and
+repeat. Each run also gives how busy the workers were by their tasks' wall time (sum of the samples' wall
+seconds in the workers / (wall x workers)), robust to other jobs on the cores, and the driver's seconds
+outside the workers (before the first dispatch, after the last result).
+
 Dataset: the bundled sample scenes (1600x900; CAM_FRONT, CAM_FRONT_LEFT, CAM_BACK) replicated R times
 with fresh tokens (files linked, not copied), so that there are enough samples to keep two workers
 busy; each replica gets its own placements (seeds derive from the sample token). ``--real`` also
@@ -80,8 +87,22 @@ def replicate_dataset(src: Path, dst: Path, version: str, replicas: int) -> Path
     return dst
 
 
-def timed_run(dataroot: Path, version: str, out: Path, quality: str, level: str, run: RunOptions, seed: int) -> dict:
-    config = BatchConfig(dataroot=str(dataroot), version=version, quality=quality, level=level, seed=seed)
+def busy_by_wall(rows: list, wall_s: float, workers: int) -> dict:
+    """Sum of the samples' wall seconds in the workers (``seconds`` x cameras; every batch version logs it)
+    over ``wall_s`` x ``workers``, and the per-sample walls' spread (what a last sample leaves idle)."""
+    per_sample: dict[str, float] = {}
+    for r in rows:
+        per_sample[r.sample_token] = per_sample.get(r.sample_token, 0.0) + float(r.seconds or 0.0)
+    busy = sum(per_sample.values())
+    walls = sorted(per_sample.values())
+    return {"busy_fraction": round(busy / (wall_s * workers), 3), "busy_workers": round(busy / wall_s, 2),
+            "sample_wall_s_p50_max": [round(float(np.median(walls)), 2), round(walls[-1], 2)] if walls else None}
+
+
+def timed_run(dataroot: Path, version: str, out: Path, quality: str, level: str, run: RunOptions, seed: int,
+              limit: int | None = None, cameras: tuple[str, ...] = ()) -> dict:
+    config = BatchConfig(dataroot=str(dataroot), version=version, quality=quality, level=level, seed=seed,
+                         limit=limit, cameras=cameras)
     load0 = os.getloadavg()[0]
     t0 = time.perf_counter()
     summary = run_batch(config, out, run)
@@ -90,7 +111,10 @@ def timed_run(dataroot: Path, version: str, out: Path, quality: str, level: str,
     rss = [w["peak_rss_mb"] for w in summary["workers"].values()]
     # Per sample CPU seconds / cameras; the median leaves out each worker's one-off warm-up (first ephemeris
     # call, caches), which a real run amortises over thousands of samples.
-    cpu = [r.cpu_s for r in read_log(out / "augment_log.jsonl")]
+    rows = read_log(out / "augment_log.jsonl")
+    cpu = [r.cpu_s for r in rows]
+    workers = run.dask_local or run.workers
+    this_run = summary["this_run"]
     return {
         "wall_s": round(wall, 2),
         "images": n_images,
@@ -105,6 +129,14 @@ def timed_run(dataroot: Path, version: str, out: Path, quality: str, level: str,
         "peak_rss_mb_per_worker": sorted(rss),
         "load_avg_1min_before_after": [round(load0, 2), round(os.getloadavg()[0], 2)],
         "stage_p50_s": {k: v["p50"] for k, v in summary["stage_seconds"].items() if "." not in k},
+        "counts": summary["counts"],
+        # by the tasks' wall time, over the run's whole wall (driver included) and over the dispatch-to-last-result wall
+        "busy_by_wall_whole_run": busy_by_wall(rows, wall, workers),
+        "busy_by_wall_dispatch_to_last": busy_by_wall(rows, this_run["wall_s"], workers),
+        "driver_s": {"before_dispatch": round(wall - this_run["wall_s"] - this_run.get("finalize_s", 0.0), 2)
+                     if "finalize_s" in this_run else None,
+                     "finalize": this_run.get("finalize_s")},
+        "timeline": this_run.get("timeline"),  # this version's own account (None before it existed)
     }
 
 
@@ -134,7 +166,16 @@ def main() -> None:
     parser.add_argument("--usd-per-core-hour", type=float, default=0.04,
                         help="price assumed for the projection (on-demand compute-optimised vCPU, order of magnitude)")
     parser.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "results" / "batch_throughput.json")
+    parser.add_argument("--dataroot", type=Path, help="time this nuScenes dataroot instead of the bundled replicas")
+    parser.add_argument("--version", default="v1.0-mini", help="its table folder (with --dataroot)")
+    parser.add_argument("--limit", type=int, help="the first N keyframes only (with --dataroot)")
+    parser.add_argument("--cameras", default="", help="comma-separated channels (with --dataroot; default all)")
+    parser.add_argument("--workers", type=int, nargs="+", default=[2], help="worker counts (with --dataroot)")
+    parser.add_argument("--label", default="", help="a name for this code tree in the report (with --dataroot)")
     args = parser.parse_args()
+    if args.dataroot is not None:
+        dataset_main(args)
+        return
 
     modes = {"1 worker (inline)": RunOptions(workers=1, progress=False, contact_sheet=0),
              "2 local processes": RunOptions(workers=2, progress=False, contact_sheet=0),
@@ -197,6 +238,41 @@ def main() -> None:
                                              "steady_scaling_1_to_2_workers", "steady_scaling_1_to_dask_2",
                                              "median_worker_cpu_s_per_image", "cpu_bound_scaling_2_workers",
                                              "cpu_bound_scaling_dask_2", "projection_trainval")}, indent=2))
+    print(f"wrote {args.out}")
+
+
+def dataset_main(args: argparse.Namespace) -> None:
+    """``--dataroot``: each worker count in turn, ``--repeats`` times (interleaved), on the given dataset."""
+    import streetaug.augment
+
+    cameras = tuple(c for c in args.cameras.split(",") if c)
+    runs: dict[str, list[dict]] = {f"{w} workers": [] for w in args.workers}
+    with tempfile.TemporaryDirectory() as tmp:
+        for r in range(args.repeats):
+            for w in args.workers:
+                run = RunOptions(workers=w, progress=False, contact_sheet=12)
+                out = Path(tmp) / f"out-{r}-{w}"
+                result = timed_run(args.dataroot.resolve(), args.version, out, args.quality, args.level, run, 0,
+                                   args.limit, cameras)
+                runs[f"{w} workers"].append(result)
+                print(f"{w} workers: {json.dumps(result)}", flush=True)
+                shutil.rmtree(out)
+    report = {
+        "benchmark": "streetaug batch on a dataset",
+        "code": args.label or str(Path(streetaug.augment.__file__).resolve().parent.parent),
+        "dataset": str(args.dataroot), "version": args.version, "limit": args.limit, "cameras": list(cameras) or "all",
+        "quality": args.quality, "level": args.level,
+        "machine": {"cpus": os.cpu_count(), "python": platform.python_version(), "platform": platform.platform()},
+        "runs": runs,
+        "medians": {name: {k: float(np.median([x[k] for x in rs])) for k in
+                           ("images_per_s", "worker_cpu_s_per_image_mean", "wall_s")}
+                    | {"peak_rss_mb_max": float(np.median([max(x["peak_rss_mb_per_worker"]) for x in rs])),
+                       "busy_fraction": float(np.median([x["busy_by_wall_whole_run"]["busy_fraction"] for x in rs]))}
+                    for name, rs in runs.items()},
+    }
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(json.dumps(report, indent=2) + "\n")
+    print(json.dumps(report["medians"], indent=2))
     print(f"wrote {args.out}")
 
 
