@@ -70,7 +70,7 @@ def init_pool_worker() -> None:
     malloc tuning, a fast exit.
 
     A SIGKILLed driver cannot stop its workers; :func:`exit_with_parent` makes each end by itself when its
-    parent goes (instead of finishing its task, ~580 MB each, for a minute or more).
+    parent goes (instead of finishing its task, 1.3-1.5 GB each on scene-0916, for a minute or more).
 
     A spawned process ends with ``sys.exit``, i.e. a full interpreter teardown, which takes 0.45 s with
     torch and scipy loaded (2.3 s for a Dask LocalCluster's two workers; measured) -- paid at the end of
