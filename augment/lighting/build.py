@@ -14,6 +14,9 @@ scale. :func:`build_volume` runs these steps (all vectorised):
   that rays cannot step over them;
 * *sky carving* (:func:`sky_carved`): what the prior added is removed again where a camera's sky pixel's ray
   passes through it (the camera saw the sky there, so nothing stands in between);
+* *sky gaps* (:func:`sky_gap_alpha`): a seen voxel above the LiDAR's reach that sky rays also cross (a canopy
+  with sky between its leaves) keeps the fraction of the cameras' rays into it that stop there as its opacity
+  (spread over the march's samples in it, :func:`per_sample_alpha`): rays from elsewhere see sky through it;
 * *surfaces* (:func:`surfaces_and_normals`): occupied voxels with a free neighbour, normals from the occupancy
   gradient;
 * *unobserved surfaces are shaded* (:func:`shade_surfaces`): ``a max(n.s, 0) tau_sun + b (1 + n_z) / 2`` (sun
@@ -39,7 +42,7 @@ from ...datasets.sample import LidarSweep
 from ..core import transform_points
 from .fill import UNSEEN_KEEP, lateral_offsets_m, mean_colour_radiance, shrink_unseen, street_axis_xy, street_extrusion
 from .observe import ViewObservation
-from .volume import CH_ALPHA, CH_AXIS, CH_COLOR, CH_SIGMA, N_CHANNELS, HybridLighting, LogGrid
+from .volume import CH_ALPHA, CH_AXIS, CH_COLOR, CH_SIGMA, DEFAULT_SAMPLES, N_CHANNELS, HybridLighting, LogGrid
 
 GROUND_SNAP_M = 0.3  # points below this height are ground (moved into the solid ground layer)
 STRUCTURE_MIN_TOP_M = 2.5  # columns reaching higher are structures (walls, trees), lower ones objects
@@ -51,9 +54,18 @@ EGO_BOX_EGO_M = ((-1.5, 4.0), (-1.2, 1.2), (-0.5, 2.2))  # LiDAR returns inside 
 THICKEN_VOXELS = 2
 SKY_CARVE_STRIDE = 4  # every n-th sky pixel's ray carves
 SKY_CARVE_SAMPLES = 96  # samples along a carving ray (quadratic spacing: dense near the camera)
+SKY_GAP_WEIGHT = 1.0  # sky rays count this much against a seen pixel in a voxel's opacity (0: voxels stay opaque)
+SKY_GAP_PER_SAMPLE = True  # the voxels' opacity spread over the samples a ray from the cameras takes in them
+SKY_GAP_ABOVE_LIDAR = True  # only voxels above the LiDAR's upper field-of-view limit (its beams never reach them)
+SKY_GAP_MIN_RAYS = 1  # sky rays a voxel needs before it opens (1: any)
 SHADOW_SAMPLES = 48  # samples of the sun-visibility rays that shade unobserved surfaces
 STREET_PRIOR_WEIGHT = 3.0  # the shading model counts as this many observed voxels of a street cell (see .fill);
 # chosen a priori (a cell needs a few observed voxels to outweigh the model), not fitted to any scene
+
+
+def lidar_reach_m(r_xy_m: np.ndarray) -> np.ndarray:
+    """Height (metres) of the LiDAR's highest beam at horizontal distances ``r_xy_m`` from it."""
+    return 1.84 + np.asarray(r_xy_m) * np.tan(np.radians(LIDAR_MAX_ELEVATION_DEG))
 
 
 def structure_heights(top_m: np.ndarray, cam_top_m: np.ndarray, cam_capped: np.ndarray, r_xy_m: np.ndarray,
@@ -74,7 +86,7 @@ def structure_heights(top_m: np.ndarray, cam_top_m: np.ndarray, cam_capped: np.n
     Returns:
         (heights (...), stats) with the raised heights (never below ``top_m``).
     """
-    lidar_limit = 1.84 + r_xy_m * np.tan(np.radians(LIDAR_MAX_ELEVATION_DEG))
+    lidar_limit = lidar_reach_m(r_xy_m)
     # a camera saw the top: its highest pixel is the column's top and the image column ends in sky
     seen_whole = standing & ~cam_capped & (cam_top_m >= top_m - 1.0) & (cam_top_m >= STRUCTURE_MIN_TOP_M)
     cut = standing & ~seen_whole & ((top_m >= np.maximum(0.8 * lidar_limit, STRUCTURE_MIN_TOP_M)) | cam_capped)
@@ -137,6 +149,7 @@ class ObservedVoxels:
         dir_sum: (n, 3) float64 sum of the viewing directions per voxel.
         cam_top_m: (X, Y) highest pixel per column (-inf where none), metres.
         cam_capped: (X, Y) bool, some pixel of the column comes from an image column cut by the image top.
+        count: (n,) float64 pixels per voxel (flat index).
     """
 
     observed: np.ndarray
@@ -144,6 +157,7 @@ class ObservedVoxels:
     dir_sum: np.ndarray
     cam_top_m: np.ndarray
     cam_capped: np.ndarray
+    count: np.ndarray | None = None
 
 
 def observed_voxels(grid: LogGrid, observations: list[ViewObservation]) -> ObservedVoxels:
@@ -177,7 +191,7 @@ def observed_voxels(grid: LogGrid, observations: list[ViewObservation]) -> Obser
         cf = flat // Z
         np.maximum.at(cam_top.reshape(-1), cf, pts[:, 2])
         cam_capped.reshape(-1)[cf[cap]] = True
-    return ObservedVoxels(observed, obs_rgb, dir_sum, cam_top, cam_capped)
+    return ObservedVoxels(observed, obs_rgb, dir_sum, cam_top, cam_capped, count)
 
 
 def occupancy(grid: LogGrid, observed: np.ndarray, lidar_points_vol: np.ndarray | None, stats: dict) -> np.ndarray:
@@ -227,11 +241,11 @@ def canyon_prior(grid: LogGrid, occ: np.ndarray, obs: ObservedVoxels, stats: dic
     return occ
 
 
-def sky_carved(grid: LogGrid, observations: list[ViewObservation], stride: int = SKY_CARVE_STRIDE,
-               n_samples: int = SKY_CARVE_SAMPLES) -> np.ndarray:
-    """(X, Y, Z) bool voxels crossed by the rays of the cameras' sky pixels (every ``stride``-th), from each
-    camera's centre to where the ray leaves the grid."""
-    carved = np.zeros(grid.n_voxels, bool)
+def sky_crossings(grid: LogGrid, observations: list[ViewObservation], stride: int = SKY_CARVE_STRIDE,
+                  n_samples: int = SKY_CARVE_SAMPLES) -> np.ndarray:
+    """(X, Y, Z) int64: how many of the cameras' sky-pixel rays (every ``stride``-th) cross each voxel, from each
+    camera's centre to where the ray leaves the grid (a ray counts once per voxel)."""
+    counts = np.zeros(grid.n_voxels, np.int64)
     lo, hi = grid.bounds()
     frac = ((np.arange(n_samples) + 0.5) / n_samples) ** 2
     for o in observations:
@@ -243,8 +257,66 @@ def sky_carved(grid: LogGrid, observations: list[ViewObservation], stride: int =
         t_exit = np.maximum((lo - c) / safe, (hi - c) / safe).min(axis=1).clip(min=0.0)
         t = t_exit[:, None] * frac[None]
         flat, inside = grid.flat_index_xyz(*(c[a] + t * d[:, a, None] for a in range(3)))
-        carved[flat[inside]] = True
-    return carved.reshape(grid.shape)
+        # samples along a ray are ordered: a voxel's samples are consecutive (it is convex)
+        new = np.ones_like(inside)
+        new[:, 1:] = flat[:, 1:] != flat[:, :-1]
+        counts += np.bincount(flat[inside & new], minlength=grid.n_voxels)
+    return counts.reshape(grid.shape)
+
+
+def sky_carved(grid: LogGrid, observations: list[ViewObservation], stride: int = SKY_CARVE_STRIDE,
+               n_samples: int = SKY_CARVE_SAMPLES) -> np.ndarray:
+    """(X, Y, Z) bool voxels crossed by the rays of the cameras' sky pixels (every ``stride``-th), from each
+    camera's centre to where the ray leaves the grid."""
+    return sky_crossings(grid, observations, stride, n_samples) > 0
+
+
+def sky_gap_alpha(pixels: np.ndarray, sky_rays: np.ndarray, stride: int = SKY_CARVE_STRIDE,
+                  weight: float = SKY_GAP_WEIGHT) -> np.ndarray:
+    """Opacity of voxels that cameras saw both as surface and as sky behind (canopies with gaps): the fraction
+    of the image rays entering the voxel that stop in it, ``pixels / (pixels + weight stride sky_rays)``
+    (each carving ray stands for ``stride`` sky pixels); 1 where no sky ray crossed."""
+    gap = weight * stride * np.asarray(sky_rays, np.float64)
+    p = np.asarray(pixels, np.float64)
+    return np.where(gap > 0, p / np.maximum(p + gap, 1e-12), 1.0)
+
+
+def per_sample_alpha(grid: LogGrid, flat: np.ndarray, alpha_voxel: np.ndarray, origin: np.ndarray,
+                     n_samples: int = DEFAULT_SAMPLES) -> np.ndarray:
+    """Eq. 1 applies a voxel's alpha at every sample inside it: the per-sample alpha (M,) that lets a ray from
+    ``origin`` (3,) through voxels ``flat`` (M,) keep ``1 - alpha_voxel`` of its light across each (the march's
+    uniform steps ``t_exit / n_samples``, the voxel's chord its mean size)."""
+    lo, hi = grid.bounds()
+    c = grid.voxel_centres().reshape(-1, 3)[flat]
+    d = c - origin
+    d /= np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-9)
+    safe = np.where(np.abs(d) < 1e-12, 1e-12, d)
+    t_exit = np.maximum((lo - origin) / safe, (hi - origin) / safe).min(axis=1).clip(min=1e-6)
+    sizes = [np.diff(e) for e in grid.axis_edges()]
+    chord = np.mean([sz[i] for sz, i in zip(sizes, np.unravel_index(flat, grid.shape))], axis=0)
+    m = np.maximum(chord / (t_exit / n_samples), 1.0)
+    return 1.0 - np.power(np.clip(1.0 - alpha_voxel, 0.0, 1.0), 1.0 / m)
+
+
+def sky_gap_opacity(grid: LogGrid, observations: list[ViewObservation], obs: ObservedVoxels, crossings: np.ndarray,
+                    lidar_points_vol: np.ndarray | None, stats: dict) -> np.ndarray:
+    """(X, Y, Z) opacity factor: :func:`sky_gap_alpha` (per sample) of the seen voxels without LiDAR returns
+    (above the LiDAR's reach with ``SKY_GAP_ABOVE_LIDAR``) that sky rays cross; 1 elsewhere."""
+    lidar_occ = occupancy(grid, np.zeros_like(obs.observed), lidar_points_vol, {})
+    flat = np.flatnonzero((obs.observed & ~lidar_occ & (crossings >= max(SKY_GAP_MIN_RAYS, 1))).reshape(-1))
+    flat = flat[flat % grid.shape[2] >= grid.n_below]
+    if SKY_GAP_ABOVE_LIDAR and len(flat):
+        c = grid.voxel_centres().reshape(-1, 3)[flat]
+        flat = flat[c[:, 2] > lidar_reach_m(np.linalg.norm(c[:, :2], axis=1))]
+    a_vox = sky_gap_alpha(obs.count[flat], crossings.reshape(-1)[flat], weight=SKY_GAP_WEIGHT)
+    if SKY_GAP_PER_SAMPLE and observations and len(flat):
+        origin = np.mean([np.asarray(o.camera_centre, np.float64) for o in observations], axis=0)
+        a_vox = per_sample_alpha(grid, flat, a_vox, origin)
+    alpha = np.ones(grid.n_voxels)
+    alpha[flat] = a_vox
+    stats["sky_gap_voxels"] = int(len(flat))
+    stats["sky_gap_alpha_mean"] = float(a_vox.mean()) if len(flat) else None
+    return alpha.reshape(grid.shape)
 
 
 def surfaces_and_normals(grid: LogGrid, occ: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -352,9 +424,9 @@ def shade_surfaces(grid: LogGrid, surf: Surfaces, obs_rgb: np.ndarray, light: Di
 
 
 def assemble_params(grid: LogGrid, occ: np.ndarray, obs: ObservedVoxels, surf: Surfaces,
-                    shaded: np.ndarray) -> np.ndarray:
-    """VSG parameters (X, Y, Z, 8) float32: alpha = occupancy, colours (observed, else shaded, grown inwards),
-    lobe axes (viewing direction where observed, else the normal), the surfaces' broad lobe."""
+                    shaded: np.ndarray, alpha: np.ndarray | None = None) -> np.ndarray:
+    """VSG parameters (X, Y, Z, 8) float32: alpha = occupancy (times ``alpha`` (X, Y, Z) where given), colours
+    (observed, else shaded, grown inwards), lobe axes (viewing direction where observed, else the normal), the surfaces' broad lobe."""
     n = grid.n_voxels
     color = np.zeros((n, 3))
     color[surf.idx] = shaded
@@ -375,7 +447,7 @@ def assemble_params(grid: LogGrid, occ: np.ndarray, obs: ObservedVoxels, surf: S
     values = np.zeros((n, N_CHANNELS), np.float32)
     values[:, CH_AXIS] = (0.0, 0.0, 1.0)
     values[:, CH_SIGMA] = SIGMA_SURFACE
-    values[:, CH_ALPHA] = occ.reshape(-1)
+    values[:, CH_ALPHA] = occ.reshape(-1) if alpha is None else occ.reshape(-1) * alpha.reshape(-1)
     some = np.flatnonzero(occ.reshape(-1) | known)
     values[some, CH_COLOR] = color[some]
     axis = axis[some]
@@ -393,16 +465,20 @@ def build_volume(grid: LogGrid, observations: list[ViewObservation], lidar_point
     stats["observed_voxels"] = int(obs.observed.sum())
     occ_seen = occupancy(grid, obs.observed, lidar_points_vol, stats)
     occ = canyon_prior(grid, occ_seen, obs, stats)
-    carved = sky_carved(grid, observations) & occ & ~occ_seen
+    crossings = sky_crossings(grid, observations)
+    carved = (crossings > 0) & occ & ~occ_seen
     occ &= ~carved
     stats["sky_carved_voxels"] = int(carved.sum())
+    alpha = None
+    if SKY_GAP_WEIGHT > 0:  # seen voxels beyond the LiDAR with sky seen through them: partly transparent
+        alpha = sky_gap_opacity(grid, observations, obs, crossings, lidar_points_vol, stats)
     surface, normal = surfaces_and_normals(grid, occ)
     surf = surface_lighting(grid, occ, surface, normal, obs.observed, light, sky_world)
     ego_forward = next((o.ego_forward for o in observations if o.ego_forward is not None), None)
     seen = [o.radiance for o in observations if len(o.radiance)]
     anchor = mean_colour_radiance(np.concatenate(seen)) if seen else None
     shaded = shade_surfaces(grid, surf, obs.obs_rgb, light, ground_albedo, ego_forward, stats, anchor, unseen_keep)
-    params = assemble_params(grid, occ, obs, surf, shaded)
+    params = assemble_params(grid, occ, obs, surf, shaded, alpha)
     stats["surface_voxels"] = int(len(surf.idx))
     stats["sun_shadowed_surface_fraction"] = float((surf.tau_sun < 0.5).mean()) if len(surf.tau_sun) else 0.0
     return params, stats
