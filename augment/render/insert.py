@@ -24,7 +24,7 @@ from .footprint import Footprint, footprint
 from .foreground import Foreground, render_foreground
 from .settings import RenderSettings, resolve_settings
 from .shade import ShadingContext
-from .shadow import GroundShadow, ShadowMap, car_ambient_radiance, render_shadow
+from .shadow import GroundShadow, ShadowMap, car_ambient_radiance, ground_snapped_depth, render_shadow
 from .surface import PreparedAsset, prepare_asset
 from .veil import Veil, estimate_veil
 
@@ -145,7 +145,10 @@ def render_insertion(image_rgb: np.ndarray, K: np.ndarray, depth_m: np.ndarray, 
     timing["raycast"] = fg.stats.get("raycast_s", 0.0) if fg is not None else 0.0
     timing["shade"] = timing["foreground"] - timing["raycast"]
     t0 = time.perf_counter()
-    layers = object_layers(fg, sh, x.depth_m)
+    # The occlusion test sees the ground the shadow sees (snapped to the object's plane near it).
+    occluder_depth_m = ground_snapped_depth(x.camera, x.depth_m, where.object_box, prepared.up_cam,
+                                            x.T_cam_from_object)
+    layers = object_layers(fg, sh, occluder_depth_m)
     motion = _image_motion(x, layers, velocity_cam_mps, exposure_s) if settings.match_camera else None
     if settings.match_camera and veil is None:
         veil = estimate_veil(x.image_rgb, x.depth_m, ev)

@@ -432,6 +432,31 @@ class _Ground:
         return valid & np.all((p[:, :2] >= lo[:2]) & (p[:, :2] <= hi[:2]), axis=1)
 
 
+def ground_snapped_depth(camera: PinholeCamera, depth_m: np.ndarray, box: PixelBox | None,
+                         ground_normal_cam: np.ndarray, T_cam_from_object: np.ndarray) -> np.ndarray:
+    """(H, W) float32 scene depth (camera z, m) with the ground near the object's plane put on that plane over ``box``.
+
+    The same rule as the shadow's ground (:data:`GROUND_SNAP_M`, blended out to :data:`GROUND_SNAP_END_M`), so the
+    object's occlusion test and its shadow see one ground: densified LiDAR depth is off by +-0.2 m in bands between
+    rings, which at a grazing view is metres of depth, and would hide the bottoms of the tyres behind a ground
+    that the shadow puts below them. Unknown depth stays unknown; outside ``box`` the map is unchanged.
+    """
+    depth = np.asarray(depth_m, dtype=np.float32)
+    if box is None or box.width <= 0 or box.height <= 0:
+        return depth
+    ys, xs = np.mgrid[box.y0:box.y1, box.x0:box.x1]
+    uv = np.stack([xs.ravel(), ys.ravel()], axis=1).astype(np.float64)
+    n_cam = np.asarray(ground_normal_cam, dtype=np.float64)
+    geo = _Ground(camera, depth.astype(np.float64), n_cam / np.linalg.norm(n_cam), T_cam_from_object)
+    p_obj, valid = geo.points_obj(uv)
+    z_cam = (p_obj @ geo.R.T + geo.t)[:, 2]
+    inside = depth[box.slices].ravel()
+    known = np.isfinite(inside) & (inside > 0) & valid
+    out = depth.copy()
+    out[box.slices] = np.where(known, z_cam, inside).reshape(box.height, box.width).astype(np.float32)
+    return out
+
+
 def _footprint_distance(p_obj: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     """(N,) horizontal distance (m) of object-frame points (N, 3) from the footprint box [lo, hi] (x, y); 0 under it."""
     gap = np.maximum(np.maximum(lo[None, :2] - p_obj[:, :2], p_obj[:, :2] - hi[None, :2]), 0.0)
