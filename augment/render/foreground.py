@@ -4,7 +4,9 @@ Pipeline (all vectorised, rays in big Embree batches)::
 
     object pixel box -> n x n jittered camera samples (+ k x k more in silhouette pixels -- mixed
       coverage, or crossed by a projected triangle edge: thin parts -- and 2 x 2 at material
-      boundaries and shading discontinuities)
+      boundaries and shading discontinuities the first pass does not resolve: a step, not a gradient,
+      :func:`unresolved_shading`; of each pixel's k x k extra samples only k carry the Monte Carlo
+      residual, :func:`residual_strata`: a sub-pixel sample needs a share of the pixel's light samples)
       -> ray-mesh hits (object frame) -> surface at the hits (:mod:`.surface`)
       -> shading (:mod:`.shade`): sun + environment, self-occlusion, one bounce, the ground's shadow
       -> glass: reflection on the glass + the continued ray (dark interior or what lies behind)
@@ -34,6 +36,7 @@ from .surface import SurfaceHits, surface_at_hits
 
 EDGE_LIGHT_SAMPLES = {"sun_samples": 1, "env_samples": 0, "brdf_samples": 1}  # per extra edge sample
 INNER_RESIDUAL = True  # False: inner edge samples sharpen the smooth part only (residual from the first pass; see below)
+INNER_RESIDUAL_SUBSET = True  # True: like the silhouette's, only k of the inner pass's k x k samples carry the residual
 SHADING_EDGE_REL = 0.15  # relative jump of the noise-free radiance that marks a pixel for more samples
 DENOISE_RADIUS_PX = 6
 DENOISE_SIGMA_PX = 3.5
@@ -116,17 +119,30 @@ def render_foreground(camera: PinholeCamera, box: PixelBox | None, ctx: ShadingC
     # The extra samples are there for coverage and sharp shading edges; each pixel averages k x k of
     # them, so each needs fewer light samples (EDGE_LIGHT_SAMPLES instead of the preset's).
     ctx.settings = dataclasses.replace(settings, **{k: min(getattr(settings, k), v) for k, v in EDGE_LIGHT_SAMPLES.items()})
-    for edge, k, residual in ((silhouette, settings.edge_grid, True), (inner, min(settings.edge_grid, 2), INNER_RESIDUAL)):
+    passes = ((silhouette, settings.edge_grid, True, True), (inner, min(settings.edge_grid, 2), INNER_RESIDUAL, INNER_RESIDUAL_SUBSET))
+    for edge, k, residual, subset in passes:
         edge_ids = np.flatnonzero(edge.ravel())
         if len(edge_ids) == 0 or k <= 1:
             continue
-        ctx.residual = residual
         uv2, pix2 = _jittered_samples(xs[edge_ids] + box.x0, ys[edge_ids] + box.y0, k, ctx.rng)
-        traced = traced.concat(_cast(ctx, camera, T_cam_from_object, uv2, edge_ids[pix2]))
+        # A sample covering 1 / k^2 of the pixel needs 1 / k^2 of its light samples: the Monte Carlo residual
+        # comes from k of the k^2 (one per row and column of the strata), the others shade the sharp part.
+        carries = np.full(len(uv2), residual) if not (residual and subset) else np.tile(residual_strata(k), len(edge_ids))
+        for part, res in ((carries, True), (~carries, False)):
+            if part.any():
+                ctx.residual = res
+                traced = traced.concat(_cast(ctx, camera, T_cam_from_object, uv2[part], edge_ids[pix2[part]]))
         counts[edge_ids] += k * k
         n_edge += len(uv2)
     ctx.settings, ctx.residual = settings, True
     return _resolve_pixels(traced, counts, box, T_cam_from_object[:3, :3], settings.denoise, ctx, n_edge)
+
+
+def residual_strata(k: int) -> np.ndarray:
+    """(k^2,) bool over the k x k strata of :func:`_jittered_samples` (row-major): the k that carry the Monte Carlo
+    residual, one in each row and column (a rook pattern, stratified over the pixel)."""
+    gy, gx = np.divmod(np.arange(k * k), k)
+    return gx == (gy * (k - 1)) % k
 
 
 def _cast(ctx: ShadingContext, camera: PinholeCamera, T_cam_from_object: np.ndarray, uv: np.ndarray,
@@ -177,9 +193,26 @@ def _refine_masks(traced: CameraSamples, w: int, h: int, n: int,
     inner = (cv2.dilate(mat, kernel) != cv2.erode(mat, kernel, borderType=cv2.BORDER_REPLICATE)) & ~silhouette
     smooth_lum = np.bincount(pix, weights=luminance(traced.radiance[:, :3]), minlength=w * h)
     smooth_lum = np.log(np.maximum(smooth_lum.reshape(h, w) / (n * n), 1e-4)).astype(np.float32)
-    jump = cv2.dilate(smooth_lum, kernel) - cv2.erode(smooth_lum, kernel, borderType=cv2.BORDER_REPLICATE)
-    inner |= (jump > np.log1p(SHADING_EDGE_REL)) & (mat >= 0) & ~silhouette
+    inner |= (unresolved_shading(smooth_lum) > np.log1p(SHADING_EDGE_REL)) & (mat >= 0) & ~silhouette
     return silhouette, inner
+
+
+def unresolved_shading(log_lum: np.ndarray) -> np.ndarray:
+    """(h, w) largest second difference ``|L(x - e) + L(x + e) - 2 L(x)|`` of ``log_lum`` (h, w) over the four
+    pixel axes (horizontal, vertical, diagonals): what more samples inside the pixel would change.
+
+    A step between two pixels gives the step at both (as the 3 x 3 range did), a gradient the pixels resolve
+    gives 0 (more samples of a linear ramp average to its centre value): reflections of the environment and
+    highlights sweeping smoothly over a near car's panels no longer ask for supersampling, edges still do.
+    """
+    L = np.pad(log_lum, 1, mode="reflect", reflect_type="odd")  # linear extrapolation: a ramp stays a ramp
+    c = L[1:-1, 1:-1]
+    out = np.zeros_like(c)
+    for (ay, ax), (by, bx) in (((1, 0), (1, 2)), ((0, 1), (2, 1)), ((0, 0), (2, 2)), ((0, 2), (2, 0))):
+        a = L[ay:ay + c.shape[0], ax:ax + c.shape[1]]
+        b = L[by:by + c.shape[0], bx:bx + c.shape[1]]
+        np.maximum(out, np.abs(a + b - 2.0 * c), out=out)
+    return out
 
 
 def _resolve_pixels(traced: CameraSamples, counts: np.ndarray, box: PixelBox, R: np.ndarray, denoise: bool,

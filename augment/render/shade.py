@@ -183,7 +183,11 @@ def _shade_batch(ctx: ShadingContext, p: np.ndarray, n_s: np.ndarray, n_g: np.nd
     noisy = np.zeros((N, 3))
     samples = []
     if ctx.sun_dir_obj is not None and ctx.settings.sun_samples:
-        samples.append(_sun_samples(ctx, p, n_s, n_g, v, params))
+        if np.any(np.asarray(ctx.light.sun.irradiance_rgb) > 0):
+            samples.append(_sun_samples(ctx, p, n_s, n_g, v, params))
+        else:  # a sun of no irradiance (hidden): no light, only its random numbers drawn (same stream after it)
+            ctx.rng.random(len(p) * ctx.settings.sun_samples)
+            ctx.rng.random(len(p) * ctx.settings.sun_samples)
     # Environment: MIS of env-map importance and BRDF sampling, with the unoccluded diffuse term as a
     # control variate: per sample we subtract g = c_d/pi L cos (MIS-weighted) and add its exact
     # expectation c_d/pi E(n) from the irradiance map, so unblocked diffuse light is noise-free.
