@@ -55,12 +55,11 @@ from ..core import (
     write_json_atomic,
 )
 from .seen_surfaces import SeenSurfaces
+from .volume_channels import CH_ALPHA, CH_AXIS, CH_COLOR, CH_SIGMA, N_CHANNELS  # noqa: F401 (re-exported)
 
 if TYPE_CHECKING:
     import torch
 
-N_CHANNELS = 8
-CH_COLOR, CH_AXIS, CH_SIGMA, CH_ALPHA = slice(0, 3), slice(3, 6), 6, 7
 DEFAULT_SAMPLES = 128
 ENVMAP_CACHE_SIZE = 32  # local env maps kept per HybridLighting (a sample has a handful of objects)
 CHUNK_RAYS = 16384

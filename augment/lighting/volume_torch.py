@@ -15,7 +15,7 @@ import numpy as np
 import torch
 
 from ..core import check_shape
-from .volume import CH_ALPHA, CH_AXIS, CH_COLOR, CH_SIGMA, N_CHANNELS
+from .volume_channels import CH_ALPHA, CH_AXIS, CH_COLOR, CH_SIGMA, N_CHANNELS
 
 
 def sample_world_equirect(env: torch.Tensor, dirs: torch.Tensor) -> torch.Tensor:
