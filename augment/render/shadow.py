@@ -155,7 +155,7 @@ def render_shadow(camera: PinholeCamera, box: PixelBox | None, depth_m: np.ndarr
     sky = _sky_occlusion(geo, box, light, prep, bounce, settings, rng, stats, E_safe)
     # -- sun: full resolution where the object's shadow can fall, refined at the shadow's edges.
     sun_def = np.zeros((box.height, box.width, 3), np.float32)
-    if cos_sun > 0:
+    if cos_sun > 0 and luminance(E_sun) > 0:  # a sun of zero irradiance (overcast) casts no shadow: no rays
         blocked = _sun_blocked(geo, box, light, prep, settings, rng, stats)
         sun_def = (blocked[..., None] * (E_sun / E_safe)[None, None]).astype(np.float32)
     s_foot = _foot_ratio(geo, box, prep, sky, sun_def, E_safe)

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from render_fixtures import plane_shadow, two_level_sky
+from render_fixtures import plane_shadow, primitive_car, sunny_light, two_level_sky
 from streetaug.augment.assets.asset import Asset, Material
 from streetaug.augment.core import PinholeCamera, intrinsics_from_fov, pose_camera_to_transform
 from streetaug.augment.core.depth import ground_plane_depth
@@ -139,3 +139,18 @@ def test_deep_shadow_under_a_street_sky_is_the_sky_through_the_gap():
     mean = r[:, deep].mean(axis=0)
     assert abs(mean.mean() - expected.mean()) < 0.005, (mean.mean(), expected.mean())
     assert r[:, deep].min() > 0.2 * expected.min(), (r[:, deep].min(), expected.min())
+
+
+def test_a_sun_of_zero_irradiance_traces_no_sun_rays_and_changes_nothing():
+    """Overcast estimates keep the sun's direction with zero irradiance: its shadow is empty, so no rays."""
+    W, H = 320, 180
+    K = intrinsics_from_fov(W, H, 60.0)
+    up = np.array([0.0, -1.0, 0.0])
+    T = pose_camera_to_transform(0.0, 1.5, 12.0, 90.0)
+    depth = ground_plane_depth(K, W, H, up, 1.5)
+    car, camera = primitive_car(), PinholeCamera(K, W, H)
+    _, dark_sun = plane_shadow(camera, car, T, up, sunny_light(sun_irradiance=0.0), depth, seed=0)
+    _, lit_sun = plane_shadow(camera, car, T, up, sunny_light(sun_irradiance=8.0), depth, seed=0)
+    assert lit_sun.stats["rays"].get("shadow_sun", 0) > 1000
+    assert dark_sun.stats["rays"].get("shadow_sun", 0) == 0
+    assert np.all(np.isfinite(dark_sun.ratio_rgb)) and dark_sun.ratio_rgb.min() >= 0.0
