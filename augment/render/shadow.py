@@ -419,7 +419,9 @@ class _Ground:
         if np.any(on_plane):
             height = np.abs(denom * (z - np.where(on_plane, z_plane, 0.0)))
             snap = fade_weight(np.where(on_plane, height, np.inf), GROUND_SNAP_END_M, GROUND_SNAP_M / GROUND_SNAP_END_M)
-            z = np.where(on_plane, z + snap * (np.where(on_plane, z_plane, 0.0) - z), z)
+            with np.errstate(invalid="ignore"):  # off the plane z may be inf: masked out
+                to_plane = np.where(on_plane, z_plane - z, 0.0)
+            z = np.where(on_plane, z + snap * to_plane, z)
         valid = np.isfinite(z)
         p_cam = rays * np.where(valid, z, 0.0)[:, None]
         return (p_cam - self.t) @ self.R, valid
