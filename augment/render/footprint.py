@@ -106,16 +106,36 @@ def _clipped(x0: int, y0: int, x1: int, y1: int, camera: PinholeCamera) -> Pixel
     return PixelBox(int(x0), int(y0), int(x1), int(y1))
 
 
+NEAR_PLANE_M = 1e-3  # camera z below which an object's box corner is behind the camera
+
+
+def clip_to_near_plane(points_cam: np.ndarray, near_m: float) -> np.ndarray:
+    """Points (M, 3) whose convex hull is that of ``points_cam`` (N, 3), camera frame, cut by the plane z = near_m.
+
+    The points in front of the plane plus every crossing of the plane by a segment between a point in front and
+    one behind (the cut hull's vertices are among them, and all of them lie in it, so the projections of the
+    result bound exactly what of the hull a camera can see).
+    """
+    z = points_cam[:, 2]
+    front, behind = points_cam[z > near_m], points_cam[z <= near_m]
+    a = np.repeat(front, len(behind), axis=0)
+    b = np.tile(behind, (len(front), 1))
+    t = (a[:, 2] - near_m) / (a[:, 2] - b[:, 2])
+    crossings = a + t[:, None] * (b - a)
+    crossings[:, 2] = near_m
+    return np.concatenate([front, crossings])
+
+
 def object_pixel_box(camera: PinholeCamera, T_cam_from_object: np.ndarray, corners_object: np.ndarray,
                      pad_px: int = OBJECT_BOX_PAD_PX) -> PixelBox | None:
     """The pixel box covering the projected object box (8, 3) (object frame), or None if off-screen."""
     pts = corners_object @ T_cam_from_object[:3, :3].T + T_cam_from_object[:3, 3]
     z = pts[:, 2]
-    if np.all(z <= 1e-3):
+    if np.all(z <= NEAR_PLANE_M):
         return None
-    if np.any(z <= 1e-3):
-        # The box straddles the camera plane: anything on screen may be covered.
-        return PixelBox(0, 0, camera.width, camera.height)
+    if np.any(z <= NEAR_PLANE_M):
+        # The box straddles the camera plane: only its part in front of the near plane can be seen.
+        pts = clip_to_near_plane(pts, NEAR_PLANE_M)
     uv, _ = camera.project(pts)
     x0 = int(np.floor(uv[:, 0].min())) - pad_px
     y0 = int(np.floor(uv[:, 1].min())) - pad_px
