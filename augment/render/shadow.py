@@ -417,10 +417,10 @@ class _Ground:
         # them a floating car); blended back to the depth up to GROUND_SNAP_END_M (kerbs, walls, other objects).
         on_plane = known & np.isfinite(z_plane)
         if np.any(on_plane):
-            height = np.abs(denom * (z - np.where(on_plane, z_plane, 0.0)))
-            snap = fade_weight(np.where(on_plane, height, np.inf), GROUND_SNAP_END_M, GROUND_SNAP_M / GROUND_SNAP_END_M)
-            with np.errstate(invalid="ignore"):  # off the plane z may be inf: masked out
+            with np.errstate(invalid="ignore"):  # off the plane z or z_plane may be inf: masked out
                 to_plane = np.where(on_plane, z_plane - z, 0.0)
+            height = np.where(on_plane, np.abs(denom * to_plane), np.inf)
+            snap = fade_weight(height, GROUND_SNAP_END_M, GROUND_SNAP_M / GROUND_SNAP_END_M)
             z = np.where(on_plane, z + snap * to_plane, z)
         valid = np.isfinite(z)
         p_cam = rays * np.where(valid, z, 0.0)[:, None]
