@@ -47,11 +47,10 @@ def insert_into_image(
     rendered = render_objects(image, K, depth_m, [light], [asset], [T_cam_from_object], [ground_normal], options,
                               item_seed(options.seed, "image"), timing)
     (obj,) = rendered.objects
-    ins = obj.insertion
     attribute = asset.attribute if asset.attribute is not None else (
         VEHICLE_MOVING if asset.category.startswith("vehicle.") else None)  # the pose says nothing more
-    objects = [object_label(T_cam_from_object, asset.wlh, asset.category, camera, ins.mask, ins.coverage,
-                            attribute=attribute)]
+    objects = [object_label(T_cam_from_object, asset.wlh, asset.category, camera, obj.full_mask(),
+                            obj.full_coverage(), attribute=attribute)]
     timing["total"] = time.perf_counter() - t0
     return InsertResult(rendered.image, objects, rendered.mask, rendered.shadow_ratio, timing)
 

@@ -8,7 +8,8 @@ image pixel (the image, its depth, mask, shadow and float32 HDR buffers).
 A batch worker on the real scene-0916 (six 1600 x 900 cameras per sample, default quality, the sky model
 loaded) peaks at 1.29-1.45 GB, above the estimate (0.98 GB): ~370 MB of code, models and maps; ~17 MB per
 camera kept until the sample is written (image, depth, mask, shadow); ~66 MB per object already drawn in
-the camera being rendered (the renderer's full-frame layers, kept until the camera is done); and the
+the camera being rendered (the renderer's full-frame layers, kept until the camera was done: since then only
+its mask and coverage in its pixel box are kept, ``pipeline.objects.RenderedObject``); and the
 render of one object, ~0.4-1 kB per camera sample of its pixel box: 564 MB when the object's box straddles
 the camera plane and its pixel box is the whole frame (``render.footprint.object_pixel_box``), 300 MB for a
 car filling a fifth of the frame. The estimate does not model the last two (they depend on where the

@@ -119,13 +119,13 @@ def render_into_view(context: ViewContext, token: str, placed: SamplePlacement, 
                               [poses[i] for i in shown], normals, options, rng, timing, velocities, jpeg_quality)
     objects = []
     for i, obj in zip(shown, rendered.objects):
-        ins = obj.insertion
-        visible_px[i] = ins.visible_px
-        coverage_px[i] = ins.coverage_px
-        if ins.coverage_px <= 0:  # only its shadow reaches this camera
+        visible_px[i] = obj.visible_px
+        coverage_px[i] = obj.coverage_px
+        if obj.coverage_px <= 0:  # only its shadow reaches this camera
             continue
-        label = object_label(obj.T_cam_from_object, obj.asset.wlh, obj.asset.category, context.camera, ins.mask,
-                             ins.coverage, T_global_from_cam=view.T_global_from_cam, attribute=placements[i].attribute)
+        label = object_label(obj.T_cam_from_object, obj.asset.wlh, obj.asset.category, context.camera,
+                             obj.full_mask(), obj.full_coverage(), T_global_from_cam=view.T_global_from_cam,
+                             attribute=placements[i].attribute)
         label.update(object_index=i, placed_for=placed.placed_for[i])
         if placed.label_fields:
             label.update(placed.label_fields[i])

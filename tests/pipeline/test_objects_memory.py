@@ -1,0 +1,73 @@
+"""render_objects keeps of each object only what the labels read, cut to the object's pixel box: none of
+the renderer's full-frame layers of an object (~66 MB at 1600 x 900) outlives its compositing, neither
+while the next object renders nor after render_objects returns."""
+
+from __future__ import annotations
+
+import gc
+import sys
+import weakref
+from pathlib import Path
+
+import numpy as np
+
+from streetaug.augment.assets.procedural import procedural_car
+from streetaug.augment.core import intrinsics_from_fov, pose_camera_to_transform
+from streetaug.augment.pipeline import InsertOptions
+from streetaug.augment.pipeline import objects as objects_module
+from streetaug.augment.pipeline.objects import render_objects
+from streetaug.augment.render import render_insertion
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from render_fixtures import ground_scene, sunny_light  # noqa: E402
+
+
+def _scene():
+    W, H = 320, 180
+    K = intrinsics_from_fov(W, H, 60.0)
+    light = sunny_light(sun_dir_cam=(0.6, -0.55, 0.58))
+    image, depth, ev = ground_scene(light, K, W, H)
+    cars = [procedural_car(4), procedural_car(11), procedural_car(7)]
+    poses = [pose_camera_to_transform(-2.0, 1.5, 10.0, 120.0), pose_camera_to_transform(3.0, 1.5, 16.0, 60.0),
+             pose_camera_to_transform(40.0, 1.5, 8.0, 90.0)]  # the last far off to the right: its shadow at most
+    return image, K, depth, [light] * 3, cars, poses, InsertOptions(quality="draft", seed=0, ev=ev)
+
+
+def test_no_full_frame_layer_of_a_composited_object_stays_referenced(monkeypatch):
+    image, K, depth, lights, cars, poses, options = _scene()
+    layers: list[weakref.ref] = []  # every full-frame layer but the composite image, of each render
+    alive_at_next_render: list[int] = []
+    calls: list[tuple[np.ndarray, np.ndarray, float, float]] = []  # each render's mask, coverage and pixel sums
+
+    def spy(*args, **kwargs):
+        gc.collect()
+        alive_at_next_render.append(sum(r() is not None for r in layers))
+        ins = render_insertion(*args, **kwargs)
+        for name in ("mask", "coverage", "shadow_ratio", "object_depth_m", "shadow_ratio_rgb", "object_radiance",
+                     "alpha"):
+            if getattr(ins, name) is not None:
+                layers.append(weakref.ref(getattr(ins, name)))
+        calls.append((ins.mask.copy(), ins.coverage.copy(), ins.visible_px, ins.coverage_px))
+        return ins
+
+    monkeypatch.setattr(objects_module, "render_insertion", spy)
+    out = render_objects(image, K, depth, lights, cars, poses, [T[:3, 2] for T in poses], options,
+                         np.random.default_rng(0), {})
+    gc.collect()
+    assert len(calls) == 3 and len(layers) >= 15
+    assert alive_at_next_render == [0, 0, 0]
+    assert all(r() is None for r in layers)
+    H, W = image.shape[:2]
+    order = np.argsort([np.linalg.norm(T[:3, 3]) for T in poses], kind="stable")
+    for (mask, coverage, visible_px, coverage_px), i in zip(calls, order):
+        obj = out.objects[i]
+        r0, r1, c0, c1 = obj.box_px
+        assert obj.mask_box.shape == obj.coverage_box.shape == (r1 - r0, c1 - c0)
+        if coverage_px > 0:
+            assert obj.mask_box.size < 0.25 * H * W  # the object's box, not the frame
+        assert np.array_equal(obj.full_mask(), mask) and obj.full_mask().dtype == mask.dtype
+        assert np.array_equal(obj.full_coverage(), coverage)
+        assert (obj.visible_px, obj.coverage_px) == (visible_px, coverage_px)
+        arrays = [v for v in vars(obj).values() if isinstance(v, np.ndarray)]
+        assert all(a.size < H * W for a in arrays)
+    assert sum(o.coverage_px > 0 for o in out.objects) >= 2
