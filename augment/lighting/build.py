@@ -57,7 +57,6 @@ SKY_CARVE_SAMPLES = 96  # samples along a carving ray (quadratic spacing: dense 
 SKY_GAP_WEIGHT = 1.0  # sky rays count this much against a seen pixel in a voxel's opacity (0: voxels stay opaque)
 SKY_GAP_PER_SAMPLE = True  # the voxels' opacity spread over the samples a ray from the cameras takes in them
 SKY_GAP_ABOVE_LIDAR = True  # only voxels above the LiDAR's upper field-of-view limit (its beams never reach them)
-SKY_GAP_MIN_RAYS = 1  # sky rays a voxel needs before it opens (1: any)
 SHADOW_SAMPLES = 48  # samples of the sun-visibility rays that shade unobserved surfaces
 STREET_PRIOR_WEIGHT = 3.0  # the shading model counts as this many observed voxels of a street cell (see .fill);
 # chosen a priori (a cell needs a few observed voxels to outweigh the model), not fitted to any scene
@@ -303,7 +302,7 @@ def sky_gap_opacity(grid: LogGrid, observations: list[ViewObservation], obs: Obs
     """(X, Y, Z) opacity factor: :func:`sky_gap_alpha` (per sample) of the seen voxels without LiDAR returns
     (above the LiDAR's reach with ``SKY_GAP_ABOVE_LIDAR``) that sky rays cross; 1 elsewhere."""
     lidar_occ = occupancy(grid, np.zeros_like(obs.observed), lidar_points_vol, {})
-    flat = np.flatnonzero((obs.observed & ~lidar_occ & (crossings >= max(SKY_GAP_MIN_RAYS, 1))).reshape(-1))
+    flat = np.flatnonzero((obs.observed & ~lidar_occ & (crossings > 0)).reshape(-1))
     flat = flat[flat % grid.shape[2] >= grid.n_below]
     if SKY_GAP_ABOVE_LIDAR and len(flat):
         c = grid.voxel_centres().reshape(-1, 3)[flat]
