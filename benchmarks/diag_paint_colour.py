@@ -42,6 +42,7 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
 
 import argparse  # noqa: E402
+import functools  # noqa: E402
 import json  # noqa: E402
 from pathlib import Path  # noqa: E402
 
@@ -52,6 +53,17 @@ SEQ = (ROOT / ".." / "shared" / "data" / "nuscenes-seq").resolve()
 GREY_ALBEDO = 0.25
 KEYS = ("road", "env_down", "env_up", "env_side", "sky", "sky_photo", "sky_env_there", "airlight", "paint_pred",
         "paint_render", "paint_final")
+
+
+@functools.lru_cache(maxsize=None)
+def _benchmark(name: str):
+    """Another script of ``benchmarks/`` as a module (the folder is not a package), loaded once."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location(name, ROOT / "benchmarks" / f"{name}.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
 
 
 def chroma_of(rgb_lin: np.ndarray) -> list[float]:
@@ -161,11 +173,8 @@ def car_colour(cap: dict) -> dict | None:
     box = ins.footprint.object_box
     ys, xs = np.mgrid[box.slices]
     ys, xs = ys.ravel(), xs.ravel()
-    rays = np.stack([(xs + 0.5 - K[0, 2]) / K[0, 0], (ys + 0.5 - K[1, 2]) / K[1, 1], np.ones(len(xs))], 1)
-    R, t = T[:3, :3], T[:3, 3]
-    hits = prep.scene.intersect(np.tile(-R.T @ t, (len(xs), 1)), rays @ R)
-    mat = np.where(hits.hit, prep.face_material[np.where(hits.hit, hits.face, 0)], -1)
-    n_obj = np.where(hits.hit[:, None], prep.face_normal[np.where(hits.hit, hits.face, 0)], 0.0)
+    mat, n_obj = _benchmark("diag_paint_level").pixel_hits(prep, K, T, ys, xs)
+    R = T[:3, :3]
     sel = (mat == names.index("paint")) & (np.abs(n_obj[:, 2]) < 0.35) & (ins.mask[ys, xs] > 0.99)
     if sel.sum() < 30:
         return None
@@ -214,11 +223,8 @@ def hull_parts(cap: dict) -> dict | None:
     mask = hull_mask(uv, (x0, y0, x1, y1))
     ys, xs = np.nonzero(mask)
     ys, xs = ys + y0, xs + x0
-    rays = np.stack([(xs + 0.5 - K[0, 2]) / K[0, 0], (ys + 0.5 - K[1, 2]) / K[1, 1], np.ones(len(xs))], 1)
-    R, t = T[:3, :3], T[:3, 3]
-    hits = prep.scene.intersect(np.tile(-R.T @ t, (len(xs), 1)), rays @ R)
-    mat = np.where(hits.hit & (ins.mask[ys, xs] > 0.5), prep.face_material[np.where(hits.hit, hits.face, 0)],
-                   len(names) - 1)
+    hit_mat, _ = _benchmark("diag_paint_level").pixel_hits(prep, K, T, ys, xs)
+    mat = np.where((hit_mat >= 0) & (ins.mask[ys, xs] > 0.5), hit_mat, len(names) - 1)
     lab = srgb_to_lab(ins.image[ys, xs][None])[0].astype(np.float64)
     lab0 = srgb_to_lab(cap["image"][ys, xs][None])[0].astype(np.float64)
     out = {"paint": prep.asset.name.split("-")[-1], "n_px": int(len(xs)),
@@ -234,15 +240,11 @@ def hull_parts(cap: dict) -> dict | None:
 def real_cars(args) -> list[dict]:
     """The benchmark's real cars (:func:`bench_realism.image_cars`) in the chosen keyframes / cameras: their box
     hull split into ``car`` (the scene depth puts the pixel inside the box grown by 0.3 m) and ``background``."""
-    import importlib.util
-
     from streetaug.augment.evaluation.realism import box_corners_cam, hull_mask, project_points, srgb_to_lab
     from streetaug.augment.pipeline.context import scene_depth_for_view
     from streetaug.datasets.nuscenes import NuScenesReader
 
-    spec = importlib.util.spec_from_file_location("bench_realism", ROOT / "benchmarks" / "bench_realism.py")
-    bench = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(bench)
+    bench = _benchmark("bench_realism")
     reader = NuScenesReader(args.dataroot, args.version)
     tokens = reader.sample_tokens()
     out = []

@@ -53,6 +53,17 @@ def _overridden(asset, override: dict):
     return dataclasses.replace(asset, materials=mats)
 
 
+def pixel_hits(prep, K: np.ndarray, T: np.ndarray, ys: np.ndarray, xs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The asset's surface seen through pixel centres (ys, xs) (N,) of a camera K, object pose T (cam <- object):
+    its material index (N,) (-1: no hit) and object-frame face normal (N, 3) (0 where no hit)."""
+    rays = np.stack([(xs + 0.5 - K[0, 2]) / K[0, 0], (ys + 0.5 - K[1, 2]) / K[1, 1], np.ones(len(xs))], 1)
+    R, t = T[:3, :3], T[:3, 3]
+    hits = prep.scene.intersect(np.tile(-R.T @ t, (len(xs), 1)), rays @ R)
+    face = np.where(hits.hit, hits.face, 0)
+    return (np.where(hits.hit, prep.face_material[face], -1),
+            np.where(hits.hit[:, None], prep.face_normal[face], 0.0))
+
+
 def car_regions(cap: dict) -> dict | None:
     """Per-region statistics of one captured insertion (see the module docstring), or None when too small."""
     from streetaug.augment.core import hdr_to_ldr
@@ -69,11 +80,9 @@ def car_regions(cap: dict) -> dict | None:
     box = ins.footprint.object_box
     ys, xs = np.mgrid[box.slices]
     ys, xs = ys.ravel(), xs.ravel()
-    rays = np.stack([(xs + 0.5 - K[0, 2]) / K[0, 0], (ys + 0.5 - K[1, 2]) / K[1, 1], np.ones(len(xs))], 1)
+    mat, n_obj = pixel_hits(prep, K, T, ys, xs)
+    hit = mat >= 0
     R, t = T[:3, :3], T[:3, 3]
-    hits = prep.scene.intersect(np.tile(-R.T @ t, (len(xs), 1)), rays @ R)
-    mat = np.where(hits.hit, prep.face_material[np.where(hits.hit, hits.face, 0)], -1)
-    n_obj = np.where(hits.hit[:, None], prep.face_normal[np.where(hits.hit, hits.face, 0)], 0.0)
     env = environment_tables(light.envmap)
     final = ins.image[ys, xs]
     rad = ins.object_radiance[ys, xs].astype(np.float64)
@@ -102,10 +111,10 @@ def car_regions(cap: dict) -> dict | None:
                        "ldr_lambert": (255 * hdr_to_ldr(pred, ev)).tolist(),
                        "ldr_final": final[sel].mean(axis=0).tolist(),
                        "lab_final": srgb_to_lab(final[sel][None])[0].mean(axis=0).tolist()}
-    rows = ys[vis & hits.hit]
+    rows = ys[vis & hit]
     if len(rows):
         y0, y1 = rows.min(), rows.max()
-        band = vis & hits.hit & (ys >= y0 + 0.7 * (y1 - y0))
+        band = vis & hit & (ys >= y0 + 0.7 * (y1 - y0))
         L = srgb_to_lab(final[None])[0][:, 0]
         out["bottom_band"] = {names[m]: [float(np.mean(mat[band] == m)), float(np.median(L[band & (mat == m)]))]
                               for m in np.unique(mat[band])}
