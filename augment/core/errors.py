@@ -32,3 +32,12 @@ def check_shape(x: np.ndarray, shape: Sequence[int | str], name: str) -> None:
     if not ok:
         want = "(" + ", ".join(str(s) for s in shape) + ")"
         raise ConventionError(f"{name}: expected shape {want}, got {actual}")
+
+
+def check_rays(points, dirs) -> None:
+    """Raise a clear error unless ray origins ``points`` and directions ``dirs`` are both (N, 3) with the same N
+    (numpy arrays or tensors)."""
+    check_shape(points, ("N", 3), "points")
+    check_shape(dirs, ("N", 3), "dirs")
+    if len(points) != len(dirs):
+        raise ValueError(f"points and dirs must have the same length, got {len(points)} and {len(dirs)}")

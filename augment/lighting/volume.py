@@ -45,6 +45,7 @@ import numpy as np
 from ..core import (
     InputError,
     camera_envmap_directions,
+    check_rays,
     check_shape,
     equirect_pixel_lonlat,
     lonlat_to_world_dir,
@@ -315,10 +316,7 @@ class NumpyBackend:
     def rays(points, dirs, dtype: np.dtype) -> tuple[np.ndarray, np.ndarray]:
         """Points and directions (N, 3) as arrays of ``dtype`` (ValueError on other shapes)."""
         points, dirs = NumpyBackend.array(points, dtype), NumpyBackend.array(dirs, dtype)
-        check_shape(points, ("N", 3), "points")
-        check_shape(dirs, ("N", 3), "dirs")
-        if len(points) != len(dirs):
-            raise ValueError(f"points and dirs must have the same length, got {len(points)} and {len(dirs)}")
+        check_rays(points, dirs)
         return points, dirs
 
     @staticmethod

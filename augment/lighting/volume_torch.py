@@ -14,7 +14,7 @@ import math
 import numpy as np
 import torch
 
-from ..core import check_shape
+from ..core import check_rays
 from .volume_channels import CH_ALPHA, CH_AXIS, CH_COLOR, CH_SIGMA, N_CHANNELS
 
 
@@ -55,10 +55,7 @@ class TorchBackend:
     @staticmethod
     def rays(points, dirs, dtype: torch.dtype) -> tuple[torch.Tensor, torch.Tensor]:
         points, dirs = TorchBackend.array(points, dtype), TorchBackend.array(dirs, dtype)
-        check_shape(points, ("N", 3), "points")
-        check_shape(dirs, ("N", 3), "dirs")
-        if len(points) != len(dirs):
-            raise ValueError(f"points and dirs must have the same length, got {len(points)} and {len(dirs)}")
+        check_rays(points, dirs)
         return points, dirs
 
     @staticmethod
