@@ -449,7 +449,7 @@ def ground_snapped_depth(camera: PinholeCamera, depth_m: np.ndarray, box: PixelB
     ys, xs = np.mgrid[box.y0:box.y1, box.x0:box.x1]
     uv = np.stack([xs.ravel(), ys.ravel()], axis=1).astype(np.float64)
     n_cam = np.asarray(ground_normal_cam, dtype=np.float64)
-    geo = _Ground(camera, depth.astype(np.float64), n_cam / np.linalg.norm(n_cam), T_cam_from_object)
+    geo = _Ground(camera, depth, n_cam / np.linalg.norm(n_cam), T_cam_from_object)  # it reads float64 per pixel
     p_obj, valid = geo.points_obj(uv)
     z_cam = (p_obj @ geo.R.T + geo.t)[:, 2]
     inside = depth[box.slices].ravel()
