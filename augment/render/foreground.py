@@ -36,7 +36,6 @@ from .surface import SurfaceHits, surface_at_hits
 
 EDGE_LIGHT_SAMPLES = {"sun_samples": 1, "env_samples": 0, "brdf_samples": 1}  # per extra edge sample
 INNER_RESIDUAL = True  # False: inner edge samples sharpen the smooth part only (residual from the first pass; see below)
-INNER_RESIDUAL_SUBSET = True  # True: like the silhouette's, only k of the inner pass's k x k samples carry the residual
 SHADING_EDGE_REL = 0.15  # relative jump of the noise-free radiance that marks a pixel for more samples
 DENOISE_RADIUS_PX = 6
 DENOISE_SIGMA_PX = 3.5
@@ -119,15 +118,14 @@ def render_foreground(camera: PinholeCamera, box: PixelBox | None, ctx: ShadingC
     # The extra samples are there for coverage and sharp shading edges; each pixel averages k x k of
     # them, so each needs fewer light samples (EDGE_LIGHT_SAMPLES instead of the preset's).
     ctx.settings = dataclasses.replace(settings, **{k: min(getattr(settings, k), v) for k, v in EDGE_LIGHT_SAMPLES.items()})
-    passes = ((silhouette, settings.edge_grid, True, True), (inner, min(settings.edge_grid, 2), INNER_RESIDUAL, INNER_RESIDUAL_SUBSET))
-    for edge, k, residual, subset in passes:
+    for edge, k, residual in ((silhouette, settings.edge_grid, True), (inner, min(settings.edge_grid, 2), INNER_RESIDUAL)):
         edge_ids = np.flatnonzero(edge.ravel())
         if len(edge_ids) == 0 or k <= 1:
             continue
         uv2, pix2 = _jittered_samples(xs[edge_ids] + box.x0, ys[edge_ids] + box.y0, k, ctx.rng)
         # A sample covering 1 / k^2 of the pixel needs 1 / k^2 of its light samples: the Monte Carlo residual
         # comes from k of the k^2 (one per row and column of the strata), the others shade the sharp part.
-        carries = np.full(len(uv2), residual) if not (residual and subset) else np.tile(residual_strata(k), len(edge_ids))
+        carries = np.tile(residual_strata(k), len(edge_ids)) if residual else np.zeros(len(uv2), bool)
         for part, res in ((carries, True), (~carries, False)):
             if part.any():
                 ctx.residual = res
