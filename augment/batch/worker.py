@@ -104,10 +104,9 @@ def release_sample_assets() -> None:
     one of them again in 1.6 % of its draws at best; a track's object is drawn again in every keyframe of its
     scene, so ``--tracks`` keeps them.
     """
-    from ..assets import select  # deferred: the procedural generators
+    from ..assets.select import forget_procedural_assets  # deferred: the procedural generators
 
-    for cached in (select._procedural, select._procedural_of):  # noqa: SLF001 - no public handle (see report)
-        cached.cache_clear()
+    forget_procedural_assets()
 
 
 def process_sample(config: BatchConfig, out_dir: str, token: str, cameras: list[str], tables: dict,
