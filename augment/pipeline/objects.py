@@ -11,7 +11,7 @@ import numpy as np
 from ..assets.asset import Asset
 from ..core import PinholeCamera
 from ..lighting.light import DistantLight
-from ..render import Insertion, estimate_veil, footprint, render_insertion
+from ..render import Insertion, PixelBox, estimate_veil, footprint, render_insertion
 from .options import InsertOptions, render_settings
 
 
@@ -25,10 +25,10 @@ class RenderedObject:
         T_cam_from_object: (4, 4) its pose in the camera frame.
         asset: the object.
         image_shape_px: (H, W) of the image it was rendered into.
-        box_px: (row0, row1, col0, col1) the pixel box of ``mask_box`` / ``coverage_box`` (empty for an
-            object of which only the shadow reaches the image).
-        mask_box, coverage_box: (row1 - row0, col1 - col0) float32 the renderer's ``mask`` (visible extent,
-            after occlusion) and ``coverage`` (before occlusion) inside ``box_px``; 0 outside it.
+        box: the pixel box of ``mask_box`` / ``coverage_box`` (empty for an object of which only the shadow
+            reaches the image).
+        mask_box, coverage_box: (box.height, box.width) float32 the renderer's ``mask`` (visible extent,
+            after occlusion) and ``coverage`` (before occlusion) inside ``box``; 0 outside it.
         visible_px, coverage_px: the renderer's ``visible_px`` / ``coverage_px`` (sums over the full image).
         timing_s, stats: the renderer's seconds per stage and statistics.
     """
@@ -36,7 +36,7 @@ class RenderedObject:
     T_cam_from_object: np.ndarray
     asset: Asset
     image_shape_px: tuple[int, int]
-    box_px: tuple[int, int, int, int]
+    box: PixelBox
     mask_box: np.ndarray
     coverage_box: np.ndarray
     visible_px: float
@@ -49,16 +49,14 @@ class RenderedObject:
         """The labels' part of ``ins`` (copies: nothing of ``ins`` stays referenced)."""
         on = (ins.mask != 0) | (ins.coverage != 0)
         rows, cols = np.flatnonzero(on.any(axis=1)), np.flatnonzero(on.any(axis=0))
-        box = (int(rows[0]), int(rows[-1]) + 1, int(cols[0]), int(cols[-1]) + 1) if len(rows) else (0, 0, 0, 0)
-        r0, r1, c0, c1 = box
-        return cls(T_cam_from_object, asset, ins.mask.shape[:2], box, ins.mask[r0:r1, c0:c1].copy(),
-                   ins.coverage[r0:r1, c0:c1].copy(), ins.visible_px, ins.coverage_px, dict(ins.timing_s),
-                   ins.stats)
+        box = (PixelBox(int(cols[0]), int(rows[0]), int(cols[-1]) + 1, int(rows[-1]) + 1) if len(rows)
+               else PixelBox(0, 0, 0, 0))
+        return cls(T_cam_from_object, asset, ins.mask.shape[:2], box, ins.mask[box.slices].copy(),
+                   ins.coverage[box.slices].copy(), ins.visible_px, ins.coverage_px, dict(ins.timing_s), ins.stats)
 
     def _full(self, box_layer: np.ndarray) -> np.ndarray:
         full = np.zeros(self.image_shape_px, box_layer.dtype)
-        r0, r1, c0, c1 = self.box_px
-        full[r0:r1, c0:c1] = box_layer
+        full[self.box.slices] = box_layer
         return full
 
     def full_mask(self) -> np.ndarray:
