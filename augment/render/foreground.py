@@ -13,6 +13,10 @@ Pipeline (all vectorised, rays in big Embree batches)::
       -> per-pixel premultiplied radiance, coverage alpha, camera-z depth
       -> G-buffer-guided cross-bilateral denoising of the Monte Carlo residual only.
 
+Camera rays are intersected and looked up :data:`TRACE_CHUNK_RAYS` at a time and summed per pixel as they go
+(:class:`PixelSums`); their hits are shaded in the batches one :func:`.shade.shade` call would make
+(:class:`_ShadeQueue`), so the render is the unchunked one and its memory does not grow with the pixel box.
+
 With :data:`INNER_RESIDUAL` False the 2 x 2 extra samples of inner edges (material boundaries, shading
 discontinuities) shade only the sharp noise-free part (sun, control variates, mirror reflection) and their
 pixels take the Monte Carlo residual from the first pass: foreground CPU -22 % on scene-0916 inserts, but
@@ -31,6 +35,7 @@ import numpy as np
 from ..core import PinholeCamera, invert_transform, luminance
 from .brdf import BRDFParams, row_norm, schlick_weight
 from .footprint import PixelBox, edge_pixels
+from . import shade as shade_module
 from .shade import RAY_EPS_M, ShadingContext, shade
 from .surface import SurfaceHits, surface_at_hits
 
@@ -66,7 +71,7 @@ class Foreground:
 
 @dataclass(frozen=True)
 class CameraSamples:
-    """Traced camera samples (N of them), object frame.
+    """Traced camera samples (N of them), object frame (what :class:`PixelSums` sums per pixel).
 
     Attributes:
         pixel: (N,) int64 index of the sample's pixel in the box (row-major).
@@ -89,10 +94,6 @@ class CameraSamples:
     dirs_obj: np.ndarray
     residual: np.ndarray
 
-    def concat(self, other: "CameraSamples") -> "CameraSamples":
-        """Both sets of samples, this one's first."""
-        return CameraSamples(*(np.concatenate([getattr(self, f.name), getattr(other, f.name)])
-                               for f in dataclasses.fields(self)))
 
 
 def render_foreground(camera: PinholeCamera, box: PixelBox | None, ctx: ShadingContext,
@@ -111,9 +112,10 @@ def render_foreground(camera: PinholeCamera, box: PixelBox | None, ctx: ShadingC
     w, h = box.width, box.height
     ys, xs = np.divmod(np.arange(w * h), w)
     n = settings.aa_grid
-    traced = _cast(ctx, camera, T_cam_from_object, *_jittered_samples(xs + box.x0, ys + box.y0, n, ctx.rng))
+    sums = PixelSums.empty(w * h, T_cam_from_object[2, :3])
+    _cast(ctx, camera, T_cam_from_object, *_jittered_samples(xs + box.x0, ys + box.y0, n, ctx.rng), sums)
     counts = np.full(w * h, n * n, dtype=np.float64)
-    silhouette, inner = _refine_masks(traced, w, h, n, _crossed_pixels(camera, box, ctx, T_cam_from_object))
+    silhouette, inner = _refine_masks(sums, w, h, n, _crossed_pixels(camera, box, ctx, T_cam_from_object))
     n_edge = 0
     # The extra samples are there for coverage and sharp shading edges; each pixel averages k x k of
     # them, so each needs fewer light samples (EDGE_LIGHT_SAMPLES instead of the preset's).
@@ -129,11 +131,11 @@ def render_foreground(camera: PinholeCamera, box: PixelBox | None, ctx: ShadingC
         for part, res in ((carries, True), (~carries, False)):
             if part.any():
                 ctx.residual = res
-                traced = traced.concat(_cast(ctx, camera, T_cam_from_object, uv2[part], edge_ids[pix2[part]]))
+                _cast(ctx, camera, T_cam_from_object, uv2[part], edge_ids[pix2[part]], sums)
         counts[edge_ids] += k * k
         n_edge += len(uv2)
     ctx.settings, ctx.residual = settings, True
-    return _resolve_pixels(traced, counts, box, T_cam_from_object[:3, :3], settings.denoise, ctx, n_edge)
+    return _resolve_pixels(sums, counts, box, T_cam_from_object[:3, :3], settings.denoise, ctx, n_edge)
 
 
 def residual_strata(k: int) -> np.ndarray:
@@ -144,12 +146,11 @@ def residual_strata(k: int) -> np.ndarray:
 
 
 def _cast(ctx: ShadingContext, camera: PinholeCamera, T_cam_from_object: np.ndarray, uv: np.ndarray,
-          pixel: np.ndarray) -> CameraSamples:
-    """Trace camera rays through pixel positions uv (N, 2) (their box pixels ``pixel`` (N,))."""
+          pixel: np.ndarray, sums: "PixelSums") -> None:
+    """Trace camera rays through pixel positions uv (N, 2) (their box pixels ``pixel`` (N,)) into ``sums``."""
     R = T_cam_from_object[:3, :3]
-    d_obj = camera.rays(uv) @ R  # camera -> object frame
-    o_obj = np.broadcast_to(invert_transform(T_cam_from_object)[:3, 3], d_obj.shape)
-    return _trace(ctx, np.ascontiguousarray(o_obj), d_obj, pixel)
+    eye_obj = invert_transform(T_cam_from_object)[:3, 3]
+    _trace(ctx, lambda sl: (eye_obj, camera.rays(uv[sl]) @ R), len(uv), pixel, sums)  # camera -> object frame
 
 
 def _crossed_pixels(camera: PinholeCamera, box: PixelBox, ctx: ShadingContext, T_cam_from_object: np.ndarray) -> np.ndarray | None:
@@ -163,7 +164,7 @@ def _crossed_pixels(camera: PinholeCamera, box: PixelBox, ctx: ShadingContext, T
     return edge_pixels(uv[ctx.prep.faces], box)
 
 
-def _refine_masks(traced: CameraSamples, w: int, h: int, n: int,
+def _refine_masks(first: "PixelSums | CameraSamples", w: int, h: int, n: int,
                   crossed: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """(silhouette, inner), each (h, w) bool: pixels that get more camera samples after the first pass.
 
@@ -174,9 +175,9 @@ def _refine_masks(traced: CameraSamples, w: int, h: int, n: int,
     (creases between flat faces, self-shadow edges: the noise-free part of the first pass jumps by
     more than SHADING_EDGE_REL between neighbours).
     """
-    pix = traced.pixel
-    hit = np.isfinite(traced.t_first)
-    nhit = np.bincount(pix, weights=hit, minlength=w * h).reshape(h, w)
+    if isinstance(first, CameraSamples):
+        first = PixelSums.of(first, w * h)
+    nhit = first.solid.reshape(h, w)
     any_hit = (nhit > 0).astype(np.uint8)
     all_hit = (nhit == n * n).astype(np.uint8)
     kernel = np.ones((3, 3), np.uint8)
@@ -184,13 +185,9 @@ def _refine_masks(traced: CameraSamples, w: int, h: int, n: int,
     if crossed is not None:
         reach |= crossed
     silhouette = reach & ~(cv2.erode(all_hit, kernel, borderType=cv2.BORDER_REPLICATE) > 0)
-    mat = np.full(w * h, -1.0, np.float32)
-    first_hit = traced.material_first >= 0
-    mat[pix[first_hit]] = traced.material_first[first_hit]
-    mat = mat.reshape(h, w)
+    mat = first.material.astype(np.float32).reshape(h, w)
     inner = (cv2.dilate(mat, kernel) != cv2.erode(mat, kernel, borderType=cv2.BORDER_REPLICATE)) & ~silhouette
-    smooth_lum = np.bincount(pix, weights=luminance(traced.radiance[:, :3]), minlength=w * h)
-    smooth_lum = np.log(np.maximum(smooth_lum.reshape(h, w) / (n * n), 1e-4)).astype(np.float32)
+    smooth_lum = np.log(np.maximum(luminance(first.smooth).reshape(h, w) / (n * n), 1e-4)).astype(np.float32)
     inner |= (unresolved_shading(smooth_lum) > np.log1p(SHADING_EDGE_REL)) & (mat >= 0) & ~silhouette
     return silhouette, inner
 
@@ -213,31 +210,20 @@ def unresolved_shading(log_lum: np.ndarray) -> np.ndarray:
     return out
 
 
-def _resolve_pixels(traced: CameraSamples, counts: np.ndarray, box: PixelBox, R: np.ndarray, denoise: bool,
+def _resolve_pixels(sums: "PixelSums", counts: np.ndarray, box: PixelBox, R: np.ndarray, denoise: bool,
                     ctx: ShadingContext, n_edge: int) -> Foreground:
     """Average the samples per pixel (radiance, alpha), nearest depth, G-buffer; denoise the residual."""
     w, h = box.width, box.height
     P = w * h
-    pix = traced.pixel
-    rad_px = np.stack([np.bincount(pix, weights=traced.radiance[:, c], minlength=P) for c in range(3)], axis=1) / counts[:, None]
     # The residual: mean over the samples that carry one (inner edge samples only sharpen the smooth part).
-    carried = np.maximum(np.bincount(pix, weights=traced.residual, minlength=P), 1e-12)
-    noisy = np.stack([np.bincount(pix, weights=traced.radiance[:, c] * traced.residual, minlength=P)
-                      for c in range(3, 6)], axis=1) / carried[:, None]
-    rad_px = np.concatenate([rad_px, noisy], axis=1)
-    alpha_px = np.bincount(pix, weights=traced.alpha, minlength=P) / counts
-    solid_px = np.bincount(pix, weights=np.isfinite(traced.t_first), minlength=P) / counts
-    # Camera z of the nearest hit per pixel.
-    t = traced.t_first
-    z = np.where(np.isfinite(t), t * np.einsum("ij,j->i", traced.dirs_obj, R[2]), np.inf)
-    depth_px = np.full(P, np.inf)
-    np.minimum.at(depth_px, pix, z)
+    rad_px = np.concatenate([sums.smooth / counts[:, None],
+                             sums.noisy / np.maximum(sums.carried, 1e-12)[:, None]], axis=1)
+    alpha_px = sums.alpha / counts
+    solid_px = sums.solid / counts
+    depth_px = sums.depth_m
     # G-buffer per pixel (mean first-hit normal, a first-hit material) for the denoiser.
-    hit_all = traced.material_first >= 0
-    n_px = np.stack([np.bincount(pix, weights=traced.normal_first[:, c], minlength=P) for c in range(3)], axis=1)
-    n_px /= np.maximum(row_norm(n_px)[:, None], 1e-9)
-    m_px = np.full(P, -1, dtype=np.int64)
-    m_px[pix[hit_all]] = traced.material_first[hit_all]
+    n_px = sums.normal / np.maximum(row_norm(sums.normal)[:, None], 1e-9)
+    m_px = sums.material
     smooth_px, noisy_px = rad_px[:, :3], rad_px[:, 3:]
     if denoise:
         # Only the Monte Carlo residual is filtered (widely); the control variates' expectations and
@@ -247,7 +233,7 @@ def _resolve_pixels(traced: CameraSamples, counts: np.ndarray, box: PixelBox, R:
                                     m_px.reshape(h, w), depth_m=depth_px.reshape(h, w),
                                     radius=DENOISE_RADIUS_PX, sigma_px=DENOISE_SIGMA_PX).reshape(P, 3)
     rad_px = smooth_px + noisy_px
-    stats = {"rays": dict(ctx.rays), "raycast_s": ctx.raycast_s, "pixels": int(P), "camera_samples": int(len(pix)),
+    stats = {"rays": dict(ctx.rays), "raycast_s": ctx.raycast_s, "pixels": int(P), "camera_samples": int(sums.samples),
              "edge_samples": int(n_edge), "box": box.as_list()}
     return Foreground(
         box=box,
@@ -259,66 +245,216 @@ def _resolve_pixels(traced: CameraSamples, counts: np.ndarray, box: PixelBox, R:
     )
 
 
-def _trace(ctx: ShadingContext, origins: np.ndarray, dirs: np.ndarray, pixel: np.ndarray) -> CameraSamples:
-    """Follow camera rays (object frame, (N, 3) each) through glass: the :class:`CameraSamples` of ``pixel`` (N,)."""
-    N = len(origins)
+def _trace(ctx: ShadingContext, rays_obj, N: int, pixel: np.ndarray, sums: "PixelSums") -> None:
+    """Follow N camera rays (object frame) through glass and add them to ``sums`` (pixels ``pixel`` (N,)).
+
+    ``rays_obj(sl)`` gives the (origin (3,), unit directions (n, 3)) of the rays ``sl`` (a slice). Rays are
+    intersected and their surfaces looked up :data:`TRACE_CHUNK_RAYS` at a time, and shaded through a
+    :class:`_ShadeQueue` in the batches an unchunked :func:`.shade.shade` call makes (same random numbers,
+    same image): memory is bounded by the chunk, not by the object's pixel box.
+    """
     radiance = np.zeros((N, 6))
-    normal_first = np.zeros((N, 3))
-    material_first = np.full(N, -1, dtype=np.int64)
     escaped = np.zeros(N)
-    t_first = np.full(N, np.inf)
-    throughput = np.ones((N, 3))
-    active = np.arange(N)
-    o, d = origins, dirs
+    hit_first = np.zeros(N, bool)
+    n_rays = N  # rays at this glass depth: all at depth 0, then those that went on through glass
     for depth in range(ctx.settings.max_glass_depth):
-        t0 = time.perf_counter()
-        hits = ctx.prep.scene.intersect(o, d)
-        ctx.count("camera" if depth == 0 else "glass", len(o), time.perf_counter() - t0)
-        if depth == 0:
-            t_first[active] = hits.t
-        miss = ~hits.hit
-        if depth > 0:
-            escaped[active[miss]] += throughput[active[miss]].mean(axis=1)
-        hit = np.flatnonzero(hits.hit)
-        if len(hit) == 0:
+        queue = _ShadeQueue(ctx, radiance)
+        going = []
+        for a in range(0, n_rays, TRACE_CHUNK_RAYS):
+            sl = slice(a, a + TRACE_CHUNK_RAYS)
+            if depth == 0:
+                eye, d = rays_obj(sl)
+                o, idx, tp = np.broadcast_to(eye, d.shape), np.arange(a, a + len(d)), None
+            else:
+                o, d, idx, tp = o_next[sl], d_next[sl], active[sl], tp_next[sl]
+            going.append(_trace_chunk(ctx, o, d, idx, tp, depth, pixel, sums, hit_first, escaped, queue))
+        queue.flush()
+        active, o_next, d_next, tp_next = (np.concatenate(x) for x in zip(*going))
+        n_rays = len(active)
+        if n_rays == 0:
             break
-        idx = active[hit]
-        dh = d[hit]
-        p = o[hit] + hits.t[hit, None] * dh
-        surf = surface_at_hits(ctx.prep, hits.face[hit], hits.bary[hit], dh)
-        if depth == 0:
-            normal_first[idx] = surf.normal
-            material_first[idx] = surf.material
-        tp = throughput[idx]
-        _shade_hits(ctx, surf, p, -dh, hits.face[hit], tp, idx, radiance, inside_glass=depth > 0)
-        # Glass continues with its transmission (1 - opacity)(1 - F) tinted by the base colour.
-        cont = np.flatnonzero(surf.opacity < 1.0)
-        if len(cont) == 0:
-            break
-        params = surf.params
-        nv = np.clip(np.einsum("ij,ij->i", surf.normal[cont], -dh[cont]), 0.0, 1.0)
-        c_spec = params.take(cont).c_spec
-        F = c_spec + (1 - c_spec) * schlick_weight(nv)[:, None]
-        tint = np.sqrt(np.clip(params.base_color[cont], 0.0, 1.0))
-        throughput[idx[cont]] = tp[cont] * (1.0 - surf.opacity[cont])[:, None] * (1.0 - F) * tint
-        active = idx[cont]
-        o = p[cont] - RAY_EPS_M * surf.geometric_normal[cont]
-        d = dh[cont]
     # Whatever still travels after the last surface is absorbed by the (dark) interior.
-    alpha = np.where(np.isfinite(t_first), 1.0 - escaped, 0.0)
-    return CameraSamples(pixel, radiance, alpha, t_first, normal_first, material_first, dirs,
-                         np.full(N, 1.0 if ctx.residual else 0.0))
+    alpha = np.where(hit_first, 1.0 - escaped, 0.0)
+    sums.add_shading(pixel, radiance, alpha, ctx.residual)
+
+
+TRACE_CHUNK_RAYS = 32_768  # camera rays per intersection / surface batch (bounds the foreground's memory)
+_NONE_GOING = (np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 3)))
+
+
+def _trace_chunk(ctx: ShadingContext, o: np.ndarray, d: np.ndarray, idx: np.ndarray, tp_in: np.ndarray | None,
+                 depth: int, pixel: np.ndarray, sums: "PixelSums", hit_first: np.ndarray, escaped: np.ndarray,
+                 queue: "_ShadeQueue") -> tuple[np.ndarray, ...]:
+    """One chunk of one glass depth of :func:`_trace`: rays ``idx`` (n,) from ``o`` along ``d`` (n, 3) with
+    throughput ``tp_in`` (n, 3) (None at depth 0: 1). Returns the rays going on (idx, origins, dirs, throughput)."""
+    t0 = time.perf_counter()
+    hits = ctx.prep.scene.intersect(np.ascontiguousarray(o), d)
+    ctx.count("camera" if depth == 0 else "glass", len(o), time.perf_counter() - t0)
+    miss = ~hits.hit
+    if depth > 0:
+        escaped[idx[miss]] += tp_in[miss].mean(axis=1)
+    hit = np.flatnonzero(hits.hit)
+    if depth == 0:
+        hit_first[idx] = np.isfinite(hits.t)
+        sums.add_first_hits(pixel[idx], hits.t, d, hit)
+    if len(hit) == 0:
+        return _NONE_GOING
+    ids = idx[hit]
+    dh = d[hit]
+    p = o[hit] + hits.t[hit, None] * dh
+    surf = surface_at_hits(ctx.prep, hits.face[hit], hits.bary[hit], dh)
+    if depth == 0:
+        sums.add_first_surface(pixel[ids], surf)
+    tp = np.ones((len(hit), 3)) if tp_in is None else tp_in[hit]
+    _shade_hits(ctx, surf, p, -dh, hits.face[hit], tp, ids, queue, inside_glass=depth > 0)
+    # Glass continues with its transmission (1 - opacity)(1 - F) tinted by the base colour.
+    cont = np.flatnonzero(surf.opacity < 1.0)
+    if len(cont) == 0:
+        return _NONE_GOING
+    params = surf.params
+    nv = np.clip(np.einsum("ij,ij->i", surf.normal[cont], -dh[cont]), 0.0, 1.0)
+    c_spec = params.take(cont).c_spec
+    F = c_spec + (1 - c_spec) * schlick_weight(nv)[:, None]
+    tint = np.sqrt(np.clip(params.base_color[cont], 0.0, 1.0))
+    tp_next = tp[cont] * (1.0 - surf.opacity[cont])[:, None] * (1.0 - F) * tint
+    return ids[cont], p[cont] - RAY_EPS_M * surf.geometric_normal[cont], dh[cont], tp_next
+
+
+@dataclass
+class PixelSums:
+    """Camera samples summed per pixel of the box (P pixels), filled in place as rays are traced.
+
+    Attributes:
+        smooth, noisy: (P, 3) float64 summed premultiplied radiance, smooth part and Monte Carlo residual
+            (the residual only over samples that carry one, ``carried`` (P,) of them).
+        alpha: (P,) summed coverage; solid: (P,) number of samples that hit the object.
+        depth_m: (P,) camera z of the nearest hit (inf where none).
+        normal: (P, 3) summed first-hit shading normals (object frame); material: (P,) int64 a first-hit
+            material (the last sample's that hit), -1 where none.
+        samples: camera samples added.
+    """
+
+    smooth: np.ndarray
+    noisy: np.ndarray
+    carried: np.ndarray
+    alpha: np.ndarray
+    solid: np.ndarray
+    depth_m: np.ndarray
+    normal: np.ndarray
+    material: np.ndarray
+    cam_z_obj: np.ndarray
+    samples: int = 0
+
+    @staticmethod
+    def empty(P: int, cam_z_obj: np.ndarray) -> "PixelSums":
+        """Sums over P pixels with no sample yet; ``cam_z_obj`` (3,) is the camera's z axis in the object frame."""
+        z = np.zeros
+        return PixelSums(z((P, 3)), z((P, 3)), z(P), z(P), z(P), np.full(P, np.inf), z((P, 3)), np.full(P, -1, np.int64),
+                         np.asarray(cam_z_obj, np.float64))
+
+    @staticmethod
+    def of(samples: CameraSamples, P: int, cam_z_obj: np.ndarray = np.array([0.0, 0.0, 1.0])) -> "PixelSums":
+        """The sums of traced ``samples`` over P pixels."""
+        sums = PixelSums.empty(P, cam_z_obj)
+        sums.add_first_hits(samples.pixel, samples.t_first, samples.dirs_obj, np.flatnonzero(np.isfinite(samples.t_first)))
+        sums.normal += np.stack([np.bincount(samples.pixel, weights=samples.normal_first[:, c], minlength=P)
+                                 for c in range(3)], axis=1)
+        hit = samples.material_first >= 0
+        sums.material[samples.pixel[hit]] = samples.material_first[hit]
+        for res in (True, False):
+            part = np.flatnonzero((samples.residual > 0) == res)
+            sums.add_shading(samples.pixel[part], samples.radiance[part], samples.alpha[part], res)
+        return sums
+
+    def add_first_hits(self, pixel: np.ndarray, t: np.ndarray, dirs_obj: np.ndarray, hit: np.ndarray) -> None:
+        """Camera rays of pixels ``pixel`` (n,) along ``dirs_obj`` (n, 3) with first-hit distances ``t`` (n,)
+        (inf = miss), ``hit`` the indices of the hits: coverage count and nearest camera z."""
+        P = len(self.solid)
+        self.samples += len(pixel)
+        self.solid += np.bincount(pixel, weights=np.isfinite(t), minlength=P)
+        z = t[hit] * np.einsum("ij,j->i", dirs_obj[hit], self.cam_z_obj)
+        np.minimum.at(self.depth_m, pixel[hit], z)
+
+    def add_first_surface(self, pixel: np.ndarray, surf: SurfaceHits) -> None:
+        """The G-buffer of first hits in pixels ``pixel`` (n,): summed normal, last material."""
+        P = len(self.solid)
+        for c in range(3):
+            self.normal[:, c] += np.bincount(pixel, weights=surf.normal[:, c], minlength=P)
+        self.material[pixel] = surf.material
+
+    def add_shading(self, pixel: np.ndarray, radiance: np.ndarray, alpha: np.ndarray, residual: bool) -> None:
+        """Shaded samples of pixels ``pixel`` (N,): radiance (N, 6) (smooth, residual), alpha (N,); the residual
+        counts only if the samples carry it (``residual``)."""
+        P = len(self.solid)
+        for c in range(3):
+            self.smooth[:, c] += np.bincount(pixel, weights=radiance[:, c], minlength=P)
+        if residual:
+            self.carried += np.bincount(pixel, minlength=P)
+            for c in range(3):
+                self.noisy[:, c] += np.bincount(pixel, weights=radiance[:, 3 + c], minlength=P)
+        self.alpha += np.bincount(pixel, weights=alpha, minlength=P)
+
+
+class _ShadeQueue:
+    """Front-face hits waiting to be shaded, shaded in the batches of :func:`.shade.shade` (each batch draws its
+    own random numbers: shading n points as one call or as batches of that size is the same computation)."""
+
+    def __init__(self, ctx: ShadingContext, radiance: np.ndarray) -> None:
+        s = ctx.settings
+        self.ctx, self.radiance, self.parts, self.n = ctx, radiance, [], 0
+        self.batch = max(1, shade_module.SHADE_CHUNK_RAYS // max(1, s.sun_samples + s.env_samples + s.brdf_samples))
+
+    def add(self, idx: np.ndarray, tp: np.ndarray, p: np.ndarray, n_s: np.ndarray, n_g: np.ndarray, v: np.ndarray,
+            params: BRDFParams, emission: np.ndarray, cv_scale: np.ndarray | None) -> None:
+        """Queue points ``p`` (m, 3) of rays ``idx`` (m,) with throughput ``tp`` (m, 3); shade full batches."""
+        self.parts.append((idx, tp, p, n_s, n_g, v, params, emission, cv_scale))
+        self.n += len(idx)
+        while self.n >= self.batch:
+            self._shade(self.batch)
+
+    def flush(self) -> None:
+        """Shade whatever is queued."""
+        if self.n:
+            self._shade(self.n)
+
+    def _shade(self, m: int) -> None:
+        """Shade the first ``m`` queued points; keep the rest queued."""
+        cols = [np.concatenate(c) if i not in (6, 8) else c for i, c in enumerate(zip(*self.parts))]
+        self.parts = []  # the queued copies go: only the concatenated ones stay alive while shading
+        params = _concat_params(cols[6])
+        cv_scale = None if cols[8][0] is None else np.concatenate(cols[8])
+        idx, tp, p, n_s, n_g, v, emission = (cols[i] for i in (0, 1, 2, 3, 4, 5, 7))
+        smooth, noisy = shade(self.ctx, p[:m], n_s[:m], n_g[:m], v[:m], params.take(slice(0, m)),
+                              None if cv_scale is None else cv_scale[:m])
+        self.radiance[idx[:m], :3] += tp[:m] * (smooth + emission[:m])
+        self.radiance[idx[:m], 3:] += tp[:m] * noisy
+        self.n -= m
+        if self.n:
+            self.parts = [(idx[m:], tp[m:], p[m:], n_s[m:], n_g[m:], v[m:], params.take(slice(m, None)), emission[m:],
+                           None if cv_scale is None else cv_scale[m:])]
+
+
+def _concat_params(parts: list[BRDFParams]) -> BRDFParams:
+    """The BRDF parameters of ``parts`` one after the other."""
+    def cat(name):
+        arrays = [getattr(q, name) for q in parts]
+        return None if arrays[0] is None else np.concatenate(arrays)
+
+    return BRDFParams(*(cat(f) for f in ("base_color", "metallic", "roughness", "specular", "clearcoat",
+                                         "retroreflective", "flake")))
 
 
 def _shade_hits(ctx: ShadingContext, surf: SurfaceHits, p: np.ndarray, v: np.ndarray, face: np.ndarray, tp: np.ndarray,
-                idx: np.ndarray, radiance: np.ndarray, inside_glass: bool) -> None:
-    """Add the radiance of hits (``surf`` at points ``p``, towards ``v``) x throughput ``tp`` to rays ``idx``.
+                idx: np.ndarray, queue: _ShadeQueue, inside_glass: bool) -> None:
+    """Add the radiance of hits (``surf`` at points ``p``, towards ``v``) x throughput ``tp`` to rays ``idx``
+    (``queue.radiance``; front faces through the shading ``queue``).
 
     Seen through glass (``inside_glass``), the opaque interior (seats, dashboard) gets the interior light
     ``ctx.interior_rgb`` (a tenth of the sky through the windows) x its base colour, brighter on faces that
     look up (``interior_shading``), not the full light transport: it is dark, seen through tinted glass,
     and shading it fully cost a third of a car's render for no visible difference at 10-40 m.
     """
+    radiance = queue.radiance
     if inside_glass:  # the interior's opaque front faces: cheap light; glass (a far window) is shaded fully
         opaque = np.flatnonzero(surf.front & ~(surf.opacity < 1.0))
         if len(opaque):
@@ -336,9 +472,7 @@ def _shade_hits(ctx: ShadingContext, surf: SurfaceHits, p: np.ndarray, v: np.nda
         pr = BRDFParams(pr.base_color * op[:, None], pr.metallic, pr.roughness, pr.specular, pr.clearcoat,
                         pr.retroreflective, pr.flake)
         scale = None if ctx.bounce is None else ctx.bounce.face_sky_visibility(face[fr])
-        smooth, noisy = shade(ctx, p[fr], surf.normal[fr], surf.geometric_normal[fr], v[fr], pr, scale)
-        radiance[idx[fr], :3] += tp[fr] * (smooth + surf.emission[fr])
-        radiance[idx[fr], 3:] += tp[fr] * noisy
+        queue.add(idx[fr], tp[fr], p[fr], surf.normal[fr], surf.geometric_normal[fr], v[fr], pr, surf.emission[fr], scale)
     # Back faces (inside the car): opaque ones seen through glass show the dark interior; seen
     # directly (through a hole of an open mesh, e.g. a hollow tyre) they get no light at all.
     if inside_glass:
