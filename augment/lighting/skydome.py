@@ -11,13 +11,15 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from ..core import camera_dir_to_lonlat, check_shape, luminance, sample_equirect
+from ..core import camera_dir_to_lonlat, check_shape, hdr_to_ldr, ldr_to_hdr, luminance, sample_equirect
 from .fill import UNSEEN_KEEP, shrink_unseen
 from .observe import ViewObservation
 from .sky import sky_radiance
 from .volume import world_envmap_directions
 
 SKY_GAIN_KAPPA = 2.0  # several cameras: von Mises weight of a camera's sky correction over azimuth (~60 deg wide)
+BAND_SIGMA_DEG = 4.0  # elevation bands of the seen far pixels: Gaussian width over elevation
+BAND_PRIOR_CELLS = 32.0  # a band's seen mean colour is shrunk towards the global anchor with this many dome cells
 
 
 def model_sky_world(sun_dir_vol: np.ndarray, turbidity: float, cloud_cover: float, ground_albedo: float, scale: float,
@@ -69,6 +71,27 @@ def _sky_log_gain(log_ratio: np.ndarray, rows: np.ndarray, lon: np.ndarray, view
         log_gain += _row_log_gains(log_ratio[m], rows[m], H)[:, None, :] * weights[-1][None, :, None]
     log_gain /= np.sum(weights, axis=0)[None, :, None]
     return log_gain
+
+
+def band_anchor_rgb(observed: np.ndarray, mean_obs: np.ndarray, anchor_rgb: np.ndarray,
+                    sigma_deg: float = BAND_SIGMA_DEG, prior_cells: float = BAND_PRIOR_CELLS) -> np.ndarray:
+    """(H, 3) the mean colour (as radiance) of the dome's observed far cells per elevation band: what lies beyond
+    the volume at that elevation (sky between the trees, distant scenery), the best constant guess of the unseen
+    cells of the same band. Per row, the LDR mean of the observed cells ``observed`` (H, W) with values
+    ``mean_obs`` (H, W, 3), Gaussian-weighted over rows (``sigma_deg``), shrunk towards ``anchor_rgb`` (3,) with
+    ``prior_cells`` cells' weight (a band seen in a few cells is a noisy guess)."""
+    H = observed.shape[0]
+    ldr = np.clip(hdr_to_ldr(np.maximum(mean_obs, 0.0)), 0.0, 1.0)
+    count = observed.sum(axis=1).astype(np.float64)
+    sums = (ldr * observed[..., None]).sum(axis=1)
+    sig = sigma_deg / 180.0 * H
+    pad = int(3 * sig) + 1
+    k = np.exp(-0.5 * (np.arange(-pad, pad + 1) / sig) ** 2)
+    count_b = np.convolve(count, k, mode="same")
+    sums_b = np.stack([np.convolve(sums[:, c], k, mode="same") for c in range(3)], axis=1)
+    prior = np.clip(hdr_to_ldr(np.asarray(anchor_rgb, np.float64)), 0.0, 1.0)
+    band = (sums_b + prior_cells * prior) / (count_b + prior_cells)[:, None]
+    return np.maximum(ldr_to_hdr(band), 1e-9)
 
 
 def blend_observed(corrected: np.ndarray, observed: np.ndarray, mean_obs: np.ndarray, blur_deg: float) -> np.ndarray:
@@ -147,7 +170,8 @@ def build_sky_dome(model_world: np.ndarray, observations: list[ViewObservation],
         # the top of what was seen: a high percentile, not the single highest pixel (noise must not move it)
         top = float(np.percentile(lat[~sat], 99.0)) if (~sat).any() else -np.pi / 2
         below = (elev <= top)[..., None]
-        corrected = np.where(below, shrink_unseen(corrected, anchor_rgb, keep), corrected)
+        band = band_anchor_rgb(observed, mean_obs, anchor_rgb)[:, None, :]
+        corrected = np.where(below, shrink_unseen(corrected, band, keep), corrected)
     dome = blend_observed(corrected, observed, mean_obs, blur_deg)
     lum = np.maximum(luminance(dome), 1e-12)
     dome = dome * np.maximum(1.0, floor / lum)[..., None]
