@@ -4,6 +4,7 @@ Usage::
 
     nice python benchmarks/bench_realism.py --tag after                       # the code of this checkout
     nice python benchmarks/bench_realism.py --tag before --code-root /tmp/realism_before   # another checkout
+    nice python benchmarks/bench_realism.py --tag s8 --stride 4 --n-objects 6 --seeds 0,1,2  # mean +- std over seeds
 
 Data: ``../shared/data/nuscenes-seq`` (scene-0916, 41 keyframes x 6 cameras). Every ``--stride``-th keyframe,
 all 6 cameras: ``--n-objects`` procedural cars per camera are inserted by the pipeline's library API (what
@@ -18,7 +19,10 @@ inserted ones from the augmented image of the same camera.
 
 Reports per-feature gaps (inserted median vs real median, standardised mean difference) and a real-vs-inserted
 logistic regression on HOG + Lab histogram + scalar features, 5-fold cross-validated grouped by keyframe
-(0.5 = indistinguishable). Writes ``benchmarks/results/realism_<tag>.json`` and crop sheets
+(0.5 = indistinguishable). With some tens of cars per set one run's accuracy moves by about +- 0.1 with the
+insertion seed: ``--seeds`` runs several and reports their mean and spread. Placement diagnostics (not
+classifier features: :func:`car_placement`): each car's zone against the map's road edge, its heading against
+the edge and the camera ray, its distance, the road's share of its crop. Writes ``benchmarks/results/realism_<tag>.json`` and crop sheets
 ``/tmp/realism/sheet_<tag>_*.png`` (real images: never commit them).
 
 Another checkout (``--code-root``): the renders run in a subprocess that imports ``streetaug.*`` from that
@@ -184,16 +188,60 @@ def _without(boxes, T):
     return [(T2, w2) for T2, w2 in boxes if not np.allclose(T2, T)]
 
 
+PLACEMENT_DIAGNOSTICS = ("distance_m", "yaw_to_ray_deg", "yaw_to_edge_deg", "centre_edge_m", "footprint_min_edge_m",
+                         "road_share")
+
+
+def car_placement(zones, view, T_cam_from_box: np.ndarray, wlh: np.ndarray, crop, kerb_m: float) -> dict:
+    """Where one car of the check stands (diagnostics, not classifier features), measured with the placement
+    package's own map functions (:class:`~streetaug.placement.zones.SurfaceZones` of the camera):
+
+    zone (``lane``: footprint on the road, farther than ``kerb_m`` from its edge; ``kerb``: on the road within
+    ``kerb_m``; ``edge``: centre on the road, footprint across the edge; ``off_road``: centre off it),
+    ``centre_edge_m`` / ``footprint_min_edge_m`` the signed distance (m, + on the road) of the footprint's
+    centre / its most off-road corner to the road edge, ``yaw_to_edge_deg`` (0..90) the heading against the
+    road edge's direction, ``yaw_to_ray_deg`` (0 end-on .. 90 side-on), ``distance_m`` camera to box centre,
+    ``road_share`` the fraction of the crop outside the car's (and other cars') hulls whose ray meets the
+    ground on the map's drivable area (sky and off-road ground are not road).
+    """
+    from streetaug.augment.evaluation.realism import ground_points_box, yaw_to_ray_deg
+    from streetaug.placement.rules import footprint_corners
+
+    T_gb = view.T_global_from_cam @ T_cam_from_box
+    centre = T_gb[:2, 3]
+    yaw = float(np.arctan2(T_gb[1, 0], T_gb[0, 0]))
+    fp = footprint_corners(centre[None], np.array([yaw]), float(wlh[1]), float(wlh[0]))
+    sd = zones.signed_distance(fp[0])
+    area = zones.drivable
+    if area.contains_footprints(fp)[0]:
+        zone = "kerb" if area.edge_distance(fp)[0] <= kerb_m else "lane"
+    else:
+        zone = "edge" if zones.signed_distance(centre[None])[0] > 0 else "off_road"
+    tangent = zones.edge_tangent(centre[None])[0]
+    yaw_to_edge = np.degrees(np.arccos(np.clip(abs(np.cos(yaw) * tangent[0] + np.sin(yaw) * tangent[1]), 0, 1)))
+    hit_box = ground_points_box(view.K, T_cam_from_box, wlh, crop.window)  # (h, w, 2) box x/y on its bottom plane
+    free = ~(crop.car_mask | crop.exclude_mask)
+    ok = free & np.isfinite(hit_box[..., 0])
+    pts = np.c_[hit_box[ok], np.full(ok.sum(), -0.5 * wlh[2]), np.ones(ok.sum())] @ T_gb.T
+    road = area.contains_points(pts[:, :2]).sum() if len(pts) else 0
+    return {"zone": zone, "distance_m": float(crop.distance_m), "yaw_to_ray_deg": yaw_to_ray_deg(T_cam_from_box),
+            "yaw_to_edge_deg": float(yaw_to_edge), "centre_edge_m": float(zones.signed_distance(centre[None])[0]),
+            "footprint_min_edge_m": float(sd.min()), "road_share": float(road / max(free.sum(), 1))}
+
+
 def collect_crops(cache: Path, args):
     """Crops of every qualifying car of the cached images: (crops, labels 0 real / 1 inserted, keyframe ids,
-    image ids)."""
+    image ids, placement diagnostics per crop (:func:`car_placement`))."""
     import cv2
 
     from streetaug.augment.evaluation.realism import extract_crop
     from streetaug.datasets.nuscenes import NuScenesReader
+    from streetaug.placement import PlacementConfig, drivable_area_for_sample
+    from streetaug.placement.zones import surface_zones
 
     reader = NuScenesReader(args.dataroot, args.version)
-    crops, labels, keyframes, images = [], [], [], []
+    config = PlacementConfig()
+    crops, labels, keyframes, images, places = [], [], [], [], []
     for token in keyframe_tokens(reader, args.stride):
         doc = json.loads((cache / f"{token}.json").read_text())
         sample = reader.sample(token)
@@ -202,13 +250,32 @@ def collect_crops(cache: Path, args):
             real, inserted, others_real, others_all = image_cars(reader, sample, view, doc[c])
             original = view.image
             augmented = cv2.imread(str(cache / f"{token}_{c}.png"))[:, :, ::-1] if inserted else None
+            drivable, _ = drivable_area_for_sample(sample, view, config)
+            zones = surface_zones(sample, view, drivable, config) if drivable is not None else None
             for label, image, cars, others in ((0, original, real, others_real), (1, augmented, inserted, others_all)):
                 for T, wlh in cars:
-                    crops.append(extract_crop(image, view.K, T, wlh, _without(others, T)))
+                    crop = extract_crop(image, view.K, T, wlh, _without(others, T))
+                    crops.append(crop)
                     labels.append(label)
                     keyframes.append(token)
                     images.append(f"{token}_{c}")
-    return crops, np.array(labels), np.array(keyframes), np.array(images)
+                    places.append(car_placement(zones, view, T, wlh, crop, config.kerb_distance_m)
+                                  if zones is not None else {"zone": "no_map"})
+    return crops, np.array(labels), np.array(keyframes), np.array(images), places
+
+
+def placement_summary(inserted: list[dict], real: list[dict]) -> dict:
+    """Zone shares of each set and the gaps of the numeric placement diagnostics (:func:`feature_gaps`)."""
+    from streetaug.augment.evaluation.realism import feature_gaps
+
+    def shares(places):
+        zones = [p["zone"] for p in places]
+        return {z: zones.count(z) / max(len(zones), 1) for z in ("lane", "kerb", "edge", "off_road", "no_map")
+                if z in zones}
+
+    return {"zone_share": {"inserted": shares(inserted), "real": shares(real)},
+            "gaps": feature_gaps([p for p in inserted if "distance_m" in p], [p for p in real if "distance_m" in p],
+                                 PLACEMENT_DIAGNOSTICS)}
 
 
 def crop_sheet(real, inserted, path: Path, row_h: int = 112, per_side: int = 4) -> None:
@@ -245,7 +312,7 @@ def analyse(args, cache: Path, commit: str, render_s: float) -> dict:
                                                       crop_features, feature_gaps, size_matched)
 
     t0 = time.perf_counter()
-    crops, labels, keyframes, images = collect_crops(cache, args)
+    crops, labels, keyframes, images, places = collect_crops(cache, args)
     heights = np.array([c.box_height_px for c in crops])
     real_idx, ins_idx = np.flatnonzero(labels == 0), np.flatnonzero(labels == 1)
     rng = np.random.default_rng(args.seed)
@@ -271,6 +338,7 @@ def analyse(args, cache: Path, commit: str, render_s: float) -> dict:
     n = len(pick_r)
     gaps = feature_gaps(feats[n:], feats[:n])
     bins = np.digitize(heights[chosen[:n]], HEIGHT_BINS_PX)
+    placement = placement_summary([places[i] for i in chosen[n:]], [places[i] for i in chosen[:n]])
     doc = {
         "tag": args.tag, "commit": commit, "code_root": str(Path(args.code_root).resolve()),
         "data": f"{Path(args.dataroot).name} {args.version} ({args.cameras})", "stride": args.stride, "n_objects_per_camera": args.n_objects,
@@ -284,6 +352,7 @@ def analyse(args, cache: Path, commit: str, render_s: float) -> dict:
                                    for k in range(1, len(HEIGHT_BINS_PX))},
         "classifier": classifier,
         "feature_gaps": gaps,
+        "placement_diagnostics": placement,
         "timing_s": {"render": render_s, "analysis": time.perf_counter() - t0},
     }
     out = Path(args.out) / f"realism_{args.tag}.json"
@@ -308,6 +377,10 @@ def analyse(args, cache: Path, commit: str, render_s: float) -> dict:
     print(f"  {'feature':20s} {'inserted':>9s} {'real':>9s} {'d':>6s}")
     for name, g in gaps.items():
         print(f"  {name:20s} {g['inserted_median']:9.3f} {g['real_median']:9.3f} {g['standardised_gap']:6.2f}")
+    print(f"  placement (diagnostics, not classifier features): zones inserted {placement['zone_share']['inserted']}, "
+          f"real {placement['zone_share']['real']}")
+    for name, g in placement["gaps"].items():
+        print(f"  {name:20s} {g['inserted_median']:9.3f} {g['real_median']:9.3f} {g['standardised_gap']:6.2f}")
     print(f"wrote {out}, sheets {sheets}/sheet_{args.tag}_*.png")
     return doc
 
@@ -322,6 +395,9 @@ def parse_args(argv=None):
     p.add_argument("--stride", type=int, default=3, help="Every stride-th keyframe.")
     p.add_argument("--n-objects", type=int, default=3, help="Cars inserted per camera.")
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seeds", default=None,
+                   help="Comma-separated seeds: one run per seed (tag <tag>_seed<s>, its own cache), and a summary "
+                        "realism_<tag>.json with the mean and spread over the seeds.")
     p.add_argument("--quality", default="default")
     p.add_argument("--max-per-class", type=int, default=60)
     p.add_argument("--render-only", action="store_true")
@@ -348,14 +424,64 @@ def main(argv=None) -> None:
     if args.render_worker:
         render_worker(args)
         return
+    if args.seeds:
+        docs = [run_one(argparse.Namespace(**{**vars(args), "seed": int(s), "tag": f"{args.tag}_seed{int(s)}",
+                                              "cache": None}))
+                for s in args.seeds.split(",")]
+        if not args.render_only:
+            summarise_seeds(args, docs)
+        return
+    run_one(args)
+
+
+def run_one(args) -> dict | None:
+    """Render (cached) and analyse one seed; the result document (None with ``--render-only``)."""
     cache = Path(args.cache or f"/tmp/realism/cache_{args.tag}")
     cache.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     commit = render(args, cache)
     render_s = time.perf_counter() - t0
     if args.render_only:
-        return
-    analyse(args, cache, commit, render_s)
+        return None
+    return analyse(args, cache, commit, render_s)
+
+
+def summarise_seeds(args, docs: list[dict]) -> dict:
+    """``realism_<tag>.json``: per seed the classifier accuracy (keyframe-grouped), the counts and the zone shares;
+    over the seeds the mean and standard deviation of the accuracies and of every gap."""
+    from streetaug.augment.core.io import write_json_atomic
+
+    def spread(values):
+        v = np.asarray(values, float)
+        return {"mean": float(np.nanmean(v)), "std": float(np.nanstd(v)), "values": v.tolist()}
+
+    acc = {name: spread([d["classifier"][name]["grouped_by_keyframe"]["accuracy_mean"] for d in docs])
+           for name in docs[0]["classifier"]}
+    gaps = {name: {"standardised_gap": spread([d["feature_gaps"][name]["standardised_gap"] for d in docs]),
+                   "inserted_median": spread([d["feature_gaps"][name]["inserted_median"] for d in docs]),
+                   "real_median": spread([d["feature_gaps"][name]["real_median"] for d in docs])}
+            for name in docs[0]["feature_gaps"]}
+    place = {name: {"standardised_gap": spread([d["placement_diagnostics"]["gaps"][name]["standardised_gap"]
+                                                for d in docs]),
+                    "inserted_median": spread([d["placement_diagnostics"]["gaps"][name]["inserted_median"]
+                                               for d in docs]),
+                    "real_median": spread([d["placement_diagnostics"]["gaps"][name]["real_median"] for d in docs])}
+             for name in docs[0]["placement_diagnostics"]["gaps"]}
+    doc = {"tag": args.tag, "commit": docs[0]["commit"], "code_root": docs[0]["code_root"], "stride": args.stride,
+           "n_objects_per_camera": args.n_objects, "seeds": [d["seed"] for d in docs],
+           "per_seed": [{"seed": d["seed"], "tag": d["tag"], "candidates": d["candidates"],
+                         "matched_per_class": d["matched_per_class"],
+                         "accuracy": d["classifier"]["all"]["grouped_by_keyframe"]["accuracy_mean"],
+                         "zone_share": d["placement_diagnostics"]["zone_share"]} for d in docs],
+           "classifier_accuracy_over_seeds": acc, "feature_gaps_over_seeds": gaps,
+           "placement_diagnostics_over_seeds": place}
+    out = Path(args.out) / f"realism_{args.tag}.json"
+    write_json_atomic(out, doc)
+    a = acc["all"]
+    print(f"{args.tag}: classifier accuracy over seeds {doc['seeds']}: {a['mean']:.3f} +- {a['std']:.3f} "
+          f"({', '.join(f'{v:.3f}' for v in a['values'])}); matched "
+          f"{[d['matched_per_class'] for d in docs]}; wrote {out}")
+    return doc
 
 
 if __name__ == "__main__":

@@ -83,7 +83,7 @@ def main(argv=None) -> None:
     all_tokens = bench.keyframe_tokens
     bench.keyframe_tokens = lambda reader, stride: [t for t in all_tokens(reader, stride)  # rendered so far
                                                     if (cache / f"{t}.json").exists()]
-    crops, labels, _, _ = bench.collect_crops(cache, args)
+    crops, labels, _, _, _ = bench.collect_crops(cache, args)
     heights = np.array([c.box_height_px for c in crops])
     real_idx, ins_idx = np.flatnonzero(labels == 0), np.flatnonzero(labels == 1)
     pick_r, pick_i = size_matched(heights[real_idx], heights[ins_idx], bench.HEIGHT_BINS_PX,

@@ -106,11 +106,10 @@ def hull_mask(points_px: np.ndarray, window: tuple[int, int, int, int]) -> np.nd
     return mask.astype(bool)
 
 
-def ground_distance_map(K: np.ndarray, T_cam_from_box: np.ndarray, wlh: np.ndarray,
-                        window: tuple[int, int, int, int]) -> np.ndarray:
-    """(h, w) float32: for each window pixel, where its camera ray meets the plane of the box's bottom face,
-    the distance (m) from the footprint rectangle (0 inside); NaN when the ray meets it behind the camera
-    or not at all (sky, above the horizon)."""
+def ground_points_box(K: np.ndarray, T_cam_from_box: np.ndarray, wlh: np.ndarray,
+                      window: tuple[int, int, int, int]) -> np.ndarray:
+    """(h, w, 2) float64: for each window pixel, the box-frame x/y (m) where its camera ray meets the plane of
+    the box's bottom face; NaN when the ray meets it behind the camera or not at all (sky, above the horizon)."""
     x0, y0, x1, y1 = window
     u, v = np.meshgrid(np.arange(x0, x1, dtype=float), np.arange(y0, y1, dtype=float))
     rays_cam = np.stack([u, v, np.ones_like(u)], axis=-1) @ np.linalg.inv(K).T  # (h, w, 3), z = 1
@@ -121,10 +120,28 @@ def ground_distance_map(K: np.ndarray, T_cam_from_box: np.ndarray, wlh: np.ndarr
     with np.errstate(divide="ignore", invalid="ignore"):
         s = (z_ground - origin_box[2]) / rays_box[..., 2]
     hit = origin_box[:2] + s[..., None] * rays_box[..., :2]
+    return np.where((np.isfinite(s) & (s > 0))[..., None], hit, np.nan)
+
+
+def ground_distance_map(K: np.ndarray, T_cam_from_box: np.ndarray, wlh: np.ndarray,
+                        window: tuple[int, int, int, int]) -> np.ndarray:
+    """(h, w) float32: for each window pixel, where its camera ray meets the plane of the box's bottom face,
+    the distance (m) from the footprint rectangle (0 inside); NaN when the ray meets it behind the camera
+    or not at all (sky, above the horizon)."""
+    hit = ground_points_box(K, T_cam_from_box, wlh, window)
     half = 0.5 * np.array([wlh[1], wlh[0]])
     outside = np.maximum(np.abs(hit) - half, 0.0)
-    dist = np.hypot(outside[..., 0], outside[..., 1])
-    return np.where(np.isfinite(s) & (s > 0), dist, np.nan).astype(np.float32)
+    return np.hypot(outside[..., 0], outside[..., 1]).astype(np.float32)  # NaN stays NaN
+
+
+def yaw_to_ray_deg(T_cam_from_box: np.ndarray) -> float:
+    """Angle (deg, 0..90) between a box's heading (its x axis) and the camera ray to its centre, both in the
+    box's ground plane: 0 = seen end-on (front or back), 90 = seen side-on."""
+    up = T_cam_from_box[:3, 2]
+    heading, ray = T_cam_from_box[:3, 0], T_cam_from_box[:3, 3]
+    h, r = heading - (heading @ up) * up, ray - (ray @ up) * up
+    c = abs(h @ r) / max(np.linalg.norm(h) * np.linalg.norm(r), 1e-12)
+    return float(np.degrees(np.arccos(np.clip(c, 0.0, 1.0))))
 
 
 def extract_crop(image: np.ndarray, K: np.ndarray, T_cam_from_box: np.ndarray, wlh: np.ndarray,

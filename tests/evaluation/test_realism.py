@@ -9,8 +9,8 @@ import pytest
 from streetaug.augment.core import project_points
 from streetaug.augment.evaluation.realism import (
     FEATURE_NAMES, CarCrop, box_corners_cam, box_in_image, classifier_accuracy, crop_descriptor, crop_features,
-    edge_sharpness, extract_crop, feature_gaps, ground_distance_map, grouped_folds, laplacian_sharpness, luma,
-    noise_sigma, shadow_darkness, size_matched, srgb_to_lab,
+    edge_sharpness, extract_crop, feature_gaps, ground_distance_map, ground_points_box, grouped_folds,
+    laplacian_sharpness, luma, noise_sigma, shadow_darkness, size_matched, srgb_to_lab, yaw_to_ray_deg,
 )
 
 W, H = 240, 160
@@ -197,3 +197,25 @@ def test_car_only_descriptor_ignores_the_surroundings():
     car = crop_descriptor(crop_a, feats, car_only=True)[:n_hog], crop_descriptor(crop_b, feats, car_only=True)[:n_hog]
     assert np.abs(plain[0] - plain[1]).max() > 0.05  # the plain HOG sees the background
     np.testing.assert_allclose(car[0], car[1], atol=1e-6)
+
+
+def test_yaw_to_ray_is_0_end_on_and_90_side_on():
+    assert yaw_to_ray_deg(T_cam_from_box(yaw=0.0)) == pytest.approx(0.0, abs=1e-6)  # straight ahead, nose away
+    assert yaw_to_ray_deg(T_cam_from_box(yaw=np.pi)) == pytest.approx(0.0, abs=1e-6)  # nose towards the camera
+    assert yaw_to_ray_deg(T_cam_from_box(yaw=np.pi / 2)) == pytest.approx(90.0, abs=1e-6)
+    assert yaw_to_ray_deg(T_cam_from_box(yaw=0.4)) == pytest.approx(np.degrees(0.4), abs=1e-6)
+    # off to the side: the ray turns, so a box heading along the optical axis is no longer end-on
+    assert yaw_to_ray_deg(T_cam_from_box(z_m=10.0, x_m=10.0, yaw=0.0)) == pytest.approx(45.0, abs=1e-6)
+
+
+def test_ground_points_are_where_pixel_rays_meet_the_box_ground_plane():
+    T = T_cam_from_box(yaw=0.3)
+    window = (0, 0, W, H)
+    hit = ground_points_box(K, T, WLH, window)
+    assert np.all(np.isnan(hit[:70]))  # above the horizon
+    # the pixel of a ground point 1 m ahead and 0.5 m left of the box centre (box frame) maps back to it
+    p_box = np.array([1.0, 0.5, -WLH[2] / 2])
+    uv = project_points(K, (T[:3, :3] @ p_box + T[:3, 3])[None])[0][0]
+    u, v = int(round(uv[0])), int(round(uv[1]))
+    assert np.allclose(hit[v, u], p_box[:2], atol=0.15)  # within a pixel's footprint at 12 m
+    assert np.allclose(ground_distance_map(K, T, WLH, window)[v, u], 0.0)  # inside the footprint
