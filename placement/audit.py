@@ -23,7 +23,7 @@ import numpy as np
 import shapely
 
 from streetaug.augment.core import quat_to_rotation, transform_points
-from streetaug.datasets.nuscenes_format import LIDARSEG_GROUND, LIDARSEG_NON_DRIVABLE
+from streetaug.datasets.nuscenes_format import LIDARSEG_GROUND, LIDARSEG_NON_DRIVABLE, VEHICLE_PARKED
 from streetaug.datasets.sample import Box, CameraView, Sample
 
 from .class_rules import ClassRule, ClassRules, read_class_rules
@@ -201,8 +201,11 @@ def audit_placements(sample: Sample, view: CameraView, placements: Sequence[Plac
         measured["distance_m"] = d
         passed["distance"] = config.min_distance_m <= d <= config.max_distance_m
         # annotated boxes by class
-        gaps_dyn = [hull.distance(h) for b, h in zip(boxes, box_hulls) if b.is_dynamic]
-        gaps_sta = [hull.distance(h) for b, h in zip(boxes, box_hulls) if not b.is_dynamic]
+        # (a car parking by the kerb as the scene's do keeps the static clearance from parked vehicles)
+        beside_parked = p.zone == "kerb" and rule.zone_weights == "scene"
+        moving = [b.is_dynamic and not (beside_parked and VEHICLE_PARKED in b.attributes) for b in boxes]
+        gaps_dyn = [hull.distance(h) for m, h in zip(moving, box_hulls) if m]
+        gaps_sta = [hull.distance(h) for m, h in zip(moving, box_hulls) if not m]
         measured["min_gap_dynamic_m"] = min(gaps_dyn, default=np.inf)
         measured["min_gap_static_m"] = min(gaps_sta, default=np.inf)
         passed["annotated_boxes"] = (measured["min_gap_dynamic_m"] >= config.dynamic_clearance_m

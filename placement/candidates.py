@@ -17,6 +17,7 @@ from streetaug.datasets.sample import CameraView
 from .class_rules import ClassRule
 from .config import PlacementConfig
 from .ground import GroundPlane, ego_ground_plane
+from .parking import kerb_poses
 from .rules import box_corners_object, box_footprint_rect, footprint_corners
 from .scene import PlacementScene
 
@@ -97,7 +98,9 @@ def sample_candidates(scene: PlacementScene, wlh: np.ndarray, rng: np.random.Gen
     stream does not depend on the scene) and keeps, in draw order, those whose centre suits the zone
     (:meth:`SurfaceZones.plausible_centres`) first, then the others. The heading follows ``rule.heading``:
     ``lane`` the nearest lane's direction (within ``lane_max_distance_m``) or the ego's (either way); ``path``
-    the same either way (across the road on a crossing); ``across`` that plus 90 deg; ``random`` uniform.
+    the same either way (across the road on a crossing); ``across`` that plus 90 deg; ``random`` uniform. In the
+    ``kerb`` zone of a ``lane``-heading rule with ``zone_weights: scene`` the candidate stands as the nearest parked
+    box of its class does, else along the road edge (lanes only where no parked box is near: :func:`kerb_poses`).
     ``rule`` None: a car's rule (lane heading) with the scene's config.
     """
     config = scene.config if rule is None else rule.config(scene.config)
@@ -127,12 +130,17 @@ def sample_candidates(scene: PlacementScene, wlh: np.ndarray, rng: np.random.Gen
         lane_heading, on_lane = scene.lanes.heading_at(xy, reach)
         along = lane_heading + (np.pi * flip if heading_mode != "lane" else 0.0)
         heading = np.where(on_lane, along, heading)
+    w, l, _ = wlh
+    if zone == "kerb" and rule is not None and rule.heading == "lane" and rule.zone_weights == "scene":
+        # parked as the nearest parked box of the class stands (angle to the edge, distance in), else along the edge
+        xy, kerb_heading, styled = kerb_poses(scene.zones, scene.parking_style(rule), xy, heading, l, w)
+        on_lane &= ~styled
+        heading = np.where(on_lane, heading, kerb_heading)
     if heading_mode == "across" or (heading_mode == "path" and zone == "crossing"):
         heading = heading + np.pi / 2
     if heading_mode == "random":
         heading, noise, on_lane = uniform_yaw, np.zeros(n), np.zeros(n, dtype=bool)
     yaw = np.mod(heading + noise + np.pi, 2 * np.pi) - np.pi
-    w, l, _ = wlh
     return Candidates(xy, yaw, on_lane, footprint_corners(xy, yaw, l, w))
 
 

@@ -30,6 +30,7 @@ SCHEMA = "streetaug.class_rules/1"
 ZONES = ("lane", "kerb", "road_edge", "sidewalk", "crossing")
 HEADINGS = ("lane", "path", "across", "random")
 ATTRIBUTE_MODES = ("vehicle", "parked", "asset", "none")
+ZONE_WEIGHTS = ("fixed", "scene")
 
 
 @dataclass(frozen=True)
@@ -65,6 +66,10 @@ class ClassRule:
         cluster: the line the class is placed in, or None (one object).
         sidewalk_band_m: (min, max) distance off the road of the ``sidewalk`` zone without a walkway map.
         ground_radius_m: LiDAR radius of the local ground fit (small objects read the ground right under them).
+        zone_weights: ``fixed`` (the weights as given) or ``scene``: the ``lane`` / ``kerb`` split follows the share
+            of the sample's annotated boxes of the class that are parked, these weights the prior
+            (:func:`~streetaug.placement.parking.with_parked_share`), and kerb placements stand as the nearest
+            parked box does (:func:`~streetaug.placement.parking.kerb_poses`).
     """
 
     name: str
@@ -80,6 +85,7 @@ class ClassRule:
     cluster: ClusterRule | None = None
     sidewalk_band_m: tuple[float, float] = (0.3, 4.0)
     ground_radius_m: float | None = None
+    zone_weights: str = "fixed"
 
     def config(self, base: PlacementConfig) -> PlacementConfig:
         """``base`` with the distances, clearances, yaw noise and ground radius this class sets (the fields the
@@ -167,7 +173,7 @@ def _parse_rule(name: str, fields: dict, where: str) -> ClassRule:
     for key in ("yaw_sigma_deg", "ground_radius_m"):
         if fields.get(key) is not None:
             kw[key] = _number(fields[key], f"{where}.{key}")
-    for key, valid in (("heading", HEADINGS), ("attribute", ATTRIBUTE_MODES)):
+    for key, valid in (("heading", HEADINGS), ("attribute", ATTRIBUTE_MODES), ("zone_weights", ZONE_WEIGHTS)):
         if key in fields:
             if fields[key] not in valid:
                 raise InputError(f"{where}.{key}: expected one of {', '.join(valid)}, got {fields[key]!r}")
@@ -236,4 +242,4 @@ def read_class_rules(path: str | Path | None = None) -> ClassRules:
 
 
 __all__ = ["ATTRIBUTE_MODES", "CLASS_RULES_PATH", "ClassRule", "ClassRules", "ClusterRule", "DETECTION_CLASSES",
-           "HEADINGS", "ZONES", "read_class_rules"]
+           "HEADINGS", "ZONES", "ZONE_WEIGHTS", "read_class_rules"]

@@ -45,6 +45,7 @@ from .rules import (
     rule_obstacles,
     visible_fraction_estimate,
 )
+from .parking import parked_share, with_parked_share
 from .scene import PlacementScene
 
 CHUNK = 48  # candidates stood on the ground and checked per round (the first survivor wins)
@@ -101,8 +102,9 @@ class Placement:
             area's edge (standing by the kerb), else ``"vehicle.moving"`` (in the lane).
         distance_m: horizontal distance from the camera centre to the box centre.
         edge_distance_m: distance from the footprint to the edge of the drivable area.
-        yaw_source: ``"lane"`` (heading of the nearest lane centre line of the map) or ``"ego"``
-            (the ego heading or its opposite).
+        yaw_source: ``"lane"`` (heading of the nearest lane centre line of the map), ``"kerb"`` (from the road
+            edge: as the nearest parked box stands, or along the edge; :func:`~streetaug.placement.parking.kerb_poses`),
+            ``"ego"`` (the ego heading or its opposite) or ``"random"``.
         footprint_xy: (4, 2) float64 the footprint the rules checked (:func:`box_footprint_rect`), global x/y.
         visible_fraction: the estimated fraction of the box's image inside the image and not hidden by
             the scene depth (:func:`visible_fraction_estimate`), as the ``in_view`` rule judged it.
@@ -184,8 +186,8 @@ def prefilter(scene: PlacementScene, cands: Candidates, tally: RuleTally, rule: 
     everyone = np.arange(len(cands.xy))
     alive = tally.keep("surface", everyone, everyone, scene.zones.footprints_in(zone, cands.footprints_xy, rule))
     return tally.keep("annotated_boxes", everyone, alive, rule_box_clearance(
-        cands.footprints_xy[alive], scene.box_footprints_xy, scene.box_is_dynamic, config.dynamic_clearance_m,
-        config.static_clearance_m))
+        cands.footprints_xy[alive], scene.box_footprints_xy, scene.clearance_dynamic(rule, zone),
+        config.dynamic_clearance_m, config.static_clearance_m))
 
 
 @dataclass(frozen=True)
@@ -231,7 +233,8 @@ def check_stood(scene: PlacementScene, stood: StoodCandidates, wlh: np.ndarray, 
         in_zone &= np.array([p.source != "ego-plane" and p.n_points > 0 for p in stood.planes], dtype=bool)
     k = tally.keep("surface", idx, k, in_zone)
     k = tally.keep("annotated_boxes", idx, k, rule_box_clearance(
-        rect[k], scene.box_footprints_xy, scene.box_is_dynamic, cfg.dynamic_clearance_m, cfg.static_clearance_m))
+        rect[k], scene.box_footprints_xy, scene.clearance_dynamic(rule, zone), cfg.dynamic_clearance_m,
+        cfg.static_clearance_m))
     k = tally.keep("distance", idx, k, rule_distance(stood.centers[k, :2], scene.camera_xy, cfg.min_distance_m,
                                                      cfg.max_distance_m))
     k = tally.keep("lidar_obstacles", idx, k, rule_obstacles(
@@ -288,7 +291,8 @@ def make_placement(scene: PlacementScene, asset_index: int, obj: Placeable, wlh:
         attribute=placement_attribute(rule, obj, edge, zone, scene.config),
         distance_m=float(np.linalg.norm(center[:2] - scene.camera_xy)),
         edge_distance_m=edge,
-        yaw_source="lane" if cands.on_lane[stood.index[j]] else ("random" if rule.heading == "random" else "ego"),
+        yaw_source=("lane" if cands.on_lane[stood.index[j]] else "random" if rule.heading == "random" else
+                    "kerb" if zone == "kerb" and rule.heading == "lane" and rule.zone_weights == "scene" else "ego"),
         footprint_xy=fp.copy(),
         visible_fraction=float(visible_fraction),
         detection_class=rule.name,
@@ -446,6 +450,13 @@ def check_objects(objects: Sequence[Placeable]) -> None:
                              f"got {a.tolist()}")
 
 
+def scene_rule(rules: ClassRules, rule: ClassRule, boxes: Sequence[Box]) -> ClassRule:
+    """``rule`` with its lane / kerb weights from the parked share of ``boxes`` of its class
+    (:func:`~streetaug.placement.parking.with_parked_share`; unchanged for fixed zone weights)."""
+    categories = {c for c, k in rules.categories.items() if k == rule.name}
+    return with_parked_share(rule, *parked_share(boxes, categories))
+
+
 def place_objects(
     sample: Sample,
     view: CameraView,
@@ -458,7 +469,8 @@ def place_objects(
     """Place ``objects`` (assets, or :class:`ObjectBox` sizes and categories) in ``view`` of ``sample``.
 
     Each object follows the rule of its category's class (``class_rules``, default the built-in table,
-    :func:`~streetaug.placement.class_rules.read_class_rules`): its zones, distances and clearances. An object
+    :func:`~streetaug.placement.class_rules.read_class_rules`): its zones (a vehicle's lane / kerb split from the
+    sample's own parked share, :func:`scene_rule`), distances and clearances. An object
     of a class with a ``cluster`` rule brings the other members of its line (placements with the same
     ``asset_index`` and ``cluster_of`` set). Deterministic for a given ``rng`` state. ``config.n_objects`` is
     not used here: the caller passes the objects. Objects that found no place are left out.
@@ -469,13 +481,13 @@ def place_objects(
     """
     check_objects(objects)
     rules = class_rules or read_class_rules()
-    object_rules = [rules.for_category(o.category) for o in objects]
+    object_rules = [scene_rule(rules, rules.for_category(o.category), sample.boxes) for o in objects]
     report = {name: 0 for name in RULE_ORDER}
     drivable, reason = drivable_area_for_sample(sample, view, config)
     if drivable is None:
         return PlacementResult([], report, reason, config=config,
                                class_reasons={r.name: reason for r in object_rules})
-    scene = PlacementScene.of(sample, view, config, drivable, depth_m)
+    scene = PlacementScene.of(sample, view, config, drivable, depth_m, rules)
     placements: list[Placement] = []
     placed = PlacedSoFar.empty()
     attempts = []
@@ -509,5 +521,5 @@ def place_objects(
 __all__ = [
     "CHUNK", "OFF_ROAD_ZONES", "RULE_ORDER", "ChunkSurvivors", "ObjectAttempt", "ObjectBox", "PlacedSoFar", "Placeable",
     "Placement", "PlacementResult", "RuleTally", "check_objects", "check_stood", "cluster_members", "make_placement",
-    "place_objects", "place_one", "placement_attribute", "prefilter", "zone_order",
+    "place_objects", "place_one", "placement_attribute", "prefilter", "scene_rule", "zone_order",
 ]

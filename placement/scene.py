@@ -13,13 +13,15 @@ import numpy as np
 
 from streetaug.augment.core import PinholeCamera
 from streetaug.augment.core.depth import densify_lidar_depth
-from streetaug.datasets.nuscenes_format import LIDARSEG_GROUND, LIDARSEG_NON_DRIVABLE
+from streetaug.datasets.nuscenes_format import LIDARSEG_GROUND, LIDARSEG_NON_DRIVABLE, VEHICLE_PARKED
 from streetaug.datasets.nuscenes_map import LaneCenterlines
 from streetaug.datasets.sample import CameraView, Sample
 
+from .class_rules import ClassRule, ClassRules
 from .config import PlacementConfig
 from .drivable import DrivableArea
 from .ground import LocalGroundFitter
+from .parking import ParkingStyle, parking_style
 from .rules import box_bottoms, box_footprints, points_in_boxes
 from .zones import SurfaceZones, surface_zones
 
@@ -49,6 +51,9 @@ class PlacementScene:
             them that are not ground either (no ``flat.*`` class: what blocks a sidewalk).
         ground: the local ground plane fitter.
         given_depth_m: (H, W) the caller's scene depth, or None to compute :func:`scene_depth` when needed.
+        class_rules: the rule table whose categories say which annotated boxes are of a class (for
+            :meth:`parking_style`), or None (no parking styles).
+        box_is_parked: (B,) bool the annotated boxes labelled ``vehicle.parked`` (see :meth:`clearance_dynamic`).
     """
 
     sample: Sample
@@ -62,10 +67,12 @@ class PlacementScene:
     ground: LocalGroundFitter
     given_depth_m: np.ndarray | None = None
     non_ground_xy: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+    class_rules: ClassRules | None = None
+    box_is_parked: np.ndarray | None = None
 
     @classmethod
     def of(cls, sample: Sample, view: CameraView, config: PlacementConfig, drivable: DrivableArea,
-           depth_m: np.ndarray | None) -> "PlacementScene":
+           depth_m: np.ndarray | None, class_rules: ClassRules | None = None) -> "PlacementScene":
         """Gather the boxes, the LiDAR obstacles, the lidarseg classes and the ground of ``sample``."""
         boxes = list(sample.boxes)
         box_dyn = np.array([b.is_dynamic for b in boxes], dtype=bool)
@@ -83,7 +90,32 @@ class PlacementScene:
         fitter = LocalGroundFitter(obstacles if lidar is not None else None, view.T_global_from_ego, labels, config,
                                    box_bottoms([b for b in boxes if b.category.startswith("vehicle.")]))
         return cls(sample, view, config, drivable, box_footprints(boxes), box_dyn, obstacles, non_drivable_xy,
-                   fitter, depth_m, non_ground_xy)
+                   fitter, depth_m, non_ground_xy, class_rules,
+                   np.array([VEHICLE_PARKED in b.attributes for b in boxes], dtype=bool))
+
+    def clearance_dynamic(self, rule: ClassRule, zone: str) -> np.ndarray:
+        """(B,) bool the annotated boxes an object of ``rule`` in ``zone`` keeps the dynamic clearance from: the
+        dynamic ones, except, for a kerb placement of a rule with ``zone_weights: scene``, the parked vehicles
+        (they do not move: a car parks in the bay beside one, at the static clearance)."""
+        if zone == "kerb" and rule.zone_weights == "scene" and self.box_is_parked is not None:
+            return self.box_is_dynamic & ~self.box_is_parked
+        return self.box_is_dynamic
+
+    def parking_style(self, rule: ClassRule) -> ParkingStyle | None:
+        """How the sample's parked boxes of ``rule``'s class stand at the road edge
+        (:func:`~streetaug.placement.parking.parking_style`); None without ``class_rules``, for a rule with fixed
+        zone weights, or when none is parked by an edge."""
+        if self.class_rules is None or rule.zone_weights != "scene":
+            return None
+        if rule.name not in self._styles:
+            categories = {c for c, k in self.class_rules.categories.items() if k == rule.name}
+            self._styles[rule.name] = parking_style(self.zones, self.sample.boxes, categories, self.camera_xy,
+                                                    self.config.map_roi_m, self.config.kerb_distance_m)
+        return self._styles[rule.name]
+
+    @functools.cached_property
+    def _styles(self) -> dict[str, ParkingStyle | None]:
+        return {}
 
     @functools.cached_property
     def zones(self) -> SurfaceZones:

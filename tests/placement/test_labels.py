@@ -105,5 +105,6 @@ def test_placement_label_fields_are_json_ready():
     p = place_objects(s, s.cameras["CAM_FRONT"], [ObjectBox(WLH)], np.random.default_rng(0)).placements[0]
     fields = json.loads(json.dumps(placement_label_fields(p)))["placement"]
     assert fields["drivable_source"] == "map" and fields["drivable_confidence"] == "high"
-    assert fields["ground_source"] == "lidar-plane" and fields["yaw_source"] == "ego"
+    assert fields["ground_source"] == "lidar-plane"
+    assert fields["yaw_source"] == ("kerb" if p.zone == "kerb" else "ego")  # by the kerb: along its edge
     assert 10.0 <= fields["distance_m"] <= 40.0

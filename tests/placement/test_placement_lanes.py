@@ -127,8 +127,21 @@ def test_bundled_maps_have_lanes_the_real_excerpt_has_none():
 def test_bundled_scenes_place_along_their_lanes():
     reader = NuScenesReader(bundled_dataroot(), BUNDLED_VERSION)
     sample = reader.sample(reader.sample_tokens("sample-sunny")[0])
-    (p,) = place_objects(sample, sample.cameras["CAM_FRONT"], [procedural_car(1)], np.random.default_rng(0)).placements
+    (p,) = place_objects(sample, sample.cameras["CAM_FRONT"], [procedural_car(1)], np.random.default_rng(0),
+                         class_rules=_fixed_weights()).placements
     assert p.yaw_source == "lane" and p.asset_index == 0
+
+
+def _fixed_weights():
+    """The table's car rule with fixed zone weights: the bundled scenes' annotated cars are parked, so with the
+    scene's weights a car parks as they do (test_parking.py); these tests are about the lanes' heading."""
+    import tempfile
+
+    from streetaug.placement.class_rules import read_class_rules
+
+    path = Path(tempfile.mkdtemp()) / "fixed.json"
+    path.write_text(json.dumps({"schema": "streetaug.class_rules/1", "classes": {"car": {"zone_weights": "fixed"}}}))
+    return read_class_rules(path)
 
 
 def test_reader_attaches_lanes_and_placement_follows_them(tmp_path):
@@ -158,7 +171,7 @@ def test_reader_attaches_lanes_and_placement_follows_them(tmp_path):
     sample = NuScenesReader(root, "v1.0-samples").sample(token)
     assert sample.lanes is not None and sample.lanes.tokens == ("lane-1",)
     cfg = dataclasses.replace(CFG, yaw_sigma_deg=0.0, lane_max_distance_m=30.0)  # the whole view takes the lane
-    r = place_objects(sample, view, [ObjectBox(WLH)], np.random.default_rng(0), cfg)
+    r = place_objects(sample, view, [ObjectBox(WLH)], np.random.default_rng(0), cfg, class_rules=_fixed_weights())
     assert r.placements, r.reason
     p = r.placements[0]
     assert p.yaw_source == "lane"

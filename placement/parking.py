@@ -1,0 +1,138 @@
+"""How a sample's own vehicles park, for the kerb zone: how often a class parks, and how it stands at the road edge.
+
+Two statistics of the annotated boxes of one sample, per detection class, so a placement follows the street it
+is in rather than one table for every city:
+
+* the **parked share** (:func:`parked_share`): of the class's boxes with a vehicle attribute, the share that is
+  ``vehicle.parked`` (``moving`` and ``stopped`` ones are in a lane). :func:`with_parked_share` turns it into the
+  weights of a rule's ``lane`` and ``kerb`` zones, with the rule's own split as a prior worth
+  ``PRIOR_OBJECTS`` boxes (a sample without such boxes keeps the table's weights);
+* the **parking style** (:class:`ParkingStyle`): each parked box's heading against the road edge and its
+  centre's signed distance to it (a row of cars in perpendicular bays stands at 90 deg, 2.5 m in; kerb-side
+  parking at 0 or 180 deg, about 1 m in). A kerb candidate takes the style of the nearest parked box within
+  ``STYLE_REACH_M`` (:func:`kerb_poses`); without one it stands along the edge.
+
+Angles: ``yaw_to_edge_rad`` is the heading minus the direction of the edge tangent
+(:meth:`~streetaug.placement.zones.SurfaceZones.edge_tangent`: the road on its left), in (-pi, pi]; signed
+distances are + on the road (:meth:`~streetaug.placement.zones.SurfaceZones.signed_distance`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+
+from streetaug.datasets.nuscenes_format import VEHICLE_MOVING, VEHICLE_PARKED, VEHICLE_STOPPED
+from streetaug.datasets.sample import Box
+
+from .class_rules import ClassRule
+from .rules import footprint_corners
+from .zones import SurfaceZones
+
+PRIOR_OBJECTS = 2.0  # weight of the class table's lane/kerb split, in annotated boxes
+STYLE_REACH_M = 30.0  # a kerb candidate takes the style of a parked box at most this far away
+STYLE_MAX_ROI_FRACTION = 0.8  # parked boxes beyond this fraction of the map's clip radius are not measured
+KERB_INSET_M = 0.05  # a styled footprint is moved this far inside the road edge (the kerb zone is on the road)
+
+
+def _yaw(box: Box) -> float:
+    R = box.T_global_from_box
+    return float(np.arctan2(R[1, 0], R[0, 0]))
+
+
+def _wrap(angle_rad: np.ndarray) -> np.ndarray:
+    return np.mod(np.asarray(angle_rad, float) + np.pi, 2 * np.pi) - np.pi
+
+
+def parked_share(boxes: Sequence[Box], categories: set[str]) -> tuple[int, int]:
+    """(parked, with a vehicle attribute) counts of the boxes whose category is in ``categories``."""
+    states = [a for b in boxes if b.category in categories for a in b.attributes
+              if a in (VEHICLE_PARKED, VEHICLE_MOVING, VEHICLE_STOPPED)]
+    return sum(a == VEHICLE_PARKED for a in states), len(states)
+
+
+def with_parked_share(rule: ClassRule, n_parked: int, n_vehicles: int) -> ClassRule:
+    """``rule`` with its ``lane`` / ``kerb`` weights split as ``(n_parked + PRIOR_OBJECTS p0) / (n_vehicles +
+    PRIOR_OBJECTS)`` (p0 = the rule's own kerb share of the two; their sum kept). Unchanged unless the rule has
+    ``zone_weights: scene`` and both zones."""
+    z = rule.zones
+    if rule.zone_weights != "scene" or "lane" not in z or "kerb" not in z:
+        return rule
+    total = z["lane"] + z["kerb"]
+    p = (n_parked + PRIOR_OBJECTS * z["kerb"] / total) / (n_vehicles + PRIOR_OBJECTS)
+    return dataclasses.replace(rule, zones={**z, "lane": total * (1.0 - p), "kerb": total * p})
+
+
+@dataclass(frozen=True)
+class ParkingStyle:
+    """How the parked boxes of one class stand at the road edge (see the module docstring).
+
+    Attributes:
+        xy: (P, 2) float64 their centres, global x/y (m).
+        yaw_to_edge_rad: (P,) heading minus the edge tangent's direction at the centre, (-pi, pi].
+        centre_edge_m: (P,) signed distance of the centre to the road edge (m, + on the road).
+    """
+
+    xy: np.ndarray
+    yaw_to_edge_rad: np.ndarray
+    centre_edge_m: np.ndarray
+
+
+def parking_style(zones: SurfaceZones, boxes: Sequence[Box], categories: set[str], camera_xy: np.ndarray,
+                  roi_m: float, kerb_distance_m: float) -> ParkingStyle | None:
+    """The style of the ``vehicle.parked`` boxes of ``categories`` within ``STYLE_MAX_ROI_FRACTION`` x ``roi_m``
+    of the camera whose footprint comes within ``kerb_distance_m`` + 0.5 m of the road edge (those the kerb zone
+    can imitate; a car in the middle of a car park is not at a kerb). None when there is none."""
+    parked = [b for b in boxes if b.category in categories and VEHICLE_PARKED in b.attributes
+              and np.hypot(*(b.center[:2] - camera_xy)) <= STYLE_MAX_ROI_FRACTION * roi_m]
+    if not parked:
+        return None
+    xy = np.array([b.center[:2] for b in parked], float)
+    yaw = np.array([_yaw(b) for b in parked])
+    fp = np.stack([footprint_corners(c[None], np.array([y]), float(b.wlh[1]), float(b.wlh[0]))[0]
+                   for c, y, b in zip(xy, yaw, parked)])  # (P, 4, 2); tens of boxes
+    s_min = zones.signed_distance(fp.reshape(-1, 2)).reshape(-1, 4).min(axis=1)
+    near = s_min <= kerb_distance_m + 0.5
+    if not near.any():
+        return None
+    t = zones.edge_tangent(xy[near])
+    rel = _wrap(yaw[near] - np.arctan2(t[:, 1], t[:, 0]))
+    return ParkingStyle(xy[near], rel, zones.signed_distance(xy[near]))
+
+
+def kerb_poses(zones: SurfaceZones, style: ParkingStyle | None, xy: np.ndarray, heading_rad: np.ndarray,
+               length_m: float, width_m: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Kerb poses of candidates at ``xy`` (N, 2): (xy (N, 2), heading (N,) rad, styled (N,) bool).
+
+    A candidate with a parked box within ``STYLE_REACH_M`` takes the style of the nearest one (its heading against
+    the edge, its centre's distance in from the edge), then moves inwards until its footprint is ``KERB_INSET_M``
+    inside the road (styled). The others keep their place and stand along the edge, in whichever of its two
+    directions is nearer to ``heading_rad`` (N,) (the lane's, or the ego's or its opposite).
+    """
+    xy = np.asarray(xy, float).reshape(-1, 2)
+    tangent = zones.edge_tangent(xy)
+    edge_yaw = np.arctan2(tangent[:, 1], tangent[:, 0])
+    along = np.where(np.cos(np.asarray(heading_rad, float) - edge_yaw) >= 0, edge_yaw, edge_yaw + np.pi)
+    out_xy, out_yaw = xy.copy(), _wrap(along)
+    if style is None or len(xy) == 0:
+        return out_xy, out_yaw, np.zeros(len(xy), dtype=bool)
+    d = np.linalg.norm(xy[:, None] - style.xy[None], axis=2)  # (N, P)
+    j = d.argmin(axis=1)
+    styled = d[np.arange(len(xy)), j] <= STYLE_REACH_M
+    normal = zones.road_normal(xy)
+    s = zones.signed_distance(xy)
+    moved = xy + (style.centre_edge_m[j] - s)[:, None] * normal
+    yaw = _wrap(edge_yaw + style.yaw_to_edge_rad[j])
+    fp = footprint_corners(moved, yaw, length_m, width_m)
+    s_corner = zones.signed_distance(fp.reshape(-1, 2)).reshape(-1, 4).min(axis=1)
+    inset = np.maximum(KERB_INSET_M - s_corner, 0.0)
+    moved = moved + inset[:, None] * normal
+    out_xy[styled], out_yaw[styled] = moved[styled], yaw[styled]
+    return out_xy, out_yaw, styled
+
+
+__all__ = ["KERB_INSET_M", "PRIOR_OBJECTS", "ParkingStyle", "STYLE_REACH_M", "kerb_poses", "parked_share",
+           "parking_style", "with_parked_share"]
