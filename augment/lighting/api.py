@@ -31,7 +31,7 @@ from .evidence import prepare_image
 from .exposure import exposure_ratios
 from .image_dome import image_corrected_envmap, seen_pixels
 from .learned import learned_sky_estimate
-from .multiview import volume_frame, volume_sample_lighting
+from .multiview import EarlierKeyframe, volume_frame, volume_sample_lighting
 from .parametric import (
     DEFAULT_CAMERA_HEIGHT_M,
     DEFAULT_TURBIDITY,
@@ -152,7 +152,7 @@ def seen_l1(l1: SampleLighting, inputs: Sequence[ViewInputs], lidar: LidarSweep 
 def estimate_views_lighting(views: Sequence[CameraView], location: str | None, level: str,
                             lidar: LidarSweep | None = None, boxes: list[Box] | None = None,
                             query_point_cam: np.ndarray | None = None,
-                            grid: LogGrid | None = None) -> SampleLighting:
+                            grid: LogGrid | None = None, earlier: EarlierKeyframe | None = None) -> SampleLighting:
     """Lighting shared by camera views of one moment; ``views[0]`` is the reference (volume frame and scale).
 
     Args:
@@ -163,10 +163,13 @@ def estimate_views_lighting(views: Sequence[CameraView], location: str | None, l
         boxes: the sample's annotated boxes (global frame), or None (evidence of the sun's visibility).
         query_point_cam: placement (reference camera frame, metres) for L2's centre and auto's judgement.
         grid: override of the level's volume grid (benchmarks).
+        earlier: the previous keyframe (:func:`earlier_keyframe`): at L2/L3 its cameras' seen surfaces fill
+            what the views' own leave open (what is now behind and above them); None: the views alone.
     """
     check_level(level)
     base, inputs, started = _model_l1(views, location, level, lidar, boxes)
-    return base if level == "L0" else _from_model_l1(base, inputs, started, level, lidar, query_point_cam, grid)
+    return base if level == "L0" else _from_model_l1(base, inputs, started, level, lidar, query_point_cam, grid,
+                                                     earlier)
 
 
 def _model_l1(views: Sequence[CameraView], location: str | None, level: str, lidar: LidarSweep | None,
@@ -208,7 +211,8 @@ def _model_l1(views: Sequence[CameraView], location: str | None, level: str, lid
 
 
 def _from_model_l1(l1: SampleLighting, inputs: list[ViewInputs], started: tuple[float, float], level: str,
-                   lidar: LidarSweep | None, query_point_cam: np.ndarray | None, grid: LogGrid | None) -> SampleLighting:
+                   lidar: LidarSweep | None, query_point_cam: np.ndarray | None, grid: LogGrid | None,
+                   earlier: EarlierKeyframe | None = None) -> SampleLighting:
     """A level ("L1" | "L2" | "L3" | "auto") of a sample from its model L1 (:func:`_model_l1`; left unchanged, so
     one model L1 can serve several levels)."""
     t0, t_start = started
@@ -220,7 +224,7 @@ def _from_model_l1(l1: SampleLighting, inputs: list[ViewInputs], started: tuple[
         return l1
     # the volume levels build on the model's sky (the images correct it themselves, in the sky dome)
     views = [vi.view for vi in inputs]
-    out = volume_sample_lighting(l1, views, inputs, level, lidar, query_point_cam, grid, timing, t0)
+    out = volume_sample_lighting(l1, views, inputs, level, lidar, query_point_cam, grid, timing, t0, earlier)
     if out.level == "L1":  # auto chose L1
         out = seen_l1(out, inputs, lidar)
     if out.hybrid is not None:
@@ -228,8 +232,15 @@ def _from_model_l1(l1: SampleLighting, inputs: list[ViewInputs], started: tuple[
     return out
 
 
+def earlier_keyframe(previous: Sample, cameras: Sequence[str]) -> EarlierKeyframe:
+    """The ``cameras`` of the previous keyframe ``previous`` (those it has) and its LiDAR, as the ``earlier``
+    input of :func:`estimate_views_lighting`."""
+    return EarlierKeyframe(tuple(previous.cameras[c] for c in cameras if c in previous.cameras), previous.lidar)
+
+
 def estimate_sample_lighting(sample: Sample, cameras: Sequence[str], level: str,
-                             query_point_cam: np.ndarray | None = None) -> SampleLighting:
+                             query_point_cam: np.ndarray | None = None,
+                             previous: Sample | None = None) -> SampleLighting:
     """The lighting of a sample built once from the given cameras' images (the first is the reference).
 
     Args:
@@ -237,6 +248,8 @@ def estimate_sample_lighting(sample: Sample, cameras: Sequence[str], level: str,
         cameras: camera channels to use, e.g. ``["CAM_FRONT", "CAM_FRONT_LEFT"]``.
         level: "L0" | "L1" | "L2" | "L3" | "auto".
         query_point_cam: placement (first camera's frame, metres) for L2's centre and auto's judgement.
+        previous: the sample's previous keyframe, or None: its same cameras' seen surfaces fill what these
+            leave open (:func:`earlier_keyframe`).
     """
     cams = list(cameras)
     if not cams:
@@ -245,7 +258,8 @@ def estimate_sample_lighting(sample: Sample, cameras: Sequence[str], level: str,
     if missing:
         raise InputError(f"sample {sample.token}: camera(s) {missing} not found; available: {', '.join(sorted(sample.cameras))}")
     return estimate_views_lighting([sample.cameras[c] for c in cams], sample.location, level, lidar=sample.lidar,
-                                   boxes=sample.boxes, query_point_cam=query_point_cam)
+                                   boxes=sample.boxes, query_point_cam=query_point_cam,
+                                   earlier=None if previous is None else earlier_keyframe(previous, cams))
 
 
 def estimate_lighting(view: CameraView, location: str | None, level: str = "L1", *, lidar: LidarSweep | None = None,

@@ -7,6 +7,10 @@ camera's exposure relative to the reference (nuScenes cameras run their own auto
 points neighbouring cameras both see (:mod:`.exposure`): images are divided by it when unprojected
 (:func:`~.observe.observe_view`), and :meth:`~.types.SampleLighting.for_view` multiplies the shared lighting by
 it. The sun and the per-camera L1 estimates come from the front door (:mod:`.api`), which chose their source.
+
+An *earlier keyframe* (the sample's previous one, :class:`EarlierKeyframe`) adds its cameras' seen surfaces, at
+rank 1 (:mod:`.seen_surfaces`): they fill only the rays the instant's own surfaces leave open. (Its pixels in the
+volume and its LiDAR were tried too and hurt: the instant's own observations are the better evidence.)
 """
 
 from __future__ import annotations
@@ -29,11 +33,11 @@ from ..core import (
     yaw_to_quat,
 )
 from .build import DistantSun, build_volume, lidar_points_in_volume, structure_heights
-from .exposure import exposure_ratios
+from .exposure import exposure_ratios, lidar_luminance, pair_ratio
 from .fill import mean_colour_radiance
 from .levels import L2_GRID, L3_GRID, HeightMap, choose_level, predicted_errors, region_points
 from .observe import ViewObservation, observe_view, restrict_to_grid
-from .seen_surfaces import SeenSurfaces
+from .seen_surfaces import DepthView, SeenSurfaces
 from .parametric import DEFAULT_TURBIDITY, GROUND_ALBEDO, ViewInputs, l0_estimate
 from .skydome import build_sky_dome, camera_envmap_to_world, model_sky_world
 from .types import LightingEstimate, SampleLighting, join_reasons, json_clean
@@ -140,9 +144,10 @@ def sun_factor(dome: np.ndarray, model: np.ndarray) -> tuple[float, str]:
 
 
 def build_hybrid(ref_est: LightingEstimate, T_vol_from_cam: np.ndarray, observations: list[ViewObservation],
-                 lidar_vol: np.ndarray | None, grid: LogGrid, timing: dict) -> tuple[HybridLighting, dict]:
+                 lidar_vol: np.ndarray | None, grid: LogGrid, timing: dict,
+                 earlier_depth_views: Sequence[DepthView] = ()) -> tuple[HybridLighting, dict]:
     """Sky dome (model corrected by the images), the sun (L1's, following the dome's correction), the volume and
-    the cameras' seen surfaces."""
+    the cameras' seen surfaces (with ``earlier_depth_views``, rank 1, after them)."""
     t = time.perf_counter()
     model = sky_model_world(ref_est, T_vol_from_cam, DOME_HEIGHT, DOME_WIDTH)
     seen = [o.radiance for o in observations if len(o.radiance)] + [o.far_radiance for o in observations
@@ -162,7 +167,8 @@ def build_hybrid(ref_est: LightingEstimate, T_vol_from_cam: np.ndarray, observat
     params, out["volume"] = build_volume(grid, observations, lidar_vol, light, dome, GROUND_ALBEDO)
     timing["volume"] = time.perf_counter() - t
     t = time.perf_counter()
-    surfaces = SeenSurfaces.from_views([o.depth_view for o in observations if o.depth_view is not None])
+    surfaces = SeenSurfaces.from_views([o.depth_view for o in observations if o.depth_view is not None]
+                                       + list(earlier_depth_views))
     timing["seen_surfaces"] = time.perf_counter() - t
     out["seen_surfaces"] = {"faces": 0 if surfaces is None else surfaces.n_faces,
                             "cameras": [] if surfaces is None else list(surfaces.channels)}
@@ -174,13 +180,59 @@ def build_hybrid(ref_est: LightingEstimate, T_vol_from_cam: np.ndarray, observat
 
 
 def _observe(view: CameraView, T_vol_from_cam: np.ndarray, ratio: float, lidar_vol: np.ndarray | None,
-             vi: ViewInputs) -> ViewObservation:
+             vi: ViewInputs | None) -> ViewObservation:
     """One camera's observation (:func:`observe_view`) with the LiDAR and the ground plane z = 0 in its frame."""
     T_cam_from_vol = invert_transform(T_vol_from_cam)
     n_cam = T_cam_from_vol[:3, :3] @ np.array([0.0, 0.0, 1.0])
     ground = (n_cam, float(-n_cam @ T_cam_from_vol[:3, 3]))
     pts_cam = transform_points(T_cam_from_vol, lidar_vol) if lidar_vol is not None else None
-    return observe_view(view, T_vol_from_cam, ratio, pts_cam, ground, work=vi.work)
+    return observe_view(view, T_vol_from_cam, ratio, pts_cam, ground, work=None if vi is None else vi.work)
+
+
+@dataclass(frozen=True)
+class EarlierKeyframe:
+    """The sample's previous keyframe as an extra input of the volume levels: its cameras saw from further back
+    what is now behind and above the instant's cameras (see module doc).
+
+    Attributes:
+        views: its camera views (channels of the same rig; each measured against the same channel now).
+        lidar: its LiDAR sweep (their depth), or None.
+    """
+
+    views: tuple[CameraView, ...]
+    lidar: LidarSweep | None
+
+
+def earlier_exposure_ratios(views: Sequence[CameraView], ratios: dict[str, float], earlier: EarlierKeyframe,
+                            points_global: np.ndarray | None) -> list[float]:
+    """Each earlier view's exposure relative to the reference: its channel's ratio now times that channel's
+    change of exposure between the keyframes (:func:`.exposure.pair_ratio` on the LiDAR points ``points_global``
+    (N, 3) both images see; 1 when they share too few); a channel not input now: the reference's, times its
+    change relative to the reference camera now."""
+    now = {v.channel: v for v in views}
+    out = []
+    for e in earlier.views:
+        same = now.get(e.channel, views[0])
+        change = 1.0
+        if points_global is not None and len(points_global):
+            change, _ = pair_ratio(lidar_luminance(same, points_global), lidar_luminance(e, points_global))
+        out.append(float(ratios.get(same.channel, 1.0)) * change)
+    return out
+
+
+def earlier_depth_views(earlier: EarlierKeyframe, views: Sequence[CameraView], ratios: dict[str, float],
+                        lidar: LidarSweep | None, T_vol_from_global: np.ndarray) -> tuple[list[DepthView], dict]:
+    """The earlier keyframe's cameras' depth views at rank 1 (volume frame, reference scale) and their exposure
+    ratios (channel -> ratio)."""
+    pts = [sw.points_global for sw in (lidar, earlier.lidar) if sw is not None]
+    e_ratios = earlier_exposure_ratios(views, ratios, earlier, np.concatenate(pts) if pts else None)
+    e_lidar = lidar_points_in_volume(earlier.lidar, T_vol_from_global) if earlier.lidar is not None else None
+    out = []
+    for v, k in zip(earlier.views, e_ratios):
+        dv = _observe(v, T_vol_from_global @ np.asarray(v.T_global_from_cam), k, e_lidar, None).depth_view
+        if dv is not None:
+            out.append(replace(dv, channel=f"{v.channel}@earlier", rank=1))
+    return out, {v.channel: k for v, k in zip(earlier.views, e_ratios)}
 
 
 @dataclass(frozen=True)
@@ -194,6 +246,7 @@ class SceneObservations:
         widest: the grid the observations were restricted to.
         exposure_ratio: channel -> that camera's image units per reference unit.
         exposure: the exposure measurement record.
+        earlier: the earlier keyframe's depth views (rank 1), empty without one.
     """
 
     T_vol_from_cams: list[np.ndarray]
@@ -202,11 +255,14 @@ class SceneObservations:
     widest: LogGrid
     exposure_ratio: dict[str, float]
     exposure: dict
+    earlier: tuple[DepthView, ...] = ()
 
 
 def observe_scene(views: Sequence[CameraView], inputs: Sequence[ViewInputs], T_global_from_vol: np.ndarray,
-                  lidar: LidarSweep | None, grid: LogGrid | None, timing: dict) -> SceneObservations:
-    """Each camera's exposure relative to the reference, then its pixels unprojected into the volume frame."""
+                  lidar: LidarSweep | None, grid: LogGrid | None, timing: dict,
+                  earlier: EarlierKeyframe | None = None) -> SceneObservations:
+    """Each camera's exposure relative to the reference, then its pixels unprojected into the volume frame; the
+    earlier keyframe's cameras' depth views."""
     t = time.perf_counter()
     ratios, exposure = exposure_ratios(views, lidar.points_global if lidar is not None else None)
     timing["exposure"] = time.perf_counter() - t
@@ -218,19 +274,26 @@ def observe_scene(views: Sequence[CameraView], inputs: Sequence[ViewInputs], T_g
     observations = [restrict_to_grid(_observe(v, T_vc, ratios[v.channel], lidar_vol, vi), widest)
                     for v, T_vc, vi in zip(views, T_vol_from_cams, inputs)]
     timing["observe"] = time.perf_counter() - t
-    return SceneObservations(T_vol_from_cams, observations, lidar_vol, widest, ratios, exposure)
+    depth_views: list[DepthView] = []
+    if earlier is not None and earlier.views:
+        t = time.perf_counter()
+        depth_views, exposure["earlier"] = earlier_depth_views(earlier, views, ratios, lidar, T_vol_from_global)
+        timing["observe_earlier"] = time.perf_counter() - t
+    return SceneObservations(T_vol_from_cams, observations, lidar_vol, widest, ratios, exposure, tuple(depth_views))
 
 
 def volume_sample_lighting(base: SampleLighting, views: Sequence[CameraView], inputs: Sequence[ViewInputs],
                            level: str, lidar: LidarSweep | None, query_point_cam: np.ndarray | None,
-                           grid: LogGrid | None, timing: dict, t0: float) -> SampleLighting:
+                           grid: LogGrid | None, timing: dict, t0: float,
+                           earlier: EarlierKeyframe | None = None) -> SampleLighting:
     """L2, L3 or ``auto`` of a sample from its L1 lighting ``base`` (per-camera estimates, sun, params).
 
-    ``auto`` may settle on L0 or L1 (then without a volume); ``grid`` overrides the level's grid (benchmarks).
+    ``auto`` may settle on L0 or L1 (then without a volume); ``grid`` overrides the level's grid (benchmarks);
+    ``earlier``: the previous keyframe's seen surfaces fill what the instant's leave open.
     """
     ref_est = base.per_view[base.reference]
     params = dict(base.params)
-    scene = observe_scene(views, inputs, base.T_global_from_vol, lidar, grid, timing)
+    scene = observe_scene(views, inputs, base.T_global_from_vol, lidar, grid, timing, earlier)
     params["exposure_ratio"], params["exposure"] = scene.exposure_ratio, scene.exposure
     base = replace(base, exposure_ratio=scene.exposure_ratio)
     placements = placement_points_vol(scene.T_vol_from_cams, query_point_cam)
@@ -255,11 +318,14 @@ def volume_sample_lighting(base: SampleLighting, views: Sequence[CameraView], in
     observations = scene.observations
     if grid is not scene.widest:
         observations = [restrict_to_grid(o, grid) for o in observations]
-    hybrid, build_params = build_hybrid(ref_est, scene.T_vol_from_cams[0], observations, scene.lidar_vol, grid, timing)
+    hybrid, build_params = build_hybrid(ref_est, scene.T_vol_from_cams[0], observations, scene.lidar_vol, grid, timing,
+                                        scene.earlier)
     geometry = "LiDAR densified" if lidar is not None else "no LiDAR: street-canyon prior"
     reason = (f"{level}: " if not auto_reason.startswith("auto") else "") + join_reasons(
         auto_reason, f"sky dome + VSG volume {grid.shape} over +-{grid.half_extent_xy_m:g} m from "
-        f"{len(views)} view(s) ({geometry}); {base.reason}")
+        f"{len(views)} view(s) ({geometry})" + (f", the seen surfaces of {len(scene.earlier)} view(s) of the "
+                                               f"previous keyframe behind them" if scene.earlier else "")
+        + f"; {base.reason}")
     params.update(build_params, T_global_from_vol=base.T_global_from_vol.tolist())
     timing["total"] = time.perf_counter() - t0
     return replace(base, level=level, reason=reason, hybrid=hybrid, params=json_clean(params), timing_s=timing)

@@ -19,6 +19,10 @@ took it (across the ray: moving along the ray causes no parallax), a surface at 
 ``f DEPTH_UNCERTAINTY b / t`` pixels in that camera's image, so that is the Gaussian sigma used (0 from the
 camera's own centre: its image exactly; between the precomputed ``BLUR_LEVELS_PX``, linearly). The radiance is a
 constant (not a function of the volume's parameters).
+
+Cameras have a *rank*: 0 for the estimate's own cameras, 1 for an earlier keyframe's (:mod:`.multiview`). A ray
+takes only hits of the lowest rank that it hits at all: an earlier camera's surfaces fill only what the
+cameras of the instant left open (what is now behind or above them), they never cover what those saw.
 """
 
 from __future__ import annotations
@@ -60,6 +64,7 @@ class DepthView:
         backdrop_depth_m: (h, w) float32 a second surface behind the first (inf where none), or None: where a
             near object's top meets the farther structure that continues above it, that structure goes on a
             few rows down behind the object, so that no gap opens between the two (see :mod:`.observe`).
+        rank: 0 for a camera of the estimate's instant, 1 for an earlier keyframe's (see module doc).
     """
 
     channel: str
@@ -68,6 +73,7 @@ class DepthView:
     K: np.ndarray
     T_vol_from_cam: np.ndarray
     backdrop_depth_m: np.ndarray | None = None
+    rank: int = 0
 
 
 def depth_mesh(view: DepthView, step: int = GEOMETRY_STEP_PX) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -130,6 +136,7 @@ class SeenSurfaces:
         channels: (C,) camera channels.
         camera_centres: (C, 3) float64 each camera's centre, volume frame.
         focal_px: (C,) float64 each texture's focal length, pixels.
+        rank: (C,) int8 each camera's rank (see module doc), or None: all 0.
     """
 
     vertices: np.ndarray
@@ -140,6 +147,7 @@ class SeenSurfaces:
     channels: tuple[str, ...]
     camera_centres: np.ndarray
     focal_px: np.ndarray
+    rank: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         check_shape(self.vertices, ("V", 3), "vertices")
@@ -149,6 +157,8 @@ class SeenSurfaces:
         check_shape(self.textures, (len(self.channels), "h", "w", 3), "textures")
         check_shape(self.camera_centres, (len(self.channels), 3), "camera_centres")
         check_shape(self.focal_px, (len(self.channels),), "focal_px")
+        if self.rank is not None:
+            check_shape(self.rank, (len(self.channels),), "rank")
         if len(self.faces) == 0:
             raise ValueError("SeenSurfaces: no faces (use None for no seen surfaces)")
 
@@ -179,7 +189,8 @@ class SeenSurfaces:
                             np.concatenate(uvs).astype(np.float32), np.concatenate(owner), tex,
                             tuple(v.channel for v in kept),
                             np.array([np.asarray(v.T_vol_from_cam, np.float64)[:3, 3] for v in kept]),
-                            np.array([0.5 * (v.K[0][0] + v.K[1][1]) for v in kept], np.float64))
+                            np.array([0.5 * (v.K[0][0] + v.K[1][1]) for v in kept], np.float64),
+                            np.array([v.rank for v in kept], np.int8))
 
     @functools.cached_property
     def scenes(self) -> list[tuple[RayScene, np.ndarray]]:
@@ -216,6 +227,10 @@ class SeenSurfaces:
             h = scene.intersect(origins, dirs, t_min)
             t_all[c], bary_all[c] = h.t, h.bary
             face_all[c, h.hit] = idx[h.face[h.hit]]
+        if self.rank is not None and np.ptp(self.rank) > 0:  # only the lowest rank a ray hits
+            ranks = np.asarray(self.rank, np.int64)[:, None]
+            lowest = np.where(np.isfinite(t_all), ranks, np.iinfo(np.int64).max).min(axis=0)
+            t_all = np.where(ranks > lowest[None, :], np.inf, t_all)
         t_near = t_all.min(axis=0)
         best = np.argmin(t_all, axis=0)
         if len(self.scenes) > 1:
@@ -258,7 +273,8 @@ class SeenSurfaces:
                             pixel_uv=self.pixel_uv, face_camera=self.face_camera,
                             textures=np.clip(self.textures, 0.0, 65504.0).astype(np.float16),
                             channels=np.array(self.channels, dtype=str), camera_centres=self.camera_centres,
-                            focal_px=self.focal_px)
+                            focal_px=self.focal_px,
+                            rank=np.zeros(len(self.channels), np.int8) if self.rank is None else self.rank)
         write_bytes_atomic(path, buf.getvalue())
 
     @staticmethod
@@ -271,7 +287,8 @@ class SeenSurfaces:
                 return SeenSurfaces(z["vertices"].astype(np.float32), z["faces"].astype(np.int32),
                                     z["pixel_uv"].astype(np.float32), z["face_camera"].astype(np.int16),
                                     z["textures"].astype(np.float32), tuple(str(c) for c in z["channels"]),
-                                    z["camera_centres"].astype(np.float64), z["focal_px"].astype(np.float64))
+                                    z["camera_centres"].astype(np.float64), z["focal_px"].astype(np.float64),
+                                    z["rank"].astype(np.int8) if "rank" in z.files else None)
         except (OSError, KeyError, ValueError) as e:
             raise InputError(f"{path}: cannot read the seen surfaces ({e}); expected arrays schema, vertices, "
                              "faces, pixel_uv, face_camera, textures, channels, camera_centres, focal_px") from None
