@@ -6,7 +6,8 @@ underbody curve ``z_bot(x)`` that rises into wheel arches; its plan-view width r
 ends, closing the surface.  Materials are assigned per face from its position and normal
 (windscreen / side windows / rear window with pillars in between, bumpers, grille, head and tail
 lights); the outlines of the windows, the B pillar and the bumpers' lip (:func:`outline_levels`)
-first cut the triangles they cross, so those edges are clean lines, not the loft grid's staircase.
+first cut the triangles they cross, so those edges are clean lines, not the loft grid's staircase; a shoulder
+(character) line along both sides (:func:`shoulder_crease`) turns the shading normal within 5 mm.
 Distances ``d`` run from the nose (0) to the rear (``length``); the object frame has x front.
 """
 
@@ -321,7 +322,57 @@ def body_part(spec: BodySpec) -> MeshPart:
         on = np.abs(lv[tie]).max(axis=1) < 1e-9
         inside[tie] = np.where(on, at_centre < 0.0, inside[tie])
     fm = body_materials(spec, {k: v[parent] for k, v in quads.items()}, inside)
-    return MeshPart(V, F, fm, N)
+    return shoulder_crease(spec, MeshPart(V, F, fm, N))
+
+
+SHOULDER_BELOW_BELT_M = 0.12  # the shoulder (character) line's height under the belt line
+SHOULDER_STRIP_M = 0.005  # the crease's width: the normal turns across it (sub-pixel beyond ~5 m)
+# The surfaces either side of the crease dip inwards (depth, reach from the line), tangent to the loft again at
+# the reach: the kink at the line is 27/4 depth / reach per side, ~19 deg above and ~8 deg below.
+SHOULDER_UP_M = (0.006, 0.12)
+SHOULDER_DOWN_M = (0.005, 0.25)
+
+
+def shoulder_height(spec: BodySpec, d: np.ndarray) -> np.ndarray:
+    """Height z (m) of the shoulder line at distances from the nose ``d``: :data:`SHOULDER_BELOW_BELT_M` under the
+    belt line."""
+    return body_profiles(spec, np.asarray(d, np.float64))[3] - SHOULDER_BELOW_BELT_M
+
+
+def _dip(u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The crease's dip profile and its slope at u >= 0: 1 at u = 1/3, 0 with slope 27/4 at u = 0, 0 with zero slope
+    at u >= 1."""
+    u = np.clip(u, 0.0, 1.0)
+    return 6.75 * u * (1.0 - u) ** 2, np.where(u < 1.0, 6.75 * (1.0 - u) * (1.0 - 3.0 * u), 0.0)
+
+
+def shoulder_crease(spec: BodySpec, part: MeshPart) -> MeshPart:
+    """The body with a shoulder (character) line along both sides: the loft is cut along the line and along a
+    parallel line :data:`SHOULDER_STRIP_M` above it, and the side surfaces above and below dip inwards (at most a
+    few mm: the box does not grow).  Normals are the moved surface's own (the loft's plus the dip's slope), so
+    the two lines carry the kink's two sides and the shading turns across the strip (a crisp line in the sky's
+    reflection) instead of over a loft row (the chords of 4-8 cm rows would have spread it).  Only side-facing
+    surface (|n_y| > 0.5, fading in to 0.8) is moved; the mesh stays closed."""
+    V, F, N = part.vertices, part.faces, part.normals
+    d = spec.length / 2 - V[:, 0]
+    z0 = shoulder_height(spec, d)
+    levels = np.stack([V[:, 2] - z0, V[:, 2] - z0 - SHOULDER_STRIP_M], axis=1)
+    V, F, N, lv, parent = cut_along_levels(V, F, N, levels, snap=0.01, zero_tol=1e-6)  # the strip is ~5 % of a row
+    d = spec.length / 2 - V[:, 0]
+    z0 = shoulder_height(spec, d)
+    side = np.clip((np.abs(N[:, 1]) - 0.5) / 0.3, 0.0, 1.0)
+    (depth_up, reach_up), (depth_dn, reach_dn) = SHOULDER_UP_M, SHOULDER_DOWN_M
+    g_up, s_up = _dip((V[:, 2] - z0 - SHOULDER_STRIP_M) / reach_up)
+    g_dn, s_dn = _dip((z0 - V[:, 2]) / reach_dn)
+    above, below = lv[:, 1] >= 0.0, lv[:, 0] <= 0.0  # the upper line belongs to the upper side, the lower to the lower
+    inward = side * np.where(above, depth_up * g_up, 0.0) + side * np.where(below, depth_dn * g_dn, 0.0)
+    # d(inward)/dz: the outward normal of y = f(x, z) - inward(z) (per unit |n_y|) gains + d(inward)/dz in z.
+    slope = side * (np.where(above, depth_up / reach_up * s_up, 0.0) - np.where(below, depth_dn / reach_dn * s_dn, 0.0))
+    V = V.copy()
+    V[:, 1] -= np.sign(V[:, 1]) * inward
+    n = N / np.maximum(np.abs(N[:, 1:2]), 1e-6) + np.outer(slope, [0.0, 0.0, 1.0])
+    N = np.where((side > 0)[:, None], n / np.linalg.norm(n, axis=1, keepdims=True), N)
+    return MeshPart(V, F, part.face_material[parent], N)
 
 
 # Columns of :func:`outline_levels`.
@@ -485,5 +536,6 @@ __all__ = [
     "PLATE_INK", "PLATE_REAR", "REAR_WINDOW", "REFLECTOR", "RIM", "SIDE_GLASS", "TAILLIGHT", "TRIM", "TYRE",
     "UNDERSIDE", "WINDSCREEN", "axle_distances", "body_materials", "body_part", "body_profiles", "hatchback_spec",
     "jitter_spec", "loft_stations", "outline_levels", "panel_gaps", "plan_corner_y", "section_half_width",
-    "sedan_spec", "side_window_edges", "side_window_limits", "suv_spec", "tumblehome_taper", "van_spec",
+    "sedan_spec", "shoulder_crease", "shoulder_height", "side_window_edges", "side_window_limits", "suv_spec",
+    "tumblehome_taper", "van_spec",
 ]

@@ -78,7 +78,7 @@ def lamp_parts(surface: BodySurface, spec: BodySpec) -> list[MeshPart]:
     W = spec.width
     zb = _bumper_line(spec)
     zt = spec.belt_rear - (0.12 if spec.length - spec.d_rear > 0.35 else 0.05)  # under a boot lid's rounded edge
-    n_y, n_z = 17, 7
+    n_y, n_z = 15, 7  # 15 columns: the sheets stay out of the body (13 sank 1.1 mm into a van), ~290 triangles under 17
     t_y = np.linspace(0.0, 1.0, n_y)
     t_z = np.linspace(0.0, 1.0, n_z)
     parts = []

@@ -36,7 +36,7 @@ def wheel(centre: np.ndarray, side: float, r: float, width: float, brake: bool =
     r_rim = 0.66 * r
     hw = width / 2
     # Closed profile (radius, axial) going around the tyre cross-section, outer side first.
-    a = np.linspace(0.0, np.pi / 2, 4)
+    a = np.linspace(0.0, np.pi / 2, 3)  # 45 deg steps round the 4.5 cm shoulders (4 points: 512 more triangles a car)
     rc = 0.045  # shoulder radius
     prof = np.concatenate([
         np.stack([np.linspace(r_rim, r - rc, 3, endpoint=False), np.full(3, hw)], 1),  # outer sidewall
