@@ -4,7 +4,8 @@ A plate is a thin box on the bumper (its face in the object frame's y-z plane, x
 dark character blocks slightly proud of it, so it reads as a bright rectangle with a dark band at
 distance and as characters up close; or (``anonymised``) a plain plate of its face's mean colour:
 nuScenes blurs the plates of its images, and a blurred plate is about that.  Styles follow the nuScenes
-locations: Singapore (``sg``, right-hand drive, white front / yellow rear plates), Boston (``us``, the
+locations: Singapore (``sg``, right-hand drive, white front / yellow rear plates or, on most cars, the black
+plate with white characters: :data:`PLATE_VARIANTS`), Boston (``us``, the
 12 x 6 inch plate) and ``eu`` (the 520 x 110 mm plate with the blue band) for anything else.
 """
 
@@ -53,6 +54,13 @@ PLATE_STYLES: dict[str, PlateStyle] = {
                      (0.01, 0.04, 0.35), 7, False),
 }
 
+# Singapore also has (and its older cars mostly carry) the traditional black plate with white characters, front and
+# rear.  Share: an estimate; none of the 13 plates of scene-0916 seen at 5-18 m from CAM_FRONT / CAM_BACK is yellow
+# (their blurred mean colour: CIELAB b* -8..+4, L* 21-53), while a yellow rear plate blurred keeps b* ~ +60.
+SG_BLACK_PLATE = PlateStyle("sg_black", (0.520, 0.115), (0.02, 0.02, 0.02), (0.02, 0.02, 0.02), (0.55, 0.55, 0.55),
+                            None, 7, True)
+PLATE_VARIANTS: dict[str, tuple[tuple[PlateStyle, float], ...]] = {"sg": ((SG_BLACK_PLATE, 0.7),)}
+
 
 
 def plate_style_for_location(location: str) -> str:
@@ -65,6 +73,18 @@ def check_plate_style(style: str) -> PlateStyle:
     if style not in PLATE_STYLES:
         raise ValueError(f"plate_style must be one of {', '.join(PLATE_STYLES)}, got {style!r}")
     return PLATE_STYLES[style]
+
+
+def car_plate_style(plate_style: str, seed: int) -> PlateStyle:
+    """The plates of the procedural car of ``seed`` in style ``plate_style``: the style itself or one of its
+    :data:`PLATE_VARIANTS` (drawn by their shares from the car's own stream ``[seed, 0x9A7E]``)."""
+    style = check_plate_style(plate_style)
+    u = np.random.default_rng([int(seed) & 0xFFFFFFFF, 0x9A7E]).random()
+    for variant, share in PLATE_VARIANTS.get(style.name, ()):
+        if u < share:
+            return variant
+        u -= share
+    return style
 
 
 def _box(lo: np.ndarray, hi: np.ndarray, mat: int) -> MeshPart:
@@ -151,5 +171,6 @@ def plate_part(style: PlateStyle, x_face: float, x_back: float, z_centre: float,
     return MeshPart(V, F, M, np.concatenate([p.normals for p in parts]))
 
 
-__all__ = ["CHAR_INK_SHARE", "PLATE_STYLES", "PlateStyle", "anonymised_plate_rgb", "check_plate_style", "plate_part",
+__all__ = ["CHAR_INK_SHARE", "PLATE_STYLES", "PLATE_VARIANTS", "PlateStyle", "SG_BLACK_PLATE", "anonymised_plate_rgb",
+           "car_plate_style", "check_plate_style", "plate_part",
            "plate_style_for_location"]

@@ -29,7 +29,7 @@ from .car_interior import interior_parts
 from .car_paint import check_paint_region, paint_palette, srgb_to_linear
 from .car_wheels import wheel_parts, wheel_well_parts
 from .mesh_parts import MeshPart, merge_parts
-from .number_plates import PlateStyle, anonymised_plate_rgb, check_plate_style, plate_style_for_location
+from .number_plates import PlateStyle, anonymised_plate_rgb, car_plate_style, check_plate_style, plate_style_for_location
 from .validate import validate_asset
 
 MIRROR_OUT_M = 0.04  # how far the mirrors reach beyond the body's widest point (both inside the box)
@@ -81,7 +81,7 @@ def procedural_car(seed: int, body: str | None = None, paint: tuple | None = Non
     Returns:
         An :class:`Asset` (category ``vehicle.car``), object frame (x front, y left, z up, metres),
         origin at the bottom centre; the tyres touch z = 0; the mirrors reach the box's sides.
-        About 14-15 k triangles.
+        About 18.3-19.5 k triangles.
     """
     groups, materials, name = _build(seed, body, paint, plate_style, paint_region, anonymised_plates)
     parts = [p for group in groups.values() for p in group]
@@ -109,7 +109,7 @@ def procedural_car_parts(seed: int, body: str | None = None, paint: tuple | None
 def _build(seed: int, body: str | None, paint: tuple | None, plate_style: str, paint_region: str = "global",
            anonymised_plates: bool = False) -> tuple[dict[str, list[MeshPart]], tuple[Material, ...], str]:
     """(parts by group, material table, asset name) of :func:`procedural_car`."""
-    style = check_plate_style(plate_style)
+    style = car_plate_style(plate_style, seed)
     check_paint_region(paint_region)
     rng = np.random.default_rng([int(seed) & 0xFFFFFFFF, 0x5CA4])
     names = list(BODY_SPECS)
@@ -202,9 +202,12 @@ def _materials(rng: np.random.Generator, detail_rng: np.random.Generator, paint:
         Material("paint", base_color=color, metallic=0.0, roughness=paint_rough, clearcoat=1.0, flake=flake),
         Material("glass", base_color=front_tint, metallic=0.0, roughness=0.05, specular=pane_specular(front_tint, 0.06),
                  opacity=0.06),
-        Material("trim", base_color=np.array([0.025, 0.025, 0.027]), metallic=0.0, roughness=0.75),
+        # Black trim and tyres as a street sees them: weathered, textured plastic and sidewalls under road dust
+        # (albedo ~0.04, a soft sheen), not new black (0.02-0.025, matte: under the car's own shadow it rendered
+        # at L* < 14 where the real cars of scene-0916 have their 5th percentile at L* ~15-22).
+        Material("trim", base_color=np.array([0.040, 0.040, 0.042]), metallic=0.0, roughness=0.6),
         # Rubber's refractive index ~1.5 reflects 4 % at normal incidence (UE4 specular 0.5; 0.3 was 2.4 %).
-        Material("tyre", base_color=np.array([0.02, 0.02, 0.02]), metallic=0.0, roughness=0.9, specular=0.5),
+        Material("tyre", base_color=np.array([0.035, 0.035, 0.034]), metallic=0.0, roughness=0.65, specular=0.5),
         # Alloy wheels are painted: silver (or dark) flake paint under a clear coat, like the body's metallic
         # paint (a bare-metal lobe rendered them at L* ~30, reflecting the road; real ones look light grey).
         Material("rim", base_color=np.array([0.12, 0.12, 0.13]) if rim_dark else np.array([0.62, 0.62, 0.64]),

@@ -6,7 +6,7 @@ import pytest
 from streetaug.augment.assets import car_body as cb
 from streetaug.augment.assets.car_paint import (REGION_FAMILY_SHARES, _SHADES, paint_family, paint_palette,
                                                 paint_region_for_location)
-from streetaug.augment.assets.number_plates import PLATE_STYLES, anonymised_plate_rgb
+from streetaug.augment.assets.number_plates import PLATE_STYLES, PLATE_VARIANTS, anonymised_plate_rgb, car_plate_style
 from streetaug.augment.assets.procedural import procedural_car, procedural_car_parts
 from streetaug.augment.assets.select import select_assets
 from streetaug.augment.assets.validate import face_normals
@@ -66,24 +66,39 @@ def test_cars_are_drawn_from_their_regions_palette():
     assert white["asia_pacific"] > white["north_america"]
 
 
-@pytest.mark.parametrize("style", sorted(PLATE_STYLES))
-def test_anonymised_plates_have_no_characters_and_their_mean_colour(style):
-    sharp = procedural_car(3, "sedan", plate_style=style)
-    anon = procedural_car(3, "sedan", plate_style=style, anonymised_plates=True)
+@pytest.mark.parametrize("style,seed", [(st, seed) for st in sorted(PLATE_STYLES) for seed in (3, 4, 5)])
+def test_anonymised_plates_have_no_characters_and_their_mean_colour(style, seed):
+    sharp = procedural_car(seed, "sedan", plate_style=style)
+    anon = procedural_car(seed, "sedan", plate_style=style, anonymised_plates=True)
     assert np.isin(sharp.face_material, [cb.PLATE_INK]).any()
     assert not np.isin(anon.face_material, [cb.PLATE_INK, cb.PLATE_BAND]).any()
     assert sharp.name == anon.name  # same body and paint
-    st = PLATE_STYLES[style]
+    st = car_plate_style(style, seed)
     for slot, base, rear in ((cb.PLATE_FRONT, st.front_rgb, False), (cb.PLATE_REAR, st.rear_rgb, True)):
         got = anon.materials[slot].base_color
         assert np.allclose(got, anonymised_plate_rgb(st, rear))
         assert np.allclose(sharp.materials[slot].base_color, base)
-        # The ink (and the EU band) darken the plate by their share of the face (~10-25 %).
         ratio = got.mean() / np.mean(base)
-        assert 0.7 < ratio < 0.92, ratio
-    if style == "sg":  # the yellow rear plate stays yellow
+        if np.mean(base) > np.mean(st.ink_rgb):  # dark ink (and the EU band) darken a light plate by ~10-25 %
+            assert 0.7 < ratio < 0.92, ratio
+        else:  # light characters lighten a black plate
+            assert ratio > 2.0, ratio
+    if st.name == "sg":  # the yellow rear plate stays yellow
         rear = anon.materials[cb.PLATE_REAR].base_color
         assert rear[0] > 10 * rear[2] and rear[1] > 10 * rear[2]
+
+
+def test_singapore_cars_mostly_carry_neutral_black_plates():
+    """scene-0916's 13 plates seen at 5-18 m are all grey (blurred b* -8..+4); a yellow rear plate on every car
+    (b* ~ +60 blurred) made the inserted cars' plates the most saturated thing on them."""
+    seeds = range(400)
+    black = np.mean([car_plate_style("sg", s).name == "sg_black" for s in seeds])
+    assert abs(black - PLATE_VARIANTS["sg"][0][1]) < 0.08 and black > 0.5
+    assert all(car_plate_style(st, s).name == st for st in ("us", "eu") for s in range(50))  # no variants there
+    for s in range(12):
+        rear = procedural_car(s, "sedan", plate_style="sg", anonymised_plates=True).materials[cb.PLATE_REAR].base_color
+        b_star = srgb_to_lab(np.clip(rear, 0, 1) ** (1 / 2.2))[2]
+        assert (abs(b_star) < 3.0) == (car_plate_style("sg", s).name == "sg_black"), (s, b_star)
 
 
 def test_selected_cars_have_anonymised_plates_by_default():
