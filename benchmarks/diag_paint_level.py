@@ -13,7 +13,8 @@ each fully visible pixel; per region (paint facing sideways ``side``, up ``top``
 tyres) it prints the mean rendered radiance (before the veil, blur and noise), what a Lambertian of the
 region's base colour predicts from the car's own environment (``a (E(n) + sun) / pi``, ``E`` the envmap's
 irradiance at the pixel's normal), both through the camera response (8-bit LDR), the final composite's LDR
-and CIELAB; and the material shares and L* of the lowest 30 % of the car's rows.  ``--override`` replaces
+and CIELAB; the material shares and L* of the lowest 30 % of the car's rows; and over the whole car, every material's
+share of its pixels, its L* and its share of the dark pixels (L* < ``DARK_L``), with the car's L* spread.  ``--override`` replaces
 material fields by name (e.g. the previous paint model) to compare.  Pictures are written nowhere (the
 images are shared data); ``--out`` gets the per-car JSON (default under /tmp).
 """
@@ -37,6 +38,7 @@ ROOT = Path(__file__).resolve().parents[1]
 SEQ = (ROOT / ".." / "shared" / "data" / "nuscenes-seq").resolve()
 PAINTS_SRGB = {"white": ("F2F2EE", 0.0), "silver": ("B5B8BB", 0.7), "black": ("0C0C0D", 0.0),
                "graphite": ("3C3F44", 0.6)}
+DARK_L = 15.0  # L* under which a car pixel counts as dark (the real cars' 5th percentile is ~15-22)
 REGIONS = ("side", "top", "lower", "glass", "tyre")
 
 
@@ -111,6 +113,14 @@ def car_regions(cap: dict) -> dict | None:
                        "ldr_lambert": (255 * hdr_to_ldr(pred, ev)).tolist(),
                        "ldr_final": final[sel].mean(axis=0).tolist(),
                        "lab_final": srgb_to_lab(final[sel][None])[0].mean(axis=0).tolist()}
+    L_all = srgb_to_lab(final[None])[0][:, 0]
+    seen = vis & hit
+    if seen.sum() >= 20:  # every material's share of the car's pixels, its L* (median, mean) and the car's L* spread
+        out["materials"] = {names[m]: [float(np.mean(mat[seen] == m)), float(np.median(L_all[seen & (mat == m)])),
+                                       float(L_all[seen & (mat == m)].mean()),
+                                       float(np.mean(seen[seen] & (mat[seen] == m) & (L_all[seen] < DARK_L)))]
+                            for m in np.unique(mat[seen])}
+        out["car_L_std"] = float(L_all[seen].std())
     rows = ys[vis & hit]
     if len(rows):
         y0, y1 = rows.min(), rows.max()
@@ -173,6 +183,17 @@ def main(argv=None) -> None:
     print("  lowest 30 % of the rows (share, L* median):",
           {n: (round(float(np.mean([s for s, _ in v])), 3), round(float(np.median([L for _, L in v])), 1))
            for n, v in sorted(shares.items(), key=lambda kv: -np.mean([s for s, _ in kv[1]]))})
+    mats = defaultdict(list)
+    for c in cars:
+        for name, v in c.get("materials", {}).items():
+            mats[name].append(v)
+    print("  car L* std (median over cars):", round(float(np.median([c["car_L_std"] for c in cars if "car_L_std" in c])), 2))
+    print("  materials (mean share of the car's pixels, L* median of the per-car medians):",
+          {n: (round(float(np.sum([s for s, *_ in v]) / len(cars)), 3), round(float(np.median([L for _, L, *_ in v])), 1))
+           for n, v in sorted(mats.items(), key=lambda kv: -np.sum([s for s, *_ in kv[1]]))})
+    print(f"  dark pixels (L* < {DARK_L:.0f}) per material, mean share of the car's pixels:",
+          {n: round(float(np.sum([x[3] for x in v]) / len(cars)), 4)
+           for n, v in sorted(mats.items(), key=lambda kv: -np.sum([x[3] for x in kv[1]])) if np.sum([x[3] for x in v]) > 0})
     Path(args.out).write_text(json.dumps({"paint": args.paint, "override": override, "cars": cars}, default=float))
     print(f"wrote {args.out}")
 
