@@ -46,6 +46,9 @@ def main(argv=None) -> None:
     p.add_argument("--compare", nargs=2, metavar=("OLD_SHIM", "NEW_SHIM"),
                    help="run this benchmark on two shim folders (PYTHONPATH) in turn, --rounds times each")
     p.add_argument("--rounds", type=int, default=2)
+    p.add_argument("--profile", metavar="FILE",
+                   help="cProfile (CPU time) the kept reps (not the warm-up) into FILE (pstats format)")
+    p.add_argument("--items", help="comma-separated item names to run (default: all)")
     args = p.parse_args(argv)
     if args.compare:
         return compare(args)
@@ -70,6 +73,13 @@ def main(argv=None) -> None:
         tokens = real.sample_tokens()
         items += [(real, tokens[k], cam, f"scene-0916/{k}/{cam}")
                   for k, cam in ((4, "CAM_FRONT"), (16, "CAM_FRONT"), (28, "CAM_FRONT"), (8, "CAM_BACK"))]
+    if args.items:
+        items = [it for it in items if it[3] in args.items.split(",")]
+    prof = None
+    if args.profile:
+        import cProfile
+
+        prof = cProfile.Profile(time.process_time)  # CPU seconds: the machine may be shared
     runs = []
     for rep in range(args.reps):
         for reader, token, cam, name in items:
@@ -77,14 +87,20 @@ def main(argv=None) -> None:
             where = {"location": sample.location} if has_location else {}
             assets = {cam: select_assets(pipeline.item_seed(rep, "asset", token, cam), 1, **where)}
             cpu.clear()
+            if prof is not None and rep > 0:
+                prof.enable()
             c0, w0 = time.process_time(), time.perf_counter()
             res = pipeline.insert_into_sample(sample, [sample.cameras[cam]], assets,
                                               pipeline.InsertOptions(seed=rep, n_objects=1))
+            if prof is not None:
+                prof.disable()
             view = res.views[cam]
             runs.append({"item": name, "rep": rep, "cpu_s": time.process_time() - c0,
                          "wall_s": time.perf_counter() - w0, "render_s": view.timing_s.get("render"),
                          "placed": len(view.objects), "timing_s": dict(view.timing_s),
                          "cpu_stage_s": dict(cpu)})
+    if prof is not None:
+        prof.dump_stats(args.profile)
     kept = [r for r in runs if r["rep"] > 0]
     per_item = {}
     for name in dict.fromkeys(r["item"] for r in kept):
