@@ -23,7 +23,7 @@ from pathlib import Path
 from streetaug.datasets.nuscenes import NuScenesReader
 
 from .config import BatchConfig
-from .execute import tune_malloc
+from .execute import release_free_heap, tune_malloc
 from .row import LogRow
 
 _READERS: dict[tuple[str, str], NuScenesReader] = {}
@@ -141,6 +141,7 @@ def process_sample(config: BatchConfig, out_dir: str, token: str, cameras: list[
     finally:
         if scene_tracks is None:
             release_sample_assets()
+        release_free_heap()  # the sample's freed buffers: the next sample starts from its live memory
     n = max(len(rows), 1)
     seconds, cpu_s = (time.perf_counter() - t0) / n, (time.process_time() - cpu0) / n
     worker, rss = worker_id(), round(peak_rss_mb(), 1)
