@@ -29,6 +29,7 @@ from streetaug.datasets.sample import Box, CameraView, Sample
 from .class_rules import ClassRule, ClassRules, read_class_rules
 from .config import PlacementConfig
 from .drivable import MAP_SOURCES, DrivableArea
+from .parking import parked_gap_m
 from .place import OFF_ROAD_ZONES, Placement
 from .zones import CLUSTER_TAPER_M, ROAD_EDGE_BAND_M, SurfaceZones, surface_zones
 
@@ -188,6 +189,7 @@ def audit_placements(sample: Sample, view: CameraView, placements: Sequence[Plac
         if labels is not None else np.zeros((0, 3))
     non_ground_pts = shapely.points(non_ground[:, :2])
     mutual = [rules.classes[p.detection_class].config(base_config).mutual_clearance_m for p in placements]
+    parking_gap = parked_gap_m(boxes, base_config.static_clearance_m)
     for i, (p, hull) in enumerate(zip(placements, hulls)):
         passed, measured = {}, {}
         rule = rules.classes[p.detection_class]
@@ -201,15 +203,17 @@ def audit_placements(sample: Sample, view: CameraView, placements: Sequence[Plac
         measured["distance_m"] = d
         passed["distance"] = config.min_distance_m <= d <= config.max_distance_m
         # annotated boxes by class
-        # (a car parking by the kerb as the scene's do keeps the static clearance from parked vehicles)
-        beside_parked = p.zone == "kerb" and rule.zone_weights == "scene"
-        moving = [b.is_dynamic and not (beside_parked and VEHICLE_PARKED in b.attributes) for b in boxes]
-        gaps_dyn = [hull.distance(h) for m, h in zip(moving, box_hulls) if m]
-        gaps_sta = [hull.distance(h) for m, h in zip(moving, box_hulls) if not m]
+        # (a car parking by the kerb as the scene's do keeps only the parking gap from parked vehicles)
+        beside = [p.zone == "kerb" and rule.zone_weights == "scene" and VEHICLE_PARKED in b.attributes for b in boxes]
+        gaps_dyn = [hull.distance(h) for b, h, x in zip(boxes, box_hulls, beside) if b.is_dynamic and not x]
+        gaps_sta = [hull.distance(h) for b, h, x in zip(boxes, box_hulls, beside) if not b.is_dynamic and not x]
+        gaps_parked = [hull.distance(h) for h, x in zip(box_hulls, beside) if x]
         measured["min_gap_dynamic_m"] = min(gaps_dyn, default=np.inf)
         measured["min_gap_static_m"] = min(gaps_sta, default=np.inf)
+        measured["min_gap_parked_m"] = min(gaps_parked, default=np.inf)
         passed["annotated_boxes"] = (measured["min_gap_dynamic_m"] >= config.dynamic_clearance_m
-                                     and measured["min_gap_static_m"] >= config.static_clearance_m)
+                                     and measured["min_gap_static_m"] >= config.static_clearance_m
+                                     and measured["min_gap_parked_m"] >= min(parking_gap, config.static_clearance_m))
         # unannotated LiDAR obstacles: height above the box's own ground plane, within the margin
         R = quat_to_rotation(p.box.rotation)
         bottom = p.box.center - 0.5 * p.wlh[2] * R[:, 2]

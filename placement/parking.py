@@ -10,7 +10,10 @@ is in rather than one table for every city:
 * the **parking style** (:class:`ParkingStyle`): each parked box's heading against the road edge and its
   centre's signed distance to it (a row of cars in perpendicular bays stands at 90 deg, 2.5 m in; kerb-side
   parking at 0 or 180 deg, about 1 m in). A kerb candidate takes the style of the nearest parked box within
-  ``STYLE_REACH_M`` (:func:`kerb_poses`); without one it stands along the edge.
+  ``STYLE_REACH_M`` (:func:`kerb_poses`); without one it stands along the edge;
+* the **parking gap** (:func:`parked_gap_m`): how close parked vehicles stand to their nearest parked neighbour
+  (scene-0916's bays: median 0.76 m); a kerb placement keeps that from parked vehicles, not the clearance from
+  moving things.
 
 Angles: ``yaw_to_edge_rad`` is the heading minus the direction of the edge tangent
 (:meth:`~streetaug.placement.zones.SurfaceZones.edge_tangent`: the road on its left), in (-pi, pi]; signed
@@ -36,6 +39,9 @@ PRIOR_OBJECTS = 2.0  # weight of the class table's lane/kerb split, in annotated
 STYLE_REACH_M = 30.0  # a kerb candidate takes the style of a parked box at most this far away
 STYLE_MAX_ROI_FRACTION = 0.8  # parked boxes beyond this fraction of the map's clip radius are not measured
 KERB_INSET_M = 0.05  # a styled footprint is moved this far inside the road edge (the kerb zone is on the road)
+PARKED_GAP_QUANTILE = 0.25  # of the parked vehicles' gaps to their nearest parked neighbour: a kerb car's clearance
+MIN_PARKED_GAP_M = 0.3
+MIN_PARKED_FOR_GAP = 3
 
 
 def _yaw(box: Box) -> float:
@@ -64,6 +70,22 @@ def with_parked_share(rule: ClassRule, n_parked: int, n_vehicles: int) -> ClassR
     total = z["lane"] + z["kerb"]
     p = (n_parked + PRIOR_OBJECTS * z["kerb"] / total) / (n_vehicles + PRIOR_OBJECTS)
     return dataclasses.replace(rule, zones={**z, "lane": total * (1.0 - p), "kerb": total * p})
+
+
+def parked_gap_m(boxes: Sequence[Box], static_clearance_m: float) -> float:
+    """The clearance (m) a kerb placement keeps from parked vehicles: the ``PARKED_GAP_QUANTILE`` quantile of the
+    footprint gaps of the sample's parked vehicles (any class) to their nearest parked neighbour, within
+    [``MIN_PARKED_GAP_M``, ``static_clearance_m``]; ``static_clearance_m`` with fewer than ``MIN_PARKED_FOR_GAP``."""
+    import shapely
+
+    parked = [b for b in boxes if b.category.startswith("vehicle.") and VEHICLE_PARKED in b.attributes]
+    if len(parked) < MIN_PARKED_FOR_GAP:
+        return float(static_clearance_m)
+    polys = shapely.polygons(np.stack([b.corners()[[0, 1, 5, 4], :2] for b in parked]))
+    d = shapely.distance(polys[:, None], polys[None, :])  # (P, P); tens of boxes
+    np.fill_diagonal(d, np.inf)
+    gap = float(np.quantile(d.min(axis=1), PARKED_GAP_QUANTILE))
+    return float(np.clip(gap, MIN_PARKED_GAP_M, static_clearance_m))
 
 
 @dataclass(frozen=True)
@@ -134,5 +156,5 @@ def kerb_poses(zones: SurfaceZones, style: ParkingStyle | None, xy: np.ndarray, 
     return out_xy, out_yaw, styled
 
 
-__all__ = ["KERB_INSET_M", "PRIOR_OBJECTS", "ParkingStyle", "STYLE_REACH_M", "kerb_poses", "parked_share",
+__all__ = ["KERB_INSET_M", "MIN_PARKED_GAP_M", "PRIOR_OBJECTS", "parked_gap_m", "ParkingStyle", "STYLE_REACH_M", "kerb_poses", "parked_share",
            "parking_style", "with_parked_share"]

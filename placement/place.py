@@ -185,9 +185,23 @@ def prefilter(scene: PlacementScene, cands: Candidates, tally: RuleTally, rule: 
     """Indices of the candidates whose flat footprints pass ``surface`` and ``annotated_boxes`` (cheap, vectorised)."""
     everyone = np.arange(len(cands.xy))
     alive = tally.keep("surface", everyone, everyone, scene.zones.footprints_in(zone, cands.footprints_xy, rule))
-    return tally.keep("annotated_boxes", everyone, alive, rule_box_clearance(
-        cands.footprints_xy[alive], scene.box_footprints_xy, scene.clearance_dynamic(rule, zone),
-        config.dynamic_clearance_m, config.static_clearance_m))
+    return tally.keep("annotated_boxes", everyone, alive,
+                      annotated_clearance(scene, cands.footprints_xy[alive], rule, zone, config))
+
+
+def annotated_clearance(scene: PlacementScene, footprints_xy: np.ndarray, rule: ClassRule, zone: str,
+                        config: PlacementConfig) -> np.ndarray:
+    """(N,) bool footprints (N, 4, 2) clear of the annotated boxes: the dynamic clearance from dynamic ones, the
+    static from the others, only the parking gap from parked vehicles beside a kerb placement
+    (:meth:`PlacementScene.beside_parked`)."""
+    parked = scene.beside_parked(rule, zone)
+    ok = rule_box_clearance(footprints_xy, scene.box_footprints_xy[~parked], scene.box_is_dynamic[~parked],
+                            config.dynamic_clearance_m, config.static_clearance_m)
+    if parked.any():
+        gap = min(scene.parked_gap_m, config.static_clearance_m)
+        ok &= rule_box_clearance(footprints_xy, scene.box_footprints_xy[parked], np.zeros(int(parked.sum()), bool),
+                                 gap, gap)
+    return ok
 
 
 @dataclass(frozen=True)
@@ -232,9 +246,7 @@ def check_stood(scene: PlacementScene, stood: StoodCandidates, wlh: np.ndarray, 
         # the ground must be measured under the object, not assumed
         in_zone &= np.array([p.source != "ego-plane" and p.n_points > 0 for p in stood.planes], dtype=bool)
     k = tally.keep("surface", idx, k, in_zone)
-    k = tally.keep("annotated_boxes", idx, k, rule_box_clearance(
-        rect[k], scene.box_footprints_xy, scene.clearance_dynamic(rule, zone), cfg.dynamic_clearance_m,
-        cfg.static_clearance_m))
+    k = tally.keep("annotated_boxes", idx, k, annotated_clearance(scene, rect[k], rule, zone, cfg))
     k = tally.keep("distance", idx, k, rule_distance(stood.centers[k, :2], scene.camera_xy, cfg.min_distance_m,
                                                      cfg.max_distance_m))
     k = tally.keep("lidar_obstacles", idx, k, rule_obstacles(
@@ -519,7 +531,7 @@ def place_objects(
 
 
 __all__ = [
-    "CHUNK", "OFF_ROAD_ZONES", "RULE_ORDER", "ChunkSurvivors", "ObjectAttempt", "ObjectBox", "PlacedSoFar", "Placeable",
+    "CHUNK", "OFF_ROAD_ZONES", "RULE_ORDER", "ChunkSurvivors", "annotated_clearance", "ObjectAttempt", "ObjectBox", "PlacedSoFar", "Placeable",
     "Placement", "PlacementResult", "RuleTally", "check_objects", "check_stood", "cluster_members", "make_placement",
     "place_objects", "place_one", "placement_attribute", "prefilter", "scene_rule", "zone_order",
 ]

@@ -21,7 +21,7 @@ from .class_rules import ClassRule, ClassRules
 from .config import PlacementConfig
 from .drivable import DrivableArea
 from .ground import LocalGroundFitter
-from .parking import ParkingStyle, parking_style
+from .parking import ParkingStyle, parked_gap_m, parking_style
 from .rules import box_bottoms, box_footprints, points_in_boxes
 from .zones import SurfaceZones, surface_zones
 
@@ -53,7 +53,7 @@ class PlacementScene:
         given_depth_m: (H, W) the caller's scene depth, or None to compute :func:`scene_depth` when needed.
         class_rules: the rule table whose categories say which annotated boxes are of a class (for
             :meth:`parking_style`), or None (no parking styles).
-        box_is_parked: (B,) bool the annotated boxes labelled ``vehicle.parked`` (see :meth:`clearance_dynamic`).
+        box_is_parked: (B,) bool the annotated boxes labelled ``vehicle.parked`` (see :meth:`beside_parked`).
     """
 
     sample: Sample
@@ -93,13 +93,18 @@ class PlacementScene:
                    fitter, depth_m, non_ground_xy, class_rules,
                    np.array([VEHICLE_PARKED in b.attributes for b in boxes], dtype=bool))
 
-    def clearance_dynamic(self, rule: ClassRule, zone: str) -> np.ndarray:
-        """(B,) bool the annotated boxes an object of ``rule`` in ``zone`` keeps the dynamic clearance from: the
-        dynamic ones, except, for a kerb placement of a rule with ``zone_weights: scene``, the parked vehicles
-        (they do not move: a car parks in the bay beside one, at the static clearance)."""
+    def beside_parked(self, rule: ClassRule, zone: str) -> np.ndarray:
+        """(B,) bool the annotated boxes an object of ``rule`` in ``zone`` keeps only the parking gap from
+        (:attr:`parked_gap_m`): for a kerb placement of a rule with ``zone_weights: scene``, the parked vehicles (they
+        do not move: a car parks in the bay beside one); none otherwise."""
         if zone == "kerb" and rule.zone_weights == "scene" and self.box_is_parked is not None:
-            return self.box_is_dynamic & ~self.box_is_parked
-        return self.box_is_dynamic
+            return self.box_is_parked
+        return np.zeros(len(self.box_is_dynamic), dtype=bool)
+
+    @functools.cached_property
+    def parked_gap_m(self) -> float:
+        """The clearance from parked vehicles of a kerb placement (:func:`~streetaug.placement.parking.parked_gap_m`)."""
+        return parked_gap_m(self.sample.boxes, self.config.static_clearance_m)
 
     def parking_style(self, rule: ClassRule) -> ParkingStyle | None:
         """How the sample's parked boxes of ``rule``'s class stand at the road edge

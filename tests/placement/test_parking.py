@@ -13,7 +13,7 @@ from placement_fixtures import EGO_YAW_RAD, ROAD_HALF_WIDTH_M, box_at_ego, groun
 from streetaug.datasets.nuscenes_format import VEHICLE_MOVING, VEHICLE_PARKED
 from streetaug.placement.audit import audit_placements
 from streetaug.placement.class_rules import read_class_rules
-from streetaug.placement.parking import PRIOR_OBJECTS, parked_share, with_parked_share
+from streetaug.placement.parking import PRIOR_OBJECTS, parked_gap_m, parked_share, with_parked_share
 from streetaug.placement.place import ObjectBox, place_objects, scene_rule
 from streetaug.placement.scene import scene_depth
 
@@ -127,15 +127,27 @@ def test_zone_weights_must_be_fixed_or_scene(tmp_path):
         read_class_rules(path)
 
 
-def test_a_car_parks_in_a_free_bay_between_parked_cars_at_the_static_clearance():
-    """Rows of parked cars 6 m apart on both edges: the kerb has room only between two of them (a 4.15 m gap), where
-    a car keeps the static clearance (1 m) from parked vehicles, not the dynamic one (3 m) of moving things."""
+def test_the_parking_gap_is_how_close_parked_vehicles_stand_to_their_neighbours():
+    row = [_with(box_at_ego(x, 2.5, yaw_ego=np.pi / 2), VEHICLE_PARKED) for x in np.arange(6.0, 40.0, 2.6)]
+    assert parked_gap_m(row, 1.0) == pytest.approx(2.6 - 1.8, abs=1e-6)  # box_at_ego's cars are 1.8 m wide
+    assert parked_gap_m(row[:2], 1.0) == 1.0  # too few to say: the static clearance
+    assert parked_gap_m([dataclasses.replace(b, attributes=(VEHICLE_MOVING,)) for b in row], 1.0) == 1.0
+    far = [_with(box_at_ego(x, 2.5, yaw_ego=np.pi / 2), VEHICLE_PARKED) for x in np.arange(6.0, 40.0, 9.0)]
+    assert parked_gap_m(far, 1.0) == 1.0  # at most the static clearance
+
+
+def test_a_car_parks_in_a_free_bay_between_parked_cars_at_the_parking_gap():
+    """Rows of parked cars 6 m apart on both edges (0.5 m apart across the road): the kerb has room only between two
+    of them, where a car keeps the scene's parking gap from parked vehicles, not the dynamic clearance (3 m) of moving
+    things."""
     y = ROAD_HALF_WIDTH_M - 2.5
     rows = [_with(box_at_ego(x, side * y, yaw_ego=np.pi / 2), VEHICLE_PARKED)
             for x in np.arange(6.0, 60.0, 6.0) for side in (1, -1)]
+    gap_m = parked_gap_m(rows, 1.0)
+    assert gap_m == pytest.approx(0.5, abs=1e-6)
     sample = _sample(rows)
     kerb = [p for p in _place(sample) if p.zone == "kerb"]
     assert len(kerb) >= N_SEEDS // 2
     footprints = [shapely.Polygon(b.corners()[[0, 1, 5, 4], :2]) for b in rows]
     gaps = [min(shapely.Polygon(p.footprint_xy).distance(f) for f in footprints) for p in kerb]
-    assert all(1.0 - 1e-6 <= g < 3.0 for g in gaps)
+    assert all(gap_m - 1e-6 <= g < 3.0 for g in gaps)
