@@ -269,10 +269,11 @@ def _trace(ctx: ShadingContext, rays_obj, N: int, pixel: np.ndarray, sums: "Pixe
                 o, d, idx, tp = o_next[sl], d_next[sl], active[sl], tp_next[sl]
             going.append(_trace_chunk(ctx, o, d, idx, tp, depth, pixel, sums, hit_first, escaped, queue))
         queue.flush()
+        going = [g for g in going if len(g[0])]
+        if not going:
+            break
         active, o_next, d_next, tp_next = (np.concatenate(x) for x in zip(*going))
         n_rays = len(active)
-        if n_rays == 0:
-            break
     # Whatever still travels after the last surface is absorbed by the (dark) interior.
     alpha = np.where(hit_first, 1.0 - escaped, 0.0)
     sums.add_shading(pixel, radiance, alpha, ctx.residual)
