@@ -16,6 +16,9 @@ For every keyframe *t* that has a *t* + 3 (1.5 s later; every ``--stride``-th):
 * **six_view** (lighting from the 6 cameras of *t*, CAM_FRONT the reference), per level: ``forward`` as above,
   ``forward_every_camera`` = each camera at *t* + 3, ``self_every_camera`` = each camera at *t*;
 * **every_camera** (default level): lighting from camera C alone at *t*, C at *t* + 3;
+* **monocular_previous** / **six_view_previous** (default level, keyframes with a *t* - 1): as monocular /
+  six_view, with the previous keyframe's same cameras (and LiDAR) as an extra input (``earlier``: their seen
+  surfaces fill what the instant's leave open);
 * the **constant-colour baseline** for every target: the source images' mean LDR colour everywhere.
 
 Medians over keyframes (and over cameras where a row has several) are reported next to the paper's figures
@@ -23,7 +26,7 @@ Medians over keyframes (and over cameras where a row has several) are reported n
 is predicted at its camera's auto-exposure (:mod:`streetaug.augment.lighting.predicted_view`: the inputs' mean
 image value); ``psnr_reference_exposure`` is the same prediction at the reference camera's exposure. The one-north keyframe: the same monocular and six-view
 scores at its single instant (no *t* + 3): self and other cameras. Also the time per estimate (wall, one
-thread, decode excluded). Writes ``real_lighting.json``.
+thread, decode excluded). Writes ``real_lighting.json`` (``--name``).
 """
 
 from __future__ import annotations
@@ -49,7 +52,7 @@ from streetaug.augment.evaluation.novel_view import (  # noqa: E402
     real_view,
     view_scores,
 )
-from streetaug.augment.lighting.api import estimate_views_lighting  # noqa: E402
+from streetaug.augment.lighting.api import earlier_keyframe, estimate_views_lighting  # noqa: E402
 from streetaug.augment.lighting.predicted_view import auto_exposed, predicted_radiance  # noqa: E402
 from streetaug.datasets.nuscenes import NuScenesReader  # noqa: E402
 
@@ -63,13 +66,16 @@ PAPER = {"monocular": {"psnr": 14.49, "si_psnr": 15.35}, "six_view": {"psnr": 17
 SCORES = ("psnr", "si_psnr")
 
 
-def lighting(sample, cameras, level):
-    """(SampleLighting, seconds) from the given cameras of a sample (images decoded first)."""
+def lighting(sample, cameras, level, previous=None):
+    """(SampleLighting, seconds) from the given cameras of a sample (images decoded first), with the same
+    cameras of the ``previous`` keyframe as the earlier input when given."""
     views = [sample.cameras[c] for c in cameras]
-    for v in views:
+    earlier = None if previous is None else earlier_keyframe(previous, cameras)
+    for v in views + ([] if earlier is None else list(earlier.views)):
         np.asarray(v.image)
     t0 = time.perf_counter()
-    sl = estimate_views_lighting(views, sample.location, level, lidar=sample.lidar, boxes=sample.boxes)
+    sl = estimate_views_lighting(views, sample.location, level, lidar=sample.lidar, boxes=sample.boxes,
+                                 earlier=earlier)
     return sl, time.perf_counter() - t0
 
 
@@ -90,9 +96,11 @@ def mean_row(rows: list[dict]) -> dict:
     return {k: float(np.mean([r[k] for r in rows])) for k in rows[0]}
 
 
-def keyframe_rows(sample, later, levels) -> dict:
-    """All scores of one source keyframe (``later`` = the sample 1.5 s later, or None: the instant only)."""
-    out: dict = {"token": sample.token, "monocular": {}, "six_view": {}, "every_camera": {}}
+def keyframe_rows(sample, later, levels, previous=None) -> dict:
+    """All scores of one source keyframe (``later`` = the sample 1.5 s later, or None: the instant only;
+    ``previous`` = the sample before it, or None: no ``*_previous`` rows)."""
+    out: dict = {"token": sample.token, "monocular": {}, "six_view": {}, "every_camera": {},
+                 "monocular_previous": {}, "six_view_previous": {}}
     front_img = [np.asarray(sample.cameras["CAM_FRONT"].image)]
     all_img = [np.asarray(sample.cameras[c].image) for c in CAMERAS]
     for level in levels:
@@ -110,6 +118,19 @@ def keyframe_rows(sample, later, levels) -> dict:
             row["forward"] = scored(sl, later.cameras["CAM_FRONT"], all_img)
             row["forward_every_camera"] = mean_row([scored(sl, later.cameras[c], all_img) for c in CAMERAS])
         out["six_view"][level] = row
+    if previous is not None and later is not None:
+        sl, dt = lighting(sample, ["CAM_FRONT"], DEFAULT_LEVEL, previous)
+        out["monocular_previous"][DEFAULT_LEVEL] = {
+            "chosen": sl.level, "seconds": dt, "sun_visibility": float(sl.sun_visibility),
+            "self": scored(sl, sample.cameras["CAM_FRONT"], front_img),
+            "others": mean_row([scored(sl, sample.cameras[c], front_img) for c in CAMERAS[1:]]),
+            "forward": scored(sl, later.cameras["CAM_FRONT"], front_img)}
+        sl, dt = lighting(sample, list(CAMERAS), DEFAULT_LEVEL, previous)
+        out["six_view_previous"][DEFAULT_LEVEL] = {
+            "chosen": sl.level, "seconds": dt, "sun_visibility": float(sl.sun_visibility),
+            "self_every_camera": mean_row([scored(sl, sample.cameras[c], all_img) for c in CAMERAS]),
+            "forward": scored(sl, later.cameras["CAM_FRONT"], all_img),
+            "forward_every_camera": mean_row([scored(sl, later.cameras[c], all_img) for c in CAMERAS])}
     if later is not None:
         rows = []
         for c in CAMERAS:
@@ -122,7 +143,7 @@ def keyframe_rows(sample, later, levels) -> dict:
 def medians(keyframes: list[dict], levels) -> dict:
     """Median over keyframes of every (setup, level, target) score."""
     out: dict = {}
-    for setup in ("monocular", "six_view", "every_camera"):
+    for setup in ("monocular", "six_view", "every_camera", "monocular_previous", "six_view_previous"):
         for level in levels:
             rows = [k[setup][level] for k in keyframes if level in k[setup]]
             if not rows:
@@ -159,6 +180,8 @@ def main() -> None:
     ap.add_argument("--stride", type=int, default=1, help="every n-th source keyframe")
     ap.add_argument("--levels", default="L0,L1,L2,L3,auto")
     ap.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "results")
+    ap.add_argument("--name", default="real_lighting.json", help="result file name in --out")
+    ap.add_argument("--keyframes", default=None, help="comma-separated source keyframes (default: every --stride-th)")
     args = ap.parse_args()
     torch.set_num_threads(1)
     levels = tuple(args.levels.split(","))
@@ -168,14 +191,20 @@ def main() -> None:
         reader = NuScenesReader(SEQ, "v1.0-mini")
         tokens = reader.sample_tokens("scene-0916")
         pairs = paper_pairs(len(tokens))[:: args.stride]
+        if args.keyframes:
+            wanted = {int(k) for k in args.keyframes.split(",")}
+            pairs = [p for p in paper_pairs(len(tokens)) if p[0] in wanted]
         rows = []
         for t, t3 in pairs:
             t0 = time.perf_counter()
-            rows.append({"t": t} | keyframe_rows(reader.sample(tokens[t]), reader.sample(tokens[t3]), levels))
+            previous = reader.sample(tokens[t - 1]) if t > 0 else None
+            rows.append({"t": t} | keyframe_rows(reader.sample(tokens[t]), reader.sample(tokens[t3]), levels, previous))
             m, s = rows[-1]["monocular"], rows[-1]["six_view"]
             print(f"keyframe {t} -> {t3} ({time.perf_counter() - t0:.0f} s): " + ", ".join(
                 f"{lv} mono {m[lv]['forward']['psnr']:.2f}/{m[lv]['forward']['si_psnr']:.2f} "
-                f"6v {s[lv]['forward']['psnr']:.2f}/{s[lv]['forward']['si_psnr']:.2f}" for lv in levels), flush=True)
+                f"6v {s[lv]['forward']['psnr']:.2f}/{s[lv]['forward']['si_psnr']:.2f}" for lv in levels)
+                + "".join(f", {k} {r[DEFAULT_LEVEL]['forward']['psnr']:.2f}" for k in ("monocular_previous", "six_view_previous")
+                          if DEFAULT_LEVEL in (r := rows[-1][k])), flush=True)
         med = medians(rows, levels)
         print_medians("scene-0916 median", med)
         result["scene_0916"] = {"pairs": len(rows), "median": med, "per_keyframe": rows}
@@ -201,7 +230,7 @@ def main() -> None:
                   f"all-camera self {r['all_cameras_self']['psnr']:.2f}/{r['all_cameras_self']['si_psnr']:.2f}", flush=True)
         result["one_north"] = {"cameras": cams, "rows": rows}
     args.out.mkdir(parents=True, exist_ok=True)
-    path = args.out / "real_lighting.json"
+    path = args.out / args.name
     write_json_atomic(path, result)
     print(f"wrote {path}")
 

@@ -9,8 +9,9 @@ points neighbouring cameras both see (:mod:`.exposure`): images are divided by i
 it. The sun and the per-camera L1 estimates come from the front door (:mod:`.api`), which chose their source.
 
 An *earlier keyframe* (the sample's previous one, :class:`EarlierKeyframe`) adds its cameras' seen surfaces, at
-rank 1 (:mod:`.seen_surfaces`): they fill only the rays the instant's own surfaces leave open. (Its pixels in the
-volume and its LiDAR were tried too and hurt: the instant's own observations are the better evidence.)
+rank 1 (:mod:`.seen_surfaces`), without what the instant's cameras saw through: they fill only the rays the
+instant's own surfaces leave open. (Its pixels in the volume were tried too and hurt: the instant's own
+observations are the better evidence.)
 """
 
 from __future__ import annotations
@@ -37,7 +38,7 @@ from .exposure import exposure_ratios, lidar_luminance, pair_ratio
 from .fill import mean_colour_radiance
 from .levels import L2_GRID, L3_GRID, HeightMap, choose_level, predicted_errors, region_points
 from .observe import ViewObservation, observe_view, restrict_to_grid
-from .seen_surfaces import DepthView, SeenSurfaces
+from .seen_surfaces import DepthView, SeenSurfaces, carved
 from .parametric import DEFAULT_TURBIDITY, GROUND_ALBEDO, ViewInputs, l0_estimate
 from .skydome import build_sky_dome, camera_envmap_to_world, model_sky_world
 from .types import LightingEstimate, SampleLighting, join_reasons, json_clean
@@ -221,9 +222,11 @@ def earlier_exposure_ratios(views: Sequence[CameraView], ratios: dict[str, float
 
 
 def earlier_depth_views(earlier: EarlierKeyframe, views: Sequence[CameraView], ratios: dict[str, float],
-                        lidar: LidarSweep | None, T_vol_from_global: np.ndarray) -> tuple[list[DepthView], dict]:
-    """The earlier keyframe's cameras' depth views at rank 1 (volume frame, reference scale) and their exposure
-    ratios (channel -> ratio)."""
+                        lidar: LidarSweep | None, T_vol_from_global: np.ndarray,
+                        instant: Sequence[DepthView] = ()) -> tuple[list[DepthView], dict]:
+    """The earlier keyframe's cameras' depth views at rank 1 (volume frame, reference scale), without what the
+    ``instant`` cameras' depth views saw through (:func:`.seen_surfaces.carved`), and their exposure ratios
+    (channel -> ratio)."""
     pts = [sw.points_global for sw in (lidar, earlier.lidar) if sw is not None]
     e_ratios = earlier_exposure_ratios(views, ratios, earlier, np.concatenate(pts) if pts else None)
     e_lidar = lidar_points_in_volume(earlier.lidar, T_vol_from_global) if earlier.lidar is not None else None
@@ -231,7 +234,7 @@ def earlier_depth_views(earlier: EarlierKeyframe, views: Sequence[CameraView], r
     for v, k in zip(earlier.views, e_ratios):
         dv = _observe(v, T_vol_from_global @ np.asarray(v.T_global_from_cam), k, e_lidar, None).depth_view
         if dv is not None:
-            out.append(replace(dv, channel=f"{v.channel}@earlier", rank=1))
+            out.append(replace(carved(dv, list(instant)), channel=f"{v.channel}@earlier", rank=1))
     return out, {v.channel: k for v, k in zip(earlier.views, e_ratios)}
 
 
@@ -277,7 +280,8 @@ def observe_scene(views: Sequence[CameraView], inputs: Sequence[ViewInputs], T_g
     depth_views: list[DepthView] = []
     if earlier is not None and earlier.views:
         t = time.perf_counter()
-        depth_views, exposure["earlier"] = earlier_depth_views(earlier, views, ratios, lidar, T_vol_from_global)
+        depth_views, exposure["earlier"] = earlier_depth_views(
+            earlier, views, ratios, lidar, T_vol_from_global, [o.depth_view for o in observations if o.depth_view is not None])
         timing["observe_earlier"] = time.perf_counter() - t
     return SceneObservations(T_vol_from_cams, observations, lidar_vol, widest, ratios, exposure, tuple(depth_views))
 

@@ -22,14 +22,15 @@ constant (not a function of the volume's parameters).
 
 Cameras have a *rank*: 0 for the estimate's own cameras, 1 for an earlier keyframe's (:mod:`.multiview`). A ray
 takes only hits of the lowest rank that it hits at all: an earlier camera's surfaces fill only what the
-cameras of the instant left open (what is now behind or above them), they never cover what those saw.
+cameras of the instant left open (what is now behind or above them), they never cover what those saw; and
+what an instant camera saw through (its sky, or farther surfaces) is carved out of them first (:func:`carved`).
 """
 
 from __future__ import annotations
 
 import functools
 import io
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import cv2
@@ -49,6 +50,7 @@ SEEN_SCHEMA = "streetaug.seen_surfaces/1"
 DEPTH_UNCERTAINTY = 0.1  # relative error of the densified depth (0.05 / 0.1 / 0.2 tried on scene-0916 keyframes 4, 12, 24)
 SAME_SURFACE_FRACTION = 0.05  # hits this much farther than the nearest (+ 0.1 m) are the same surface
 BLUR_LEVELS_PX = (0.0, 1.0, 2.0, 4.0, 8.0, 16.0)  # Gaussian sigmas of the texture copies
+SEEN_THROUGH_WINDOW_PX = 3  # seen_through: the depth a camera saw is the nearest within this window
 
 
 @dataclass(frozen=True)
@@ -74,6 +76,49 @@ class DepthView:
     T_vol_from_cam: np.ndarray
     backdrop_depth_m: np.ndarray | None = None
     rank: int = 0
+
+
+def seen_through(view: DepthView, by: list[DepthView], margin: float = MAX_DEPTH_RATIO,
+                 window_px: int = SEEN_THROUGH_WINDOW_PX) -> np.ndarray:
+    """(h, w) bool: the pixels of ``view`` whose surface point another camera of ``by`` saw through -- it lands
+    inside that camera's image, in front of it, nearer by more than ``margin`` than every depth it saw within
+    ``window_px`` (its sky, inf, is beyond every point; the window spares edges a pixel's misregistration
+    would cut). An earlier keyframe's surface that the instant's cameras see through has moved or was never
+    there (a sky pixel taken for structure)."""
+    h, w = view.depth_m.shape
+    finite = np.isfinite(view.depth_m)
+    out = np.zeros((h, w), bool)
+    if not finite.any():
+        return out
+    vv, uu = np.nonzero(finite)
+    p_cam = unproject_depth(view.K, np.stack([uu, vv], axis=1).astype(np.float64), view.depth_m[finite])
+    p_vol = transform_points(np.asarray(view.T_vol_from_cam, np.float64), p_cam)
+    through = np.zeros(len(p_vol), bool)
+    for other in by:
+        q = transform_points(np.linalg.inv(np.asarray(other.T_vol_from_cam, np.float64)), p_vol)
+        oh, ow = other.depth_m.shape
+        nearest = cv2.erode(np.minimum(other.depth_m, 1e9).astype(np.float32), np.ones((window_px, window_px), np.uint8))
+        z = q[:, 2]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            u = np.round(other.K[0][0] * q[:, 0] / z + other.K[0][2])
+            v = np.round(other.K[1][1] * q[:, 1] / z + other.K[1][2])
+        inside = (z > 0.5) & (u >= 0) & (u <= ow - 1) & (v >= 0) & (v <= oh - 1)
+        k = np.flatnonzero(inside)
+        seen = nearest[v[k].astype(np.int64), u[k].astype(np.int64)]
+        through[k] |= z[k] * margin < seen
+    out[vv, uu] = through
+    return out
+
+
+def carved(view: DepthView, by: list[DepthView]) -> DepthView:
+    """``view`` without the pixels the cameras ``by`` saw through (:func:`seen_through`): inf depth, in its
+    backdrop too."""
+    cut = seen_through(view, by)
+    if not cut.any():
+        return view
+    back = view.backdrop_depth_m
+    return replace(view, depth_m=np.where(cut, np.inf, view.depth_m).astype(np.float32),
+                   backdrop_depth_m=None if back is None else np.where(cut, np.inf, back).astype(np.float32))
 
 
 def depth_mesh(view: DepthView, step: int = GEOMETRY_STEP_PX) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -75,3 +75,27 @@ def test_an_earlier_keyframe_adds_rank_one_surfaces_that_leave_the_instant_views
     a = predicted_radiance(alone, views[0], 96)
     b = predicted_radiance(both, views[0], 96)
     assert np.allclose(a, b, rtol=1e-4, atol=1e-6)
+
+
+def test_an_earlier_surface_the_instant_saw_through_is_carved():
+    """The instant's camera sees sky on its right half and a wall at 10 m on its left; an earlier camera (same
+    pose) saw a surface at 5 m over its right half (moved away since, or sky taken for structure) and one at
+    10 m / 20 m on its left (the same wall / behind it): only the right half is seen through, and carved."""
+    from streetaug.augment.lighting.seen_surfaces import carved, seen_through
+
+    now_depth = np.full((H, W), np.inf)
+    now_depth[:, : W // 2] = 10.0
+    now = fronto_view(now_depth)
+    earlier_depth = np.full((H, W), 5.0)
+    earlier_depth[: H // 2, : W // 2 - 3] = 10.0
+    earlier_depth[H // 2 :, : W // 2 - 3] = 20.0
+    earlier = fronto_view(earlier_depth, "CAM_FRONT@earlier")
+    through = seen_through(earlier, [now])
+    assert through[:, W // 2 + 3 :].all()  # in front of the instant's sky
+    assert not through[:, : W // 2 - 3].any()  # the same wall, or hidden behind it
+    cut = carved(earlier, [now])
+    assert np.isinf(cut.depth_m[:, W // 2 + 3 :]).all() and np.isfinite(cut.depth_m[:, : W // 2 - 3]).all()
+    # the ranked layer: a ray through the carved half finds nothing (the instant saw sky there)
+    layer = SeenSurfaces.from_views([now, replace(cut, rank=1)])
+    o, d = _rays(-3.0)
+    assert not layer.trace(o, d)[0][0]
