@@ -259,12 +259,57 @@ def run_scene(hdri: str, car: str, args, cache: Cache, log, curve: bool = True, 
     out["mitsuba_full_frame_s_1thread_measured"] = t_full
     out["mitsuba_full_frame_cpu_s_measured"] = c_full
     d = out["presets"]["default"]
+    for threads in args.equal_threads:
+        _equal_threads(out, scene, crop, image_in, depth, env, asset, pose, ev, threads, args.runs, log)
     out["speedup_default"] = _speedup(out["mitsuba"], d["psnr_region"], d["total_s_median"])
     out["speedup_default_cpu"] = _speedup(out["mitsuba"], d["psnr_region"], d["cpu_s_median"], key="full_frame_cpu_s")
     log("  Mitsuba: " + ", ".join(f"{m['spp']} spp {m['psnr_region']:.1f} dB / {m['full_frame_s_1thread']:.1f} s"
                                   for m in out["mitsuba"]) + f" -> default is {out['speedup_default']['text']} "
         f"(CPU time: {out['speedup_default_cpu']['text']})")
     return out
+
+
+def _equal_threads(out: dict, scene, crop: tuple, image_in: np.ndarray, depth: np.ndarray, env: np.ndarray, asset,
+                   pose: tuple, ev: float, threads: int, runs: int, log) -> None:
+    """Same threads, same work: streetaug's default insert (wall, ``threads`` for torch / OpenCV / BLAS) against
+    Mitsuba rendering only the crop where the car changes the image (wall, ``threads`` in its pool), both timed
+    now, one after the other. Mitsuba's time per spp is fitted from 4 and 16 spp crop renders (linear in spp);
+    the PSNR at each spp is the curve's. Adds ``crop_s_<T>threads`` to the curve and ``equal_threads[T]``."""
+    import cv2
+    import torch
+    from threadpoolctl import threadpool_limits
+
+    torch.set_num_threads(threads)
+    cv2.setNumThreads(threads)
+    s_crop = ref.build_scene(scene, crop=crop)
+    ours, ours_cpu, t_crop, cpu_crop = [], [], {4: [], 16: []}, {4: [], 16: []}
+    with threadpool_limits(threads):
+        for seed in range(max(runs, 3)):  # interleaved: one streetaug run, then the two Mitsuba crop renders
+            c0 = time.process_time()
+            res = insert_into_image(image_in, K, depth, env, asset, pose,
+                                    InsertOptions(quality="default", ev=ev, seed=seed, match_camera=False))
+            ours_cpu.append(time.process_time() - c0)
+            ours.append(res.timing_s["total"])
+            for spp in t_crop:
+                c0 = time.process_time()
+                t_crop[spp].append(ref.render(s_crop, spp, seed=7 + seed, threads=threads)[1])
+                cpu_crop[spp].append(time.process_time() - c0)
+    t4, t16 = float(np.median(t_crop[4])), float(np.median(t_crop[16]))
+    per_spp = (t16 - t4) / 12.0
+    fixed = max(t4 - 4 * per_spp, 0.0)
+    key = f"crop_s_{threads}threads"
+    for m in out["mitsuba"]:
+        m[key] = fixed + per_spp * m["spp"]
+    ours_s = float(np.median(ours))
+    sp = _speedup(out["mitsuba"], out["presets"]["default"]["psnr_region"], ours_s, key=key)
+    out.setdefault("equal_threads", {})[str(threads)] = {
+        "threads": threads, "streetaug_wall_s": ours, "streetaug_wall_s_median": ours_s, "streetaug_cpu_s": ours_cpu,
+        "mitsuba_crop_wall_s_4spp": t_crop[4], "mitsuba_crop_wall_s_16spp": t_crop[16],
+        "mitsuba_crop_cpu_s_4spp": cpu_crop[4], "mitsuba_crop_cpu_s_16spp": cpu_crop[16],
+        "mitsuba_crop_pixels": int((crop[2] - crop[0]) * (crop[3] - crop[1])), "speedup": sp,
+        "load_avg": os.getloadavg()}
+    log(f"  {threads} thread(s), same crop: streetaug {ours_s:.3f} s, Mitsuba crop {t4:.2f} s @4 / {t16:.2f} s @16 spp "
+        f"-> {sp['text']}")
 
 
 def _coverage(prep, T, n: int = 4) -> np.ndarray:
@@ -364,9 +409,13 @@ def main() -> None:
                     help="first scene only: compare with a reference at this many spp (0: skip)")
     ap.add_argument("--cache", type=Path, default=Path("/tmp/streetaug_render_reference"))
     ap.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "results" / "render_reference")
+    ap.add_argument("--equal-threads", default="",
+                    help="comma-separated thread counts (e.g. 1,2): also time both tools on that many threads, "
+                         "Mitsuba on the crop only (the same work), for the scenes with a curve")
     ap.add_argument("--quick", action="store_true", help="one scene, 128 spp reference, short curve (smoke run)")
     args = ap.parse_args()
     args.presets = tuple(args.presets.split(","))
+    args.equal_threads = [int(t) for t in args.equal_threads.split(",") if t]
     ok, why = ref.mitsuba_available()
     if not ok:
         sys.exit(f"bench_render_reference: {why}")
@@ -405,8 +454,16 @@ def main() -> None:
     summary["default_speedup_vs_mitsuba"] = {"min": float(np.min(ratios)), "median": float(np.median(ratios)),
                                              "scenes": [f"{r['hdri']}/{r['car']}" for r in curved],
                                              "bounds": [r["speedup_default"]["bound"] for r in curved]}
+    for t in args.equal_threads:
+        r_t = [r["equal_threads"][str(t)]["speedup"]["ratio"] for r in curved if "equal_threads" in r]
+        summary[f"default_speedup_vs_mitsuba_crop_{t}threads"] = {
+            "min": float(np.min(r_t)), "median": float(np.median(r_t)),
+            "bounds": [r["equal_threads"][str(t)]["speedup"]["bound"] for r in curved if "equal_threads" in r]}
     summary["targets"] = {"default_psnr_region_ge_35_all_scenes": bool(summary["default"]["psnr_region_min"] >= 35.0),
-                          "default_speedup_ge_20_all_scenes": bool(np.min(ratios) >= 20.0)}
+                          "default_speedup_ge_20_all_scenes": bool(np.min(ratios) >= 20.0),
+                          **{f"default_speedup_ge_20_crop_{t}threads": bool(
+                              summary[f"default_speedup_vs_mitsuba_crop_{t}threads"]["min"] >= 20.0)
+                             for t in args.equal_threads}}
     doc = {"what": "streetaug composite vs Mitsuba 3 reference (see benchmarks/bench_render_reference.py)",
            "space": "LDR uint8 after the contract's camera response (EV puts the ground at 0.45)",
            "image": [W, H], "ref_spp": args.ref_spp, "full_spp": args.full_spp, "curve_spp": list(CURVE_SPP[: args.curve_points]),
