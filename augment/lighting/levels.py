@@ -27,6 +27,7 @@ LEVELS = ("L0", "L1", "L2", "L3")
 AUTO_TOLERANCE = 0.05
 L3_GRID = LogGrid(shape=(128, 128, 32), half_extent_xy_m=150.0, z_min_m=-4.0, z_max_m=76.0)
 L2_GRID = LogGrid(shape=(64, 64, 24), half_extent_xy_m=40.0, z_min_m=-4.0, z_max_m=36.0, log_scale_xy_m=3.0)
+BLOCKED_MARCH_ELEMENTS = 1_000_000  # (point, direction, step) samples marched at once by HeightMap.blocked (~50 MB)
 WALL_RHO = 0.25  # assumed albedo of occluders when predicting the light they reflect
 
 
@@ -69,13 +70,25 @@ class HeightMap:
                 box_hi: np.ndarray | None = None, max_dist_m: float = 300.0) -> np.ndarray:
         """(M, D) bool: does a ray from each point (M, 3) along each unit direction (D, 3) hit a structure?
 
-        Only structures inside the xy box ``[box_lo, box_hi]`` (default: the whole map) count.
+        Only structures inside the xy box ``[box_lo, box_hi]`` (default: the whole map) count. The march runs
+        over blocks of points of at most ``BLOCKED_MARCH_ELEMENTS`` (point, direction, step) samples, so its
+        memory does not grow with the number of points.
         """
-        pts = np.asarray(points, dtype=np.float64)
-        d = np.asarray(dirs, dtype=np.float64)
+        pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        d = np.asarray(dirs, dtype=np.float64).reshape(-1, 3)
         step = 0.5 * self.cell_m
-        horiz = np.maximum(np.linalg.norm(d[:, :2], axis=1), 1e-6)
         t = np.arange(1, int(max_dist_m / step) + 1) * step  # horizontal distance marched
+        per_point = max(len(d) * len(t), 1)
+        block = max(1, BLOCKED_MARCH_ELEMENTS // per_point)
+        out = np.zeros((len(pts), len(d)), dtype=bool)
+        for start in range(0, len(pts), block):
+            out[start:start + block] = self._blocked_block(pts[start:start + block], d, t, box_lo, box_hi)
+        return out
+
+    def _blocked_block(self, pts: np.ndarray, d: np.ndarray, t: np.ndarray, box_lo: np.ndarray | None,
+                       box_hi: np.ndarray | None) -> np.ndarray:
+        """:meth:`blocked` for one block of points (m, 3), directions (D, 3), marched distances (T,)."""
+        horiz = np.maximum(np.linalg.norm(d[:, :2], axis=1), 1e-6)
         pos = pts[:, None, None, :2] + (t[None, None, :, None] * (d[None, :, None, :2] / horiz[None, :, None, None]))
         z = pts[:, None, None, 2] + t[None, None, :] * (d[None, :, None, 2] / horiz[None, :, None])
         n = self.heights_m.shape[0]
