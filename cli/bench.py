@@ -25,10 +25,12 @@ def _names(value: str, allowed: tuple[str, ...], option: str) -> list[str]:
 @click.option("--levels", default="L0,L1,L2,L3,auto", show_default=True, help="Lighting levels to sweep.")
 @click.option("--presets", default="draft,default,high", show_default=True, help="Render presets to sweep.")
 @click.option("--small", is_flag=True, help="The CI configuration: one scene, one placement, L0/L1/auto x draft.")
+@click.option("--class-rules", type=click.Path(dir_okay=False, exists=True, path_type=Path), default=None,
+              help="JSON file overriding the per-class placement rules of the cases (as insert's --class-rules).")
 @click.option("--out", required=True, type=click.Path(file_okay=False, path_type=Path), help="Output folder.")
 @click.option("--debug", is_flag=True, help="Show tracebacks.")
 @runtime_errors
-def bench(scenes, seeds, levels, presets, small, out, debug):
+def bench(scenes, seeds, levels, presets, small, class_rules, out, debug):
     """Sweep lighting levels x render presets on the bundled scenes; chart time vs error.
 
     Writes speed_accuracy.png (log time vs composite RMSE, Pareto front, auto highlighted),
@@ -57,7 +59,7 @@ def bench(scenes, seeds, levels, presets, small, out, debug):
     n_steps = len(scene_names) * len(seed_list) * len(level_list) * len(preset_list)  # at most: cases may drop
     with click.progressbar(length=n_steps, label="bench") as bar:
         table = sa.run_bench(bundled_dataroot(), scene_names, seed_list, level_list, preset_list, out,
-                             on_step=lambda: bar.update(1))
+                             on_step=lambda: bar.update(1), class_rules=str(class_rules) if class_rules else None)
     click.echo(sa.markdown_table(table))
     for t in (t for t in table if t["level"] == "auto"):
         click.echo(f"auto ({t['config']}): {'on' if t['pareto'] else 'off'} the Pareto front, "

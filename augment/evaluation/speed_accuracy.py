@@ -108,8 +108,11 @@ def affected_region(source: np.ndarray, *composites: np.ndarray, grow_px: int = 
     return cv2.dilate(changed.astype(np.uint8), np.ones((k, k), np.uint8)) > 0
 
 
-def make_cases(dataroot, scenes: Sequence[str], seeds: Sequence[int], camera: str = "CAM_FRONT") -> list[Case]:
-    """Place one procedural car per (scene, seed) and render its reference (high preset, true local light)."""
+def make_cases(dataroot, scenes: Sequence[str], seeds: Sequence[int], camera: str = "CAM_FRONT",
+               class_rules: str | None = None) -> list[Case]:
+    """Place one procedural car per (scene, seed) and render its reference (high preset, true local light).
+
+    ``class_rules``: a placement rules file (``--class-rules``), None for the built-in rules."""
     reader = NuScenesReader(dataroot, BUNDLED_VERSION)
     cases = []
     for scene in scenes:
@@ -121,7 +124,7 @@ def make_cases(dataroot, scenes: Sequence[str], seeds: Sequence[int], camera: st
         estimate_lighting(view, sample.location, "L2", lidar=sample.lidar, boxes=sample.boxes)
         for seed in seeds:
             (asset,) = select_assets(item_seed(seed, "asset", sample.token, camera), 1, location=sample.location)
-            placed = place_in_view(sample, view, [asset], [], InsertOptions(seed=seed))
+            placed = place_in_view(sample, view, [asset], [], InsertOptions(seed=seed, class_rules=class_rules))
             if not placed.placements:
                 continue
             p = placed.placements[0]
@@ -241,17 +244,18 @@ def markdown_table(table: list[dict]) -> str:
 
 def run_bench(dataroot: str | Path, scenes: Sequence[str], seeds: Sequence[int], levels: Sequence[str],
               presets: Sequence[str], out_dir: str | Path, on_step: Callable[[], None] = lambda: None,
-              reference_results: str | Path = REFERENCE_RESULTS) -> list[dict]:
+              reference_results: str | Path = REFERENCE_RESULTS, class_rules: str | None = None) -> list[dict]:
     """The sweep of ``streetaug bench``: every case x level x preset; writes ``speed_accuracy.png``, ``.csv``
     (one row per case and configuration), ``.md`` (the table) and ``.json`` into ``out_dir``.
 
-    ``on_step`` is called after each configuration (a progress bar). Returns the table (one line per
+    ``on_step`` is called after each configuration (a progress bar); ``class_rules``: the placement rules file
+    (None: built-in). Returns the table (one line per
     configuration, :func:`summarise`).
 
     Raises:
         InputError: no placement found in any scene / seed.
     """
-    cases = make_cases(dataroot, scenes, seeds)
+    cases = make_cases(dataroot, scenes, seeds, class_rules=class_rules)
     if not cases:
         raise InputError("no placement found in any scene/seed: nothing to measure")
     rows = []

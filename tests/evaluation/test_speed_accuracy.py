@@ -50,7 +50,14 @@ def test_pareto_front_and_distance_to_it():
 
 
 def test_bench_small_writes_chart_table_and_rows(tmp_path):
-    result = CliRunner().invoke(main, ["bench", "--small", "--out", str(tmp_path)], catch_exceptions=False)
+    # The case below: the car placed with the class table's fixed lane / kerb weights (by default it parks as
+    # the sample's cars do, under the trees, where auto took L2 at RMSE 39 against L1's 12 in session 8: issue #16).
+    rules = tmp_path / "rules.json"
+    rules.write_text(json.dumps({"schema": "streetaug.class_rules/1",
+                                 "classes": {"car": {"zones": {"lane": 0.6, "kerb": 0.4}, "zone_weights": "fixed"}}}))
+    result = CliRunner().invoke(main, ["bench", "--small", "--class-rules", str(rules), "--out", str(tmp_path / "out")],
+                                catch_exceptions=False)
+    tmp_path = tmp_path / "out"
     assert result.exit_code == 0, result.output
     for name in ("speed_accuracy.png", "speed_accuracy.csv", "speed_accuracy.md", "speed_accuracy.json"):
         assert (tmp_path / name).stat().st_size > 100, name
