@@ -80,11 +80,15 @@ def main() -> None:
 @click.option("--at", "at", callback=POSITION_CHECK, help="X,Y,Z (camera frame, metres): point of the local "
               "environment map (default: the ground point 15 m straight ahead).")
 @click.option("--level", type=click.Choice(LIGHT_LEVELS), default="auto", show_default=True, help=LEVEL_HELP)
+@click.option("--previous-keyframe", is_flag=True, help="Also use the sample's previous keyframe (its cameras "
+              "saw what is now behind and above): L2/L3 fill what the instant's cameras left open (on scene-0916 "
+              "+0.06 dB six-view, +35 % lighting time). A scene's first sample has none: it is lit without.")
 @click.option("--out", required=True, type=click.Path(file_okay=False, path_type=Path), help="Output folder.")
 @click.option("--debug", is_flag=True, help="Show tracebacks.")
 @limit_options
 @runtime_errors
-def predict_light(dataroot, version, scene, sample_token, camera, image, fov_deg, intrinsics, at, level, out, debug):
+def predict_light(dataroot, version, scene, sample_token, camera, image, fov_deg, intrinsics, at, level,
+                  previous_keyframe, out, debug):
     """Estimate the scene's HDR lighting; write lighting.json, envmap_camera.exr and preview.png.
 
     \b
@@ -100,6 +104,8 @@ def predict_light(dataroot, version, scene, sample_token, camera, image, fov_deg
         from streetaug.augment.lighting.api import estimate_instant_lighting
 
     at_cam = parse_floats(at, 3, "--at")
+    if image is not None and previous_keyframe:
+        raise click.UsageError("--previous-keyframe needs a dataset sample, not --image")
     if image is not None:
         if fov_deg is None and intrinsics is None:
             raise click.UsageError("--image needs --fov-deg F or --intrinsics fx,fy,cx,cy")
@@ -120,8 +126,15 @@ def predict_light(dataroot, version, scene, sample_token, camera, image, fov_deg
             y = -(offset + normal[2] * 15.0) / normal[1] if abs(normal[1]) > 1e-6 else 1.5
             at_cam = [0.0, float(y), 15.0]
         query = at_cam
+        previous = None
+        if previous_keyframe:
+            prev_token = reader.get("sample", sample.token).get("prev", "")
+            if prev_token:
+                previous = reader.sample(prev_token)
+            else:
+                click.echo(f"sample {sample.token} is its scene's first: no previous keyframe, lit from this one alone")
         estimate = estimate_instant_lighting(sample, view.channel, level, np.asarray(query, dtype=float),
-                                             for_map=True)
+                                             for_map=True, previous=previous)
     write_lighting_outputs(estimate, out, rgb, query_point_cam=np.asarray(query, dtype=float))
     click.echo(f"wrote {out}/lighting.json, envmap_camera.exr, preview.png "
                f"(sun: {estimate.sun_source}, visibility {estimate.sun_visibility:.2f}, level {estimate.level})")

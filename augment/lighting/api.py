@@ -335,17 +335,19 @@ def map_error(lighting: SampleLighting, views: Sequence[CameraView], width: int 
 
 def estimate_views_lighting_for_map(views: Sequence[CameraView], location: str | None, level: str,
                                     lidar: LidarSweep | None = None, boxes: list[Box] | None = None,
-                                    query_point_cam: np.ndarray | None = None) -> SampleLighting:
+                                    query_point_cam: np.ndarray | None = None,
+                                    earlier: EarlierKeyframe | None = None) -> SampleLighting:
     """:func:`estimate_views_lighting` for a caller that writes the map (``predict-light``): ``auto`` judges the
     levels by the error of their maps against the images (:func:`map_error`), cheapest first, and never keeps a
-    level whose map is further from the images than the next level's; any other level is built as asked."""
+    level whose map is further from the images than the next level's; any other level is built as asked.
+    ``earlier``: as :func:`estimate_views_lighting`'s."""
     if level != "auto":
-        return estimate_views_lighting(views, location, level, lidar, boxes, query_point_cam)
+        return estimate_views_lighting(views, location, level, lidar, boxes, query_point_cam, earlier=earlier)
     model, inputs, started = _model_l1(views, location, "L1", lidar, boxes)  # one L1 fit for every candidate
     errors: dict[str, float] = {}
     chosen = None
     for lv in MAP_LEVELS:
-        sl = _from_model_l1(model, inputs, started, lv, lidar, query_point_cam, None)
+        sl = _from_model_l1(model, inputs, started, lv, lidar, query_point_cam, None, earlier)
         errors[lv] = map_error(sl, views)
         if chosen is not None and errors[lv] >= errors[chosen[0]]:
             break
@@ -361,7 +363,7 @@ def estimate_views_lighting_for_map(views: Sequence[CameraView], location: str |
 
 
 def estimate_instant_lighting(sample: Sample, camera: str, level: str, query_point_cam: np.ndarray | None = None,
-                              for_map: bool = False) -> LightingEstimate:
+                              for_map: bool = False, previous: Sample | None = None) -> LightingEstimate:
     """One camera's lighting from the estimate of its whole instant: all the sample's cameras (``camera`` the
     reference), so that every camera of a sample reports the same sun and sky.
 
@@ -374,6 +376,8 @@ def estimate_instant_lighting(sample: Sample, camera: str, level: str, query_poi
         level: "L0" | "L1" | "L2" | "L3" | "auto".
         query_point_cam: placement (``camera``'s frame, metres) for L2's centre and the placement judgement.
         for_map: ``auto`` judges by the written map (:func:`estimate_views_lighting_for_map`), not the placement.
+        previous: the sample's previous keyframe, or None: at L2/L3 its same cameras' seen surfaces fill what
+            the instant's leave open (:func:`earlier_keyframe`; about +35 % lighting time on six cameras).
     """
     if camera not in sample.cameras:
         raise InputError(f"sample {sample.token}: camera {camera!r} not found; available: "
@@ -390,10 +394,16 @@ def estimate_instant_lighting(sample: Sample, camera: str, level: str, query_poi
         except InputError as exc:
             skipped[c] = str(exc)
     build = estimate_views_lighting_for_map if for_map else estimate_views_lighting
-    sl = build(used, sample.location, level, lidar=sample.lidar, boxes=sample.boxes, query_point_cam=query_point_cam)
+    earlier = None if previous is None else earlier_keyframe(previous, [v.channel for v in used])
+    sl = build(used, sample.location, level, lidar=sample.lidar, boxes=sample.boxes, query_point_cam=query_point_cam,
+               earlier=earlier)
     est = sl.for_view(view)
     note = f"one estimate for the instant from {len(used)} camera(s) ({', '.join(v.channel for v in used)})"
+    if earlier is not None:
+        note += (f"; the previous keyframe {previous.token}'s {len(earlier.views)} camera(s) fill what they "
+                 "left open" if earlier.views else f"; the previous keyframe {previous.token} has none of them")
     if skipped:
         note += "; left out (image unreadable): " + "; ".join(f"{c}: {why}" for c, why in skipped.items())
-    params = dict(est.params) | {"instant": {"cameras": [v.channel for v in used], "skipped": skipped}}
+    params = dict(est.params) | {"instant": {"cameras": [v.channel for v in used], "skipped": skipped,
+                                             "previous_keyframe": None if previous is None else previous.token}}
     return replace(est, reason=join_reasons(est.reason, note), params=json_clean(params))
