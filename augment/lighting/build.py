@@ -74,7 +74,8 @@ def structure_heights(top_m: np.ndarray, cam_top_m: np.ndarray, cam_capped: np.n
     A standing structure (touching the ground) whose top the sensors could not see — at or near the LiDAR's
     upper field-of-view limit and not seen whole by a camera, or reaching the top edge of an image — is
     raised to the median of the heights the cameras saw whole (sky above) that exceed its observed top
-    (a conditional median; ``DEFAULT_CANYON_HEIGHT_M`` without such observations).
+    (a conditional median; a structure taller than all of them keeps its observed top; ``DEFAULT_CANYON_HEIGHT_M``
+    without such observations).
 
     Args:
         top_m: (...) observed top height per column (0 where nothing stands), metres above the ground.
@@ -98,7 +99,9 @@ def structure_heights(top_m: np.ndarray, cam_top_m: np.ndarray, cam_capped: np.n
             k = np.searchsorted(seen, bound, side="right")
             n_above = len(seen) - k
             mid = np.minimum(k + n_above // 2, len(seen) - 1)
-            est = np.where(n_above > 0, seen[mid], 1.25 * bound)
+            # taller than every structure seen whole: its observed top, the only height known (a guessed 25 %
+            # more put 27 m walls into L2's volume across a generated street whose sun then never reached a car)
+            est = np.where(n_above > 0, seen[mid], bound)
         else:
             est = np.maximum(bound, DEFAULT_CANYON_HEIGHT_M)
         heights[cut] = np.clip(np.maximum(est, bound), 0.0, 80.0)

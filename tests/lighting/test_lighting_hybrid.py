@@ -137,6 +137,14 @@ def test_structure_heights_raise_cut_columns_to_the_conditional_median():
     assert heights[11] > 2.0
 
 
+def test_a_cut_structure_taller_than_every_seen_one_keeps_its_observed_top():
+    top = np.array([5.0, 6.0, 8.0, 12.0, 20.0, 30.0, 9.0, 11.0, 14.0, 18.0, 22.0, 35.0])
+    cam_capped = np.zeros(12, bool)
+    cam_capped[11] = True  # the tallest reaches the image's top edge: 35 m is a lower bound, nothing seen is taller
+    heights, _ = structure_heights(top, top.copy(), cam_capped, np.full(12, 40.0), np.ones(12, bool))
+    assert heights[11] == 35.0  # not a guessed extrapolation above it
+
+
 def test_height_map_blocking_and_level_choice():
     pts = np.array([[x, y, z] for x in np.arange(10.0, 12.0, 0.5) for y in np.arange(-20, 20, 0.5) for z in (5.0, 25.0)])
     hmap = HeightMap.from_points(pts)
