@@ -80,8 +80,9 @@ def _wall_observation(axis_xy: np.ndarray, ego_forward) -> tuple[ViewObservation
 
 
 def _wall_colour_behind(axis_deg: float, ego_forward_deg: float | None) -> np.ndarray:
-    """The radiance (2, 3) of the (unobserved) wall 20 m behind the camera at 1.2 m and 5 m height, seen from
-    the street."""
+    """The radiance (2, 3) of the (unobserved) wall 20 m behind the camera at 1.2 m and 4.5 m height, seen from
+    the street. (4.5 m: inside the blue band the camera saw, 0.5-5.75 m; the wall's top voxel layer, 5-6 m,
+    also holds its top edge, which the canyon prior no longer raises 25 % above what was seen.)"""
     axis = np.array([np.cos(np.radians(axis_deg)), np.sin(np.radians(axis_deg))])
     fwd = None if ego_forward_deg is None else np.array([np.cos(np.radians(ego_forward_deg)),
                                                          np.sin(np.radians(ego_forward_deg)), 0.0])
@@ -91,7 +92,7 @@ def _wall_colour_behind(axis_deg: float, ego_forward_deg: float | None) -> np.nd
     params, stats = build_volume(GRID, [obs], lidar, light, sky, unseen_keep=1.0)  # the street prior alone
     hy = HybridLighting(torch.from_numpy(sky), grid=GRID, params=params)
     across = np.array([-axis[1], axis[0]])
-    p = np.array([np.r_[-20.0 * axis + 2.0 * across, h] for h in (1.2, 5.0)])
+    p = np.array([np.r_[-20.0 * axis + 2.0 * across, h] for h in (1.2, 4.5)])
     with torch.no_grad():
         return hy.radiance(p, np.tile(np.r_[across, 0.0], (2, 1)), include_sun=False).numpy()
 
