@@ -69,33 +69,6 @@ class Foreground:
     solid: np.ndarray | None = None
 
 
-@dataclass(frozen=True)
-class CameraSamples:
-    """Traced camera samples (N of them), object frame (what :class:`PixelSums` sums per pixel).
-
-    Attributes:
-        pixel: (N,) int64 index of the sample's pixel in the box (row-major).
-        radiance: (N, 6) float64 premultiplied radiance: smooth part (3) then noisy part (3) (see :func:`.shade.shade`).
-        alpha: (N,) float64 1 - fraction of the background seen along the ray (0 where the ray misses).
-        t_first: (N,) float64 distance (metres) to the first hit, inf where none.
-        normal_first: (N, 3) float64 shading normal at the first hit, 0 where none.
-        material_first: (N,) int64 material index at the first hit, -1 where none.
-        dirs_obj: (N, 3) float64 unit ray directions.
-        residual: (N,) float64 1 where the sample carries the Monte Carlo residual (``radiance[:, 3:]``), 0 where
-            it was not sampled (a pixel's residual is the mean over its samples that carry one).
-    """
-
-    pixel: np.ndarray
-    radiance: np.ndarray
-    alpha: np.ndarray
-    t_first: np.ndarray
-    normal_first: np.ndarray
-    material_first: np.ndarray
-    dirs_obj: np.ndarray
-    residual: np.ndarray
-
-
-
 def render_foreground(camera: PinholeCamera, box: PixelBox | None, ctx: ShadingContext,
                       T_cam_from_object: np.ndarray) -> Foreground | None:
     """Render the object over its pixel ``box`` (see module docstring); None if it is off-screen.
@@ -164,7 +137,7 @@ def _crossed_pixels(camera: PinholeCamera, box: PixelBox, ctx: ShadingContext, T
     return edge_pixels(uv[ctx.prep.faces], box)
 
 
-def _refine_masks(first: "PixelSums | CameraSamples", w: int, h: int, n: int,
+def _refine_masks(first: "PixelSums", w: int, h: int, n: int,
                   crossed: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """(silhouette, inner), each (h, w) bool: pixels that get more camera samples after the first pass.
 
@@ -175,8 +148,6 @@ def _refine_masks(first: "PixelSums | CameraSamples", w: int, h: int, n: int,
     (creases between flat faces, self-shadow edges: the noise-free part of the first pass jumps by
     more than SHADING_EDGE_REL between neighbours).
     """
-    if isinstance(first, CameraSamples):
-        first = PixelSums.of(first, w * h)
     nhit = first.solid.reshape(h, w)
     any_hit = (nhit > 0).astype(np.uint8)
     all_hit = (nhit == n * n).astype(np.uint8)
@@ -352,20 +323,6 @@ class PixelSums:
         z = np.zeros
         return PixelSums(z((P, 3)), z((P, 3)), z(P), z(P), z(P), np.full(P, np.inf), z((P, 3)), np.full(P, -1, np.int64),
                          np.asarray(cam_z_obj, np.float64))
-
-    @staticmethod
-    def of(samples: CameraSamples, P: int, cam_z_obj: np.ndarray = np.array([0.0, 0.0, 1.0])) -> "PixelSums":
-        """The sums of traced ``samples`` over P pixels."""
-        sums = PixelSums.empty(P, cam_z_obj)
-        sums.add_first_hits(samples.pixel, samples.t_first, samples.dirs_obj, np.flatnonzero(np.isfinite(samples.t_first)))
-        sums.normal += np.stack([np.bincount(samples.pixel, weights=samples.normal_first[:, c], minlength=P)
-                                 for c in range(3)], axis=1)
-        hit = samples.material_first >= 0
-        sums.material[samples.pixel[hit]] = samples.material_first[hit]
-        for res in (True, False):
-            part = np.flatnonzero((samples.residual > 0) == res)
-            sums.add_shading(samples.pixel[part], samples.radiance[part], samples.alpha[part], res)
-        return sums
 
     def add_first_hits(self, pixel: np.ndarray, t: np.ndarray, dirs_obj: np.ndarray, hit: np.ndarray) -> None:
         """Camera rays of pixels ``pixel`` (n,) along ``dirs_obj`` (n, 3) with first-hit distances ``t`` (n,)

@@ -8,14 +8,18 @@ import streetaug.augment.render.foreground as foreground
 W, H = 40, 30
 
 
-def _traced(log_lum: np.ndarray) -> foreground.CameraSamples:
+def _traced(log_lum: np.ndarray) -> foreground.PixelSums:
     """One camera sample per pixel of a fully covered, one-material patch whose smooth radiance is exp(log_lum)."""
     P = W * H
+    pixel = np.arange(P)
     rad = np.zeros((P, 6))
     rad[:, :3] = np.exp(log_lum.ravel())[:, None]
-    return foreground.CameraSamples(pixel=np.arange(P), radiance=rad, alpha=np.ones(P), t_first=np.full(P, 10.0),
-                                    normal_first=np.tile([0.0, 0.0, 1.0], (P, 1)), material_first=np.zeros(P, np.int64),
-                                    dirs_obj=np.tile([0.0, 0.0, -1.0], (P, 1)), residual=np.ones(P))
+    sums = foreground.PixelSums.empty(P, np.array([0.0, 0.0, 1.0]))
+    sums.add_first_hits(pixel, np.full(P, 10.0), np.tile([0.0, 0.0, -1.0], (P, 1)), pixel)
+    sums.normal[:] = [0.0, 0.0, 1.0]
+    sums.material[:] = 0
+    sums.add_shading(pixel, rad, np.ones(P), residual=True)
+    return sums
 
 
 def test_a_resolved_shading_ramp_gets_no_inner_samples():
