@@ -131,7 +131,7 @@ def sample_candidates(scene: PlacementScene, wlh: np.ndarray, rng: np.random.Gen
         along = lane_heading + (np.pi * flip if heading_mode != "lane" else 0.0)
         heading = np.where(on_lane, along, heading)
     w, l, _ = wlh
-    if zone == "kerb" and rule is not None and rule.heading == "lane" and rule.zone_weights == "scene":
+    if rule is not None and rule.parks_like_the_scene(zone):
         # parked as the nearest parked box of the class stands (angle to the edge, distance in), else along the edge
         xy, kerb_heading, styled = kerb_poses(scene.zones, scene.parking_style(rule), xy, heading, l, w)
         on_lane &= ~styled

@@ -102,6 +102,11 @@ class ClassRule:
             changes["ground_radius_m"] = self.ground_radius_m
         return dataclasses.replace(base, **changes) if changes else base
 
+    def parks_like_the_scene(self, zone: str) -> bool:
+        """Whether a placement of this class in ``zone`` stands as the sample's parked boxes do: the ``kerb`` zone of
+        a ``lane``-heading rule with ``zone_weights: scene`` (:func:`~streetaug.placement.parking.kerb_poses`)."""
+        return zone == "kerb" and self.heading == "lane" and self.zone_weights == "scene"
+
     @property
     def is_vehicle_on_road(self) -> bool:
         """Whether every zone of the class is on the road itself (lane or kerb)."""
@@ -125,6 +130,10 @@ class ClassRules:
             return self.categories[category]
         raise InputError(f"category {category!r} has no placement rule; the class rules map "
                          f"{', '.join(sorted(self.categories))}")
+
+    def categories_of(self, name: str) -> set[str]:
+        """The nuScenes categories whose objects follow detection class ``name``'s rule."""
+        return {c for c, k in self.categories.items() if k == name}
 
     def for_category(self, category: str) -> ClassRule:
         """The :class:`ClassRule` of an object of nuScenes ``category``."""

@@ -304,7 +304,7 @@ def make_placement(scene: PlacementScene, asset_index: int, obj: Placeable, wlh:
         distance_m=float(np.linalg.norm(center[:2] - scene.camera_xy)),
         edge_distance_m=edge,
         yaw_source=("lane" if cands.on_lane[stood.index[j]] else "random" if rule.heading == "random" else
-                    "kerb" if zone == "kerb" and rule.heading == "lane" and rule.zone_weights == "scene" else "ego"),
+                    "kerb" if rule.parks_like_the_scene(zone) else "ego"),
         footprint_xy=fp.copy(),
         visible_fraction=float(visible_fraction),
         detection_class=rule.name,
@@ -465,8 +465,7 @@ def check_objects(objects: Sequence[Placeable]) -> None:
 def scene_rule(rules: ClassRules, rule: ClassRule, boxes: Sequence[Box]) -> ClassRule:
     """``rule`` with its lane / kerb weights from the parked share of ``boxes`` of its class
     (:func:`~streetaug.placement.parking.with_parked_share`; unchanged for fixed zone weights)."""
-    categories = {c for c, k in rules.categories.items() if k == rule.name}
-    return with_parked_share(rule, *parked_share(boxes, categories))
+    return with_parked_share(rule, *parked_share(boxes, rules.categories_of(rule.name)))
 
 
 def place_objects(

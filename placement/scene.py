@@ -113,7 +113,7 @@ class PlacementScene:
         if self.class_rules is None or rule.zone_weights != "scene":
             return None
         if rule.name not in self._styles:
-            categories = {c for c, k in self.class_rules.categories.items() if k == rule.name}
+            categories = self.class_rules.categories_of(rule.name)
             self._styles[rule.name] = parking_style(self.zones, self.sample.boxes, categories, self.camera_xy,
                                                     self.config.map_roi_m, self.config.kerb_distance_m)
         return self._styles[rule.name]
