@@ -399,9 +399,6 @@ def estimate_instant_lighting(sample: Sample, camera: str, level: str, query_poi
                earlier=earlier)
     est = sl.for_view(view)
     note = f"one estimate for the instant from {len(used)} camera(s) ({', '.join(v.channel for v in used)})"
-    if earlier is not None:
-        note += (f"; the previous keyframe {previous.token}'s {len(earlier.views)} camera(s) fill what they "
-                 "left open" if earlier.views else f"; the previous keyframe {previous.token} has none of them")
     if skipped:
         note += "; left out (image unreadable): " + "; ".join(f"{c}: {why}" for c, why in skipped.items())
     params = dict(est.params) | {"instant": {"cameras": [v.channel for v in used], "skipped": skipped,
