@@ -468,7 +468,9 @@ def main() -> None:
            "space": "LDR uint8 after the contract's camera response (EV puts the ground at 0.45)",
            "image": [W, H], "ref_spp": args.ref_spp, "full_spp": args.full_spp, "curve_spp": list(CURVE_SPP[: args.curve_points]),
            "mitsuba_variant": "scalar_rgb", "load_avg_at_start": load, "load_avg_at_end": os.getloadavg(),
-           "wall_s": time.time() - t_start, "summary": summary, "scenes": results}
+           "wall_s": time.time() - t_start, "argv": sys.argv[1:],
+           "args": {k: (str(v) if isinstance(v, Path) else v) for k, v in vars(args).items()},
+           "summary": summary, "scenes": results}
     args.out.parent.mkdir(parents=True, exist_ok=True)
     Path(str(args.out) + ".json").write_text(json.dumps(doc, indent=2, default=float) + "\n")
     with open(str(args.out) + ".csv", "w", newline="") as f:

@@ -105,9 +105,8 @@ class BounceLight:
         return {"A": np.full((F, 3), np.nan), "B": np.full((F, 3), np.nan), "V": np.full(F, np.nan)}
 
     def _needed(self, key: str, face: np.ndarray) -> np.ndarray:
-        table = self._tables[key]
-        todo = np.unique(face)
-        return todo[np.isnan(table[todo].reshape(len(todo), -1)[:, 0])]
+        first = self._tables[key].reshape(len(self.prep.faces), -1)[:, 0]
+        return np.unique(face[np.isnan(first[face])])  # the faces not computed yet, each once
 
     def face_radiance(self, face: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(A, B), each (N, 3): outgoing radiance ``A + B S_foot`` of the outer side of faces ``face`` (N,)."""

@@ -14,7 +14,9 @@ import hashlib
 from collections import OrderedDict
 from dataclasses import dataclass
 from functools import cached_property
+from typing import Any, Callable, Hashable
 
+import cv2
 import numpy as np
 
 from ..core import check_shape
@@ -59,6 +61,23 @@ class EnvironmentTables:
         """(34, 64, 3) unoccluded irradiance per normal direction (:func:`~.sampling.irradiance_map`)."""
         return irradiance_map(self.envmap)
 
+    def cell_filtered(self, n_dirs: int) -> np.ndarray:
+        """The map box-filtered to about the angular size of one of ``n_dirs`` hemisphere lattice cells
+        (float32; the map itself when that is as fine as the map); built once per ``n_dirs``."""
+        return self.cached(f"cell_filtered_{int(n_dirs)}", (), lambda: _cell_filtered(self.envmap, int(n_dirs)))
+
+    def cached(self, kind: str, key: Hashable, make: Callable[[], Any]) -> Any:
+        """``make()`` for this map and ``key``, kept for the last ``key`` of each ``kind`` (a table derived from the
+        map and small inputs: ``key`` must name everything besides the map that the value depends on)."""
+        hit = self._memo.get(kind)
+        if hit is None or hit[0] != key:
+            hit = self._memo[kind] = (key, make())
+        return hit[1]
+
+    @cached_property
+    def _memo(self) -> dict:
+        return {}
+
     def sky_irradiance(self, normal_cam: np.ndarray) -> np.ndarray:
         """Irradiance (3,) on a surface with camera-frame ``normal_cam`` (3,) (normalised here), unoccluded."""
         n = np.asarray(normal_cam, dtype=np.float64)
@@ -79,3 +98,13 @@ def environment_tables(envmap: np.ndarray) -> EnvironmentTables:
             _TABLES.popitem(last=False)
     _TABLES.move_to_end(key)
     return tables
+
+
+def _cell_filtered(envmap: np.ndarray, n_dirs: int) -> np.ndarray:
+    """:meth:`EnvironmentTables.cell_filtered`: ``envmap`` box-filtered to cells of ``2 pi / n_dirs`` sr."""
+    cell_rad = np.sqrt(2 * np.pi / n_dirs)
+    width = int(2 ** np.round(np.log2(2 * np.pi / cell_rad)))
+    width = int(np.clip(width, 8, envmap.shape[1]))
+    if width >= envmap.shape[1]:
+        return envmap
+    return cv2.resize(np.asarray(envmap, dtype=np.float32), (width, max(width // 2, 1)), interpolation=cv2.INTER_AREA)

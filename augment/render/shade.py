@@ -227,17 +227,26 @@ def _sun_samples(ctx: ShadingContext, p: np.ndarray, n_s: np.ndarray, n_g: np.nd
     ns_sun = ctx.settings.sun_samples
     sun = ctx.light.sun
     idx_sun = np.repeat(np.arange(len(p)), ns_sun)
+    rows = _rows(idx_sun, len(p))
     l_sun = sample_cone(ctx.sun_dir_obj, sun.half_angle_rad, ctx.rng.random(len(idx_sun)), ctx.rng.random(len(idx_sun)))
-    p_sun = params.take(idx_sun)
-    f = eval_brdf(n_s[idx_sun], v[idx_sun], l_sun, p_sun)
+    p_sun = params if ns_sun == 1 else params.take(idx_sun)
+    nn = rows(n_s)
+    f = eval_brdf(nn, rows(v), l_sun, p_sun)
     if p_sun.has_retro:
-        f = f + retro_lobe(n_s[idx_sun], v[idx_sun], l_sun, p_sun)
-    cos = np.clip(np.einsum("ij,ij->i", n_s[idx_sun], l_sun), 0.0, 1.0)
-    up = np.einsum("ij,ij->i", n_g[idx_sun], l_sun) > 0
+        f = f + retro_lobe(nn, rows(v), l_sun, p_sun)
+    cos = np.clip(np.einsum("ij,ij->i", nn, l_sun), 0.0, 1.0)
+    up = np.einsum("ij,ij->i", rows(n_g), l_sun) > 0
     contrib_sun = f * (cos * up / ns_sun)[:, None] * np.asarray(sun.irradiance_rgb)[None]
     live = np.flatnonzero(up & (contrib_sun.max(axis=1) > 0))
     return LightSamples("sun", idx_sun[live], p[idx_sun[live]] + RAY_EPS_M * n_g[idx_sun[live]], l_sun[live],
                         contrib_sun[live])
+
+
+def _rows(index: np.ndarray, n: int):
+    """``a -> a[index]`` for a sorted ``index`` (m,) into n rows; the identity when it takes every row once (no copy)."""
+    if len(index) == n:
+        return lambda a: a
+    return lambda a: a[index]
 
 
 def _env_samples(ctx: ShadingContext, kind: str, p: np.ndarray, n_s: np.ndarray, n_g: np.ndarray, v: np.ndarray,
@@ -253,8 +262,9 @@ def _env_samples(ctx: ShadingContext, kind: str, p: np.ndarray, n_s: np.ndarray,
     n_e, n_b = s.env_samples, s.brdf_samples
     N = len(p)
     idx = np.repeat(np.arange(N), n_e if kind == "env" else n_b)
-    pr = params.take(idx)
-    nn, vv, ng = n_s[idx], v[idx], n_g[idx]
+    rows = _rows(idx, N)
+    pr = params if len(idx) == N else params.take(idx)
+    nn, vv, ng = rows(n_s), rows(v), rows(n_g)
     if kind == "env":
         l_cam, p_env = ctx.env.sampler.sample(rng.random((len(idx), 3)))
         l = l_cam @ R  # camera -> object frame (R^T l)
@@ -271,11 +281,13 @@ def _env_samples(ctx: ShadingContext, kind: str, p: np.ndarray, n_s: np.ndarray,
     cw = cos * w  # cos / (n p) x MIS weight
     live = np.flatnonzero(cw > 0)
     il = idx[live]
+    at_live = _rows(live, len(idx))
+    pr_live = pr if len(live) == len(idx) else pr.take(live)
     if mirror is None:
-        weight = eval_brdf(nn[live], vv[live], l[live], pr.take(live)) * cw[live, None]
+        weight = eval_brdf(at_live(nn), at_live(vv), at_live(l), pr_live) * cw[live, None]
     else:
         w_m, scale_m = mirror
-        f, f_m = eval_brdf(nn[live], vv[live], l[live], pr.take(live), w_m[il])
+        f, f_m = eval_brdf(at_live(nn), at_live(vv), at_live(l), pr_live, w_m[il])
         weight = f * cw[live, None]
     if kind == "brdf":  # filtered importance sampling: a sample of a wide lobe sees a blurred sky
         L = filtered_env_radiance(ctx.env.pyramid, l_cam[live], 1.0 / np.maximum(n_b * p_brdf[live], 1e-12))

@@ -41,7 +41,7 @@ import numpy as np
 from ..core import PinholeCamera, camera_dir_to_lonlat, luminance, sample_equirect
 from ..lighting.light import DistantLight
 from .bounce import BounceLight
-from .brdf import row_norm, to_world
+from .brdf import row_norm, tangent_frame, to_world
 from .footprint import SKY_FADE_START, SUN_FADE_START, PixelBox, edge_pixels, fade_weight, sky_radius_m
 from .environment import EnvironmentTables
 from .sampling import GOLDEN_ANGLE, sample_cone
@@ -479,6 +479,7 @@ def _sky_deficit(p_obj: np.ndarray, n_obj: np.ndarray, light: DistantLight, prep
     the pixel box ends (the coarse cells are faded after upsampling instead, :func:`_sky_occlusion`).
     """
     P = len(p_obj)
+    rays = stats["rays"]
     org = p_obj + RAY_EPS_M * n_obj
     lo, hi = prep.asset.vertices.min(axis=0), prep.asset.vertices.max(axis=0)
     centre, radius = (lo + hi) / 2.0, 0.5 * float(np.linalg.norm(hi - lo)) * 1.001
@@ -494,34 +495,37 @@ def _sky_deficit(p_obj: np.ndarray, n_obj: np.ndarray, light: DistantLight, prep
     rot = rng.integers(0, SKY_ROTATIONS, P)
     phi = GOLDEN_ANGLE * np.arange(n_dirs)[None] + (rot * (2 * np.pi / SKY_ROTATIONS))[:, None]
     rr = np.sqrt(np.clip(1.0 - z * z, 0.0, 1.0))
-    local = np.stack([rr * np.cos(phi), rr * np.sin(phi), z], axis=2).reshape(-1, 3)
-    dirs_all = to_world(local, np.repeat(axis, n_dirs, axis=0))
+    # The spiral in each point's frame (t, b, axis): one tangent frame per point, not per direction.
+    t_ax, b_ax = tangent_frame(axis)
+    dirs_all = ((rr * np.cos(phi))[..., None] * t_ax[:, None] + (rr * np.sin(phi))[..., None] * b_ax[:, None]
+                + z[..., None] * axis[:, None]).reshape(-1, 3)
     cos_n = dirs_all @ n_obj
     weight_all = np.repeat(2 * np.pi * (1.0 - cos_max) / n_dirs, n_dirs) * np.maximum(cos_n, 0.0)
     live = np.flatnonzero(cos_n > 1e-6)  # directions under the ground see the ground, not the sky
     dirs_obj = dirs_all[live]
-    origins = np.repeat(org, n_dirs, axis=0)[live]
+    origins = org[live // n_dirs]
     blocked = prep.scene.occluded(origins, dirs_obj)
-    stats["rays"]["shadow_sky"] = stats["rays"].get("shadow_sky", 0) + int(len(live))
+    rays["shadow_sky"] = rays.get("shadow_sky", 0) + int(len(live))
     D0 = np.zeros((P, 3))
     C = np.zeros((P, 3))
     bi = np.flatnonzero(blocked)
     if len(bi) == 0:
         return D0, C
     hits = prep.scene.intersect(origins[bi], dirs_obj[bi])
-    stats["rays"]["shadow_bounce"] = stats["rays"].get("shadow_bounce", 0) + int(len(bi))
+    rays["shadow_bounce"] = rays.get("shadow_bounce", 0) + int(len(bi))
     ok = hits.hit
     bi, face = bi[ok], hits.face[ok]
     A, B = bounce.radiance(face, dirs_obj[bi])
     # Each direction stands for a cell of the cone: use the sky averaged over cells of about that size
     # (a box-filtered map), not a point sample of a possibly spiky panorama.
-    env = _cell_filtered_env(light.envmap, n_dirs)
+    env = bounce.env.cell_filtered(n_dirs)
     pix = live[bi] // n_dirs
     wgt = weight_all[live[bi]]
     L = np.empty((len(bi), 3))
     hemi = inside[pix]
     if hemi.any():
-        table, E_hat = _hemisphere_sky(env, n_obj, R, n_dirs, z[np.flatnonzero(inside)[0]])
+        table, E_hat = bounce.env.cached("hemisphere_sky", (n_dirs, n_obj.tobytes(), R.tobytes()),
+                                         lambda: _hemisphere_sky(env, n_obj, R, n_dirs, z[np.flatnonzero(inside)[0]]))
         L[hemi] = table[rot[pix[hemi]], live[bi[hemi]] % n_dirs]
     if not hemi.all():
         L[~hemi] = sample_equirect(env, *camera_dir_to_lonlat(dirs_obj[bi[~hemi]] @ R.T))
@@ -669,13 +673,3 @@ def _hemisphere_sky(env: np.ndarray, n_obj: np.ndarray, R: np.ndarray, n_dirs: i
     dirs = to_world(local, np.broadcast_to(n_obj, local.shape))
     L = sample_equirect(env, *camera_dir_to_lonlat(dirs @ R.T)).reshape(SKY_ROTATIONS, n_dirs, 3)
     return L, np.einsum("rkc,k->rc", L, 2 * np.pi / n_dirs * z)
-
-
-def _cell_filtered_env(envmap: np.ndarray, n_dirs: int) -> np.ndarray:
-    """The map box-filtered to about the angular size of one of ``n_dirs`` hemisphere lattice cells."""
-    cell_rad = np.sqrt(2 * np.pi / n_dirs)
-    width = int(2 ** np.round(np.log2(2 * np.pi / cell_rad)))
-    width = int(np.clip(width, 8, envmap.shape[1]))
-    if width >= envmap.shape[1]:
-        return envmap
-    return cv2.resize(np.asarray(envmap, dtype=np.float32), (width, max(width // 2, 1)), interpolation=cv2.INTER_AREA)
