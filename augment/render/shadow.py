@@ -493,12 +493,24 @@ def _sky_deficit(p_obj: np.ndarray, n_obj: np.ndarray, light: DistantLight, prep
     # Each point's spiral is rotated by one of SKY_ROTATIONS angles: under the object (the whole hemisphere)
     # the direction sets are then a small table, whose sky integrals are computed once (below).
     rot = rng.integers(0, SKY_ROTATIONS, P)
-    phi = GOLDEN_ANGLE * np.arange(n_dirs)[None] + (rot * (2 * np.pi / SKY_ROTATIONS))[:, None]
-    rr = np.sqrt(np.clip(1.0 - z * z, 0.0, 1.0))
-    # The spiral in each point's frame (t, b, axis): one tangent frame per point, not per direction.
-    t_ax, b_ax = tangent_frame(axis)
-    dirs_all = ((rr * np.cos(phi))[..., None] * t_ax[:, None] + (rr * np.sin(phi))[..., None] * b_ax[:, None]
-                + z[..., None] * axis[:, None]).reshape(-1, 3)
+    # Each direction stands for a cell of the cone: use the sky averaged over cells of about that size
+    # (a box-filtered map), not a point sample of a possibly spiky panorama.
+    env = bounce.env.cell_filtered(n_dirs)
+    dirs_all = np.empty((P, n_dirs, 3))
+    out = np.flatnonzero(~inside)
+    if len(out):
+        phi = GOLDEN_ANGLE * np.arange(n_dirs)[None] + (rot[out] * (2 * np.pi / SKY_ROTATIONS))[:, None]
+        rr = np.sqrt(np.clip(1.0 - z[out] * z[out], 0.0, 1.0))
+        # The spiral in each point's frame (t, b, axis): one tangent frame per point, not per direction.
+        t_ax, b_ax = tangent_frame(axis[out])
+        dirs_all[out] = ((rr * np.cos(phi))[..., None] * t_ax[:, None] + (rr * np.sin(phi))[..., None] * b_ax[:, None]
+                         + z[out][..., None] * axis[out][:, None])
+    if inside.any():  # the whole hemisphere: the spirals of the table (one per rotation)
+        table, E_hat, table_dirs = bounce.env.cached(
+            "hemisphere_sky", (n_dirs, n_obj.tobytes(), R.tobytes()),
+            lambda: _hemisphere_sky(env, n_obj, R, n_dirs, z[np.flatnonzero(inside)[0]]))
+        dirs_all[inside] = table_dirs[rot[inside]]
+    dirs_all = dirs_all.reshape(-1, 3)
     cos_n = dirs_all @ n_obj
     weight_all = np.repeat(2 * np.pi * (1.0 - cos_max) / n_dirs, n_dirs) * np.maximum(cos_n, 0.0)
     live = np.flatnonzero(cos_n > 1e-6)  # directions under the ground see the ground, not the sky
@@ -516,16 +528,11 @@ def _sky_deficit(p_obj: np.ndarray, n_obj: np.ndarray, light: DistantLight, prep
     ok = hits.hit
     bi, face = bi[ok], hits.face[ok]
     A, B = bounce.radiance(face, dirs_obj[bi])
-    # Each direction stands for a cell of the cone: use the sky averaged over cells of about that size
-    # (a box-filtered map), not a point sample of a possibly spiky panorama.
-    env = bounce.env.cell_filtered(n_dirs)
     pix = live[bi] // n_dirs
     wgt = weight_all[live[bi]]
     L = np.empty((len(bi), 3))
     hemi = inside[pix]
     if hemi.any():
-        table, E_hat = bounce.env.cached("hemisphere_sky", (n_dirs, n_obj.tobytes(), R.tobytes()),
-                                         lambda: _hemisphere_sky(env, n_obj, R, n_dirs, z[np.flatnonzero(inside)[0]]))
         L[hemi] = table[rot[pix[hemi]], live[bi[hemi]] % n_dirs]
     if not hemi.all():
         L[~hemi] = sample_equirect(env, *camera_dir_to_lonlat(dirs_obj[bi[~hemi]] @ R.T))
@@ -662,14 +669,15 @@ def _sun_block_weight(prep: PreparedAsset, org: np.ndarray, dirs: np.ndarray, n_
 
 
 def _hemisphere_sky(env: np.ndarray, n_obj: np.ndarray, R: np.ndarray, n_dirs: int,
-                    z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+                    z: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The sky seen by the spiral of points inside the object's bounding sphere (the whole hemisphere around
     ``n_obj``), for each of the :data:`SKY_ROTATIONS` rotations: radiance (SKY_ROTATIONS, n_dirs, 3) of the
-    cell-filtered map ``env`` along each direction, and the sky irradiance (SKY_ROTATIONS, 3) they estimate
-    (each standing for ``2 pi / n_dirs`` sr, with its cosine ``z`` (n_dirs,))."""
+    cell-filtered map ``env`` along each direction, the sky irradiance (SKY_ROTATIONS, 3) they estimate
+    (each standing for ``2 pi / n_dirs`` sr, with its cosine ``z`` (n_dirs,)), and the directions
+    (SKY_ROTATIONS, n_dirs, 3), object frame."""
     phi = GOLDEN_ANGLE * np.arange(n_dirs)[None] + (np.arange(SKY_ROTATIONS) * (2 * np.pi / SKY_ROTATIONS))[:, None]
     rr = np.sqrt(np.clip(1.0 - z * z, 0.0, 1.0))[None]
     local = np.stack([rr * np.cos(phi), rr * np.sin(phi), np.broadcast_to(z[None], phi.shape)], axis=2).reshape(-1, 3)
     dirs = to_world(local, np.broadcast_to(n_obj, local.shape))
     L = sample_equirect(env, *camera_dir_to_lonlat(dirs @ R.T)).reshape(SKY_ROTATIONS, n_dirs, 3)
-    return L, np.einsum("rkc,k->rc", L, 2 * np.pi / n_dirs * z)
+    return L, np.einsum("rkc,k->rc", L, 2 * np.pi / n_dirs * z), dirs.reshape(SKY_ROTATIONS, n_dirs, 3)
