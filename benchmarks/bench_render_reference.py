@@ -274,7 +274,10 @@ def _equal_threads(out: dict, scene, crop: tuple, image_in: np.ndarray, depth: n
     """Same threads, same work: streetaug's default insert (wall, ``threads`` for torch / OpenCV / BLAS) against
     Mitsuba rendering only the crop where the car changes the image (wall, ``threads`` in its pool), both timed
     now, one after the other. Mitsuba's time per spp is fitted from 4 and 16 spp crop renders (linear in spp);
-    the PSNR at each spp is the curve's. Adds ``crop_s_<T>threads`` to the curve and ``equal_threads[T]``."""
+    the PSNR at each spp is the curve's. Adds ``crop_s_<T>threads`` to the curve and ``equal_threads[T]``, whose
+    ``speedup`` compares medians, ``speedup_fastest_runs`` the fastest run of each tool and ``speedup_cpu`` process
+    CPU times (the same Mitsuba fit from its ``_min`` / ``_cpu`` crop times): on a loaded machine the medians
+    follow the load of the moment."""
     import cv2
     import torch
     from threadpoolctl import threadpool_limits
@@ -294,22 +297,29 @@ def _equal_threads(out: dict, scene, crop: tuple, image_in: np.ndarray, depth: n
                 c0 = time.process_time()
                 t_crop[spp].append(ref.render(s_crop, spp, seed=7 + seed, threads=threads)[1])
                 cpu_crop[spp].append(time.process_time() - c0)
-    t4, t16 = float(np.median(t_crop[4])), float(np.median(t_crop[16]))
-    per_spp = (t16 - t4) / 12.0
-    fixed = max(t4 - 4 * per_spp, 0.0)
     key = f"crop_s_{threads}threads"
-    for m in out["mitsuba"]:
-        m[key] = fixed + per_spp * m["spp"]
+    psnr = out["presets"]["default"]["psnr_region"]
+    # Medians (the headline), and two views less sensitive to other processes on the machine: the fastest run
+    # of each tool (the least disturbed) and process CPU time (what each tool computed, not what it waited for).
+    for stat, times, k in ((np.median, t_crop, key), (np.min, t_crop, key + "_min"), (np.median, cpu_crop, key + "_cpu")):
+        t4, t16 = float(stat(times[4])), float(stat(times[16]))
+        per_spp = (t16 - t4) / 12.0
+        fixed = max(t4 - 4 * per_spp, 0.0)
+        for m in out["mitsuba"]:
+            m[k] = fixed + per_spp * m["spp"]
+    t4, t16 = float(np.median(t_crop[4])), float(np.median(t_crop[16]))
     ours_s = float(np.median(ours))
-    sp = _speedup(out["mitsuba"], out["presets"]["default"]["psnr_region"], ours_s, key=key)
+    sp = _speedup(out["mitsuba"], psnr, ours_s, key=key)
+    sp_min = _speedup(out["mitsuba"], psnr, float(np.min(ours)), key=key + "_min")
+    sp_cpu = _speedup(out["mitsuba"], psnr, float(np.median(ours_cpu)), key=key + "_cpu")
     out.setdefault("equal_threads", {})[str(threads)] = {
         "threads": threads, "streetaug_wall_s": ours, "streetaug_wall_s_median": ours_s, "streetaug_cpu_s": ours_cpu,
         "mitsuba_crop_wall_s_4spp": t_crop[4], "mitsuba_crop_wall_s_16spp": t_crop[16],
         "mitsuba_crop_cpu_s_4spp": cpu_crop[4], "mitsuba_crop_cpu_s_16spp": cpu_crop[16],
         "mitsuba_crop_pixels": int((crop[2] - crop[0]) * (crop[3] - crop[1])), "speedup": sp,
-        "load_avg": os.getloadavg()}
+        "speedup_fastest_runs": sp_min, "speedup_cpu": sp_cpu, "load_avg": os.getloadavg()}
     log(f"  {threads} thread(s), same crop: streetaug {ours_s:.3f} s, Mitsuba crop {t4:.2f} s @4 / {t16:.2f} s @16 spp "
-        f"-> {sp['text']}")
+        f"-> {sp['text']} (fastest runs {sp_min['ratio']:.0f}x, CPU time {sp_cpu['ratio']:.0f}x)")
 
 
 def _coverage(prep, T, n: int = 4) -> np.ndarray:
@@ -459,6 +469,10 @@ def main() -> None:
         summary[f"default_speedup_vs_mitsuba_crop_{t}threads"] = {
             "min": float(np.min(r_t)), "median": float(np.median(r_t)),
             "bounds": [r["equal_threads"][str(t)]["speedup"]["bound"] for r in curved if "equal_threads" in r]}
+        for view in ("fastest_runs", "cpu"):
+            r_v = [r["equal_threads"][str(t)][f"speedup_{view}"]["ratio"] for r in curved if "equal_threads" in r]
+            summary[f"default_speedup_vs_mitsuba_crop_{t}threads_{view}"] = {"min": float(np.min(r_v)),
+                                                                            "median": float(np.median(r_v))}
     summary["targets"] = {"default_psnr_region_ge_35_all_scenes": bool(summary["default"]["psnr_region_min"] >= 35.0),
                           "default_speedup_ge_20_all_scenes": bool(np.min(ratios) >= 20.0),
                           **{f"default_speedup_ge_20_crop_{t}threads": bool(

@@ -8,6 +8,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import time
 from dataclasses import dataclass
 from functools import cached_property
@@ -126,6 +127,37 @@ def render_insertion(image_rgb: np.ndarray, K: np.ndarray, depth_m: np.ndarray, 
         veil: the image's haze and veiling glare (:func:`~.veil.estimate_veil` of the image and ``depth_m``);
             with ``settings.match_camera`` the object is seen through it (None: estimated here).
     """
+    with _one_blas_thread():
+        return _render_insertion(image_rgb, K, depth_m, light, asset, T_cam_from_object, ground_normal_cam, quality, ev,
+                                 seed, velocity_cam_mps, exposure_s, jpeg_quality, veil)
+
+
+def _one_blas_thread():
+    """A context running BLAS on one thread (threadpoolctl, when installed; else nothing).
+
+    The renderer's matrix products are (N, 3) x (3, 3) or (3,): OpenBLAS splits them over its threads from
+    N ~ 30 k on, where the threads cost more than they compute and spin while numpy works (on two threads an
+    insert took 1.5x the CPU and the wall time of one, bench_render_reference's sunrise / sedan).
+    """
+    global _BLAS
+    if _BLAS is None:
+        try:
+            from threadpoolctl import ThreadpoolController
+
+            _BLAS = ThreadpoolController()
+        except ImportError:  # optional: without it BLAS keeps its threads
+            _BLAS = False
+    return _BLAS.limit(limits=1, user_api="blas") if _BLAS else contextlib.nullcontext()
+
+
+_BLAS = None
+
+
+def _render_insertion(image_rgb: np.ndarray, K: np.ndarray, depth_m: np.ndarray, light: DistantLight, asset: Asset,
+                      T_cam_from_object: np.ndarray, ground_normal_cam: np.ndarray | None, quality: str | RenderSettings,
+                      ev: float, seed: int, velocity_cam_mps: np.ndarray | None, exposure_s: float | None,
+                      jpeg_quality: int | None, veil: Veil | None) -> Insertion:
+    """:func:`render_insertion` (with BLAS on one thread)."""
     t_start = time.perf_counter()
     x = _check_inputs(image_rgb, K, depth_m, T_cam_from_object)
     settings = resolve_settings(quality)
