@@ -24,6 +24,8 @@ from .veil import Veil
 
 CAMERA_EFFECTS_MARGIN_PX = 96  # blur and noise are measured on the affected box grown by this much
 
+COMPOSITE_CHUNK_PX = 65_536  # touched pixels composited at a time (~2 MB per float64 buffer; a whole frame: 35 MB)
+
 OCCLUSION_SOFT_M = 0.10  # width of the soft depth test at 0 m ...
 OCCLUSION_SOFT_PER_M = 0.01  # ... growing 1 cm per metre of depth (LiDAR / completion error grows)
 
@@ -67,12 +69,14 @@ def composite(image_rgb: np.ndarray, radiance_premult: np.ndarray, mask: np.ndar
     touched = (mask > 0) | (ratio_rgb < 1).any(axis=2)
     if not touched.any():
         return out
-    ys, xs = np.nonzero(touched)
-    I = ldr_uint8_to_hdr(image_rgb[ys, xs], ev).astype(np.float64)
-    M = mask[ys, xs].astype(np.float64)[:, None]
-    obj = visibility[ys, xs].astype(np.float64)[:, None] * radiance_premult[ys, xs]
-    edit = obj + (1.0 - M) * I * ratio_rgb[ys, xs]
-    out[ys, xs] = hdr_to_ldr_uint8(edit, ev)
+    ys_all, xs_all = np.nonzero(touched)
+    for a in range(0, len(ys_all), COMPOSITE_CHUNK_PX):  # per pixel: chunks only bound the float64 buffers
+        ys, xs = ys_all[a : a + COMPOSITE_CHUNK_PX], xs_all[a : a + COMPOSITE_CHUNK_PX]
+        I = ldr_uint8_to_hdr(image_rgb[ys, xs], ev).astype(np.float64)
+        M = mask[ys, xs].astype(np.float64)[:, None]
+        obj = visibility[ys, xs].astype(np.float64)[:, None] * radiance_premult[ys, xs]
+        edit = obj + (1.0 - M) * I * ratio_rgb[ys, xs]
+        out[ys, xs] = hdr_to_ldr_uint8(edit, ev)
     return out
 
 
