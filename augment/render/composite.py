@@ -91,7 +91,8 @@ class ObjectLayers:
     """The object and its shadow as layers of the image (H, W), before compositing, held only inside ``box``
     (the union of the object's and the shadow's pixel boxes: every pixel outside it holds the layer's
     :data:`LAYER_FILL`). :meth:`crop` gives a layer over any box of the image; the full-frame properties
-    (``coverage``, ``mask``, ...) build a new (H, W) array on each access.
+    (``coverage``, ``mask``, ...) build a new (H, W) array on each access (unless ``box`` is the whole image:
+    then they are the held arrays).
 
     Full-frame float layers of a 1600 x 900 image are 5.8 MB each (35 MB with colour; nine of them were
     69 MB per object before): a car 30 m away has a box of ~1 % of the frame.
@@ -128,11 +129,14 @@ class ObjectLayers:
                               "ratio_rgb": "ratio_box"}.get(name, f"{name}_box"))
 
     def crop(self, name: str, box: PixelBox) -> np.ndarray:
-        """Layer ``name`` (a key of :data:`LAYER_FILL`) over ``box`` (inside the image): a new float32 array
-        (box.height, box.width[, 3]), the fill outside ``self.box``."""
+        """Layer ``name`` (a key of :data:`LAYER_FILL`) over ``box`` (inside the image): float32
+        (box.height, box.width[, 3]), the fill outside ``self.box``. A view of the held layer when ``box`` lies
+        inside ``self.box`` (a near object's box is the whole frame: no copy of it), else a new array."""
+        own = self.box
+        if own is not None and own.x0 <= box.x0 and own.y0 <= box.y0 and box.x1 <= own.x1 and box.y1 <= own.y1:
+            return self._stored(name)[box.y0 - own.y0 : box.y1 - own.y0, box.x0 - own.x0 : box.x1 - own.x0]
         shape = (box.height, box.width, 3) if name in _RGB_LAYERS else (box.height, box.width)
         out = np.full(shape, LAYER_FILL[name], np.float32)
-        own = self.box
         if own is None:
             return out
         x0, y0, x1, y1 = max(box.x0, own.x0), max(box.y0, own.y0), min(box.x1, own.x1), min(box.y1, own.y1)
@@ -142,18 +146,18 @@ class ObjectLayers:
         return out
 
     def full(self, name: str) -> np.ndarray:
-        """Layer ``name`` over the whole image: a new (H, W[, 3]) float32 array."""
+        """Layer ``name`` over the whole image: (H, W[, 3]) float32 (see :meth:`crop`)."""
         H, W = self.shape_px
         return self.crop(name, PixelBox(0, 0, W, H))
 
-    coverage = property(lambda self: self.full("coverage"), doc="(H, W) float32 (a new array).")
-    visibility = property(lambda self: self.full("visibility"), doc="(H, W) float32 (a new array).")
-    mask = property(lambda self: self.full("mask"), doc="(H, W) float32 (a new array).")
-    depth_m = property(lambda self: self.full("depth_m"), doc="(H, W) float32, inf where none (a new array).")
-    radiance_premult = property(lambda self: self.full("radiance_premult"), doc="(H, W, 3) float32 (a new array).")
-    ratio_rgb = property(lambda self: self.full("ratio_rgb"), doc="(H, W, 3) float32 (a new array).")
-    solid_coverage = property(lambda self: self.full("solid_coverage"), doc="(H, W) float32 (a new array).")
-    solid_mask = property(lambda self: self.full("solid_mask"), doc="(H, W) float32 (a new array).")
+    coverage = property(lambda self: self.full("coverage"), doc="(H, W) float32")
+    visibility = property(lambda self: self.full("visibility"), doc="(H, W) float32")
+    mask = property(lambda self: self.full("mask"), doc="(H, W) float32")
+    depth_m = property(lambda self: self.full("depth_m"), doc="(H, W) float32, inf where none")
+    radiance_premult = property(lambda self: self.full("radiance_premult"), doc="(H, W, 3) float32")
+    ratio_rgb = property(lambda self: self.full("ratio_rgb"), doc="(H, W, 3) float32")
+    solid_coverage = property(lambda self: self.full("solid_coverage"), doc="(H, W) float32")
+    solid_mask = property(lambda self: self.full("solid_mask"), doc="(H, W) float32")
 
 
 def object_layers(fg: Foreground | None, sh: ShadowMap | None, scene_depth_m: np.ndarray) -> ObjectLayers:

@@ -68,6 +68,8 @@ class TestObjectLayers:
         for name, dense in dense_layers(fg, sh, scene).items():
             np.testing.assert_array_equal(getattr(layers, name), dense, err_msg=name)
             assert layers.crop(name, PixelBox(600, 300, 1000, 600)).tobytes() == dense[300:600, 600:1000].tobytes()
+            inside = layers.crop(name, PixelBox(700, 450, 850, 500))  # inside the box: a view, no copy
+            assert inside.tobytes() == dense[450:500, 700:850].tobytes() and inside.base is not None
 
     def test_crop_outside_the_box_is_the_fill(self):
         fg, sh, scene = layers_inputs()
