@@ -1,0 +1,229 @@
+"""The paint mix of a sample's own cars: inserted cars drawn with the colours the real cars around them have.
+
+A regional colour-popularity table (:mod:`.car_paint`) says what new cars a region buys, not what stands in one
+street under one sky: scene-0916 (Singapore, overcast) shows mostly silver and grey cars where the Asia table
+draws 48 % white. This module measures the annotated cars of a sample in its images and turns them into a
+weighting of the palette's shades, with the regional table as the prior (and the fallback without cars):
+
+1. :func:`paint_band_rgb`: the pixels of a car's paint band, points on the camera-facing vertical faces of its
+   box between 30 % and 55 % of its height (doors, wings, the boot lid's edge: below the windows, above the
+   tyres) over the middle 70 % of each face, leaving out pixels a nearer box covers; linear radiance through
+   the contract's inverse camera response.
+2. :func:`band_ratio`: the band's median radiance (3,) over the image's reference level (the median luminance
+   of its lower half: ground, kerbs, walls, lit by the same sky); a paint of albedo rho shows about
+   ``REFLECTED_RATIO + LIT_RATIO rho`` (:func:`predicted_band_ratio`).
+3. :func:`scene_paint_weights`: for every measured car a posterior over the palette's shades (prior: the
+   square root of the region's family shares, the shades by their share within the family: the table itself
+   would outvote the measurement, its 48 % white turning a light silver car white; likelihood: a log-normal in luminance and a normal in chromaticity around each shade's
+   predicted ratio), their sum plus :data:`PRIOR_CARS` cars' worth of the prior, normalised.
+
+Convention: box frame as nuScenes (x front, y left, z up, origin at the box centre); ``wlh`` = (width along y,
+length along x, height along z) in metres; ``T_cam_from_box`` (4, 4) maps box points to the OpenCV camera
+frame (x right, y down, z forward); pixel centres at integer coordinates.
+"""
+
+from __future__ import annotations
+
+from typing import Sequence
+
+import numpy as np
+
+from ..core import check_shape, ldr_uint8_to_hdr, luminance, project_points
+from .car_paint import paint_family, paint_palette, paint_region_for_location
+
+BAND_HEIGHT = (0.30, 0.55)  # paint band, fractions of the box height from its bottom
+BAND_SPAN = (0.15, 0.85)  # fractions of each face's horizontal extent
+MIN_BAND_PX = 12  # fewer unoccluded band pixels: the car is not measured
+MAX_DISTANCE_M = 45.0
+# What a paint band shows, as a ratio to the image's reference level (:func:`band_ratio`): the clear coat's
+# reflection of the sky and street plus the base coat's diffuse light, ``REFLECTED_RATIO + LIT_RATIO x albedo``.
+# Measured on procedural cars rendered into scene-0916 (overcast; ``benchmarks/diag_scene_paint.py``, 80 cars,
+# 4 families): black (albedo 0.007) 0.19, grey (0.16) 0.50, silver (0.49) 1.01, white (0.84) 1.87 (medians, 92
+# cars); the line through them; rank correlation of ratio and albedo 0.86.
+REFLECTED_RATIO = 0.18
+LIT_RATIO = 2.0
+SIGMA_LOG_LUMINANCE = 0.4  # spread (log) of a paint's band ratio over cars and views (interquartile ~x1.6-1.8)
+SIGMA_CHROMATICITY = 0.03  # spread of the ratio's chromaticity (r, g of rgb / sum): white balance, reflections
+PRIOR_CARS = 4.0  # the regional table counts as this many observed cars
+
+
+def _band_points_box(T_cam_from_box: np.ndarray, wlh: np.ndarray, n_along: int = 12, n_up: int = 5) -> np.ndarray:
+    """(M, 3) box-frame points on the paint band of the box's vertical faces that face the camera."""
+    w, l, h = (float(x) for x in wlh)
+    cam_in_box = np.linalg.inv(T_cam_from_box)[:3, 3]
+    su = np.linspace(BAND_SPAN[0], BAND_SPAN[1], n_along) - 0.5
+    sz = (np.linspace(BAND_HEIGHT[0], BAND_HEIGHT[1], n_up) - 0.5) * h
+    U, Z = np.meshgrid(su, sz)
+    U, Z = U.ravel(), Z.ravel()
+    faces = []
+    for axis, half, across in ((0, 0.5 * l, w), (1, 0.5 * w, l)):
+        for sign in (1.0, -1.0):
+            if sign * cam_in_box[axis] <= half:  # the camera is not in front of this face
+                continue
+            p = np.zeros((len(U), 3))
+            p[:, axis] = sign * half
+            p[:, 1 - axis] = U * across
+            p[:, 2] = Z
+            faces.append(p)
+    return np.concatenate(faces) if faces else np.zeros((0, 3))
+
+
+def paint_band_rgb(image: np.ndarray, K: np.ndarray, T_cam_from_box: np.ndarray, wlh: np.ndarray,
+                   nearer_rects: Sequence[np.ndarray] = ()) -> np.ndarray:
+    """Linear radiance (N, 3) of the pixels on a car's paint band (see the module docstring), each pixel once.
+
+    Args:
+        image: (H, W, 3) uint8 sRGB-like camera image (the contract's response is inverted).
+        K: (3, 3) intrinsics. T_cam_from_box: (4, 4) camera <- box centre. wlh: (3,) box size, metres.
+        nearer_rects: (4,) x0, y0, x1, y1 pixel rectangles of nearer objects: band pixels inside them are dropped.
+
+    Returns:
+        (N, 3) float64, N = 0 when no band point lands in the image unoccluded.
+    """
+    check_shape(T_cam_from_box, (4, 4), "T_cam_from_box")
+    H, W = image.shape[:2]
+    pts = _band_points_box(np.asarray(T_cam_from_box, float), np.asarray(wlh, float))
+    if not len(pts):
+        return np.zeros((0, 3))
+    cam = pts @ T_cam_from_box[:3, :3].T + T_cam_from_box[:3, 3]
+    uv, z = project_points(K, cam)
+    ok = (z > 0.5) & np.all(np.isfinite(uv), axis=1)
+    uv = np.round(uv[ok]).astype(int)
+    ok = (uv[:, 0] >= 0) & (uv[:, 0] < W) & (uv[:, 1] >= 0) & (uv[:, 1] < H)
+    uv = uv[ok]
+    for r in nearer_rects:
+        if np.all(np.isfinite(r)):
+            inside = (uv[:, 0] >= r[0]) & (uv[:, 0] <= r[2]) & (uv[:, 1] >= r[1]) & (uv[:, 1] <= r[3])
+            uv = uv[~inside]
+    if not len(uv):
+        return np.zeros((0, 3))
+    uv = np.unique(uv, axis=0)
+    return ldr_uint8_to_hdr(image[uv[:, 1], uv[:, 0]][None])[0].astype(np.float64)
+
+
+def image_reference_level(image: np.ndarray) -> float:
+    """The median linear luminance of the image's lower half (the level paint bands are measured against)."""
+    lower = image[image.shape[0] // 2:: 4, :: 4]
+    return float(np.median(luminance(ldr_uint8_to_hdr(lower))))
+
+
+def band_ratio(band_rgb: np.ndarray, reference: float) -> np.ndarray | None:
+    """The paint band's median radiance (3,) over the image's reference level (:func:`image_reference_level`),
+    from its pixels (:func:`paint_band_rgb`); None with fewer than :data:`MIN_BAND_PX` pixels."""
+    if len(band_rgb) < MIN_BAND_PX or not reference > 0:
+        return None
+    return np.median(band_rgb, axis=0) / reference
+
+
+def predicted_band_ratio(albedo_rgb: np.ndarray) -> np.ndarray:
+    """(..., 3) the band ratio a paint of linear albedo ``albedo_rgb`` (..., 3) shows (see the module docstring)."""
+    return REFLECTED_RATIO + LIT_RATIO * np.asarray(albedo_rgb, float)
+
+
+def _chromaticity(rgb: np.ndarray) -> np.ndarray:
+    rgb = np.maximum(np.asarray(rgb, float), 1e-6)
+    return (rgb / rgb.sum(axis=-1, keepdims=True))[..., :2]
+
+
+def scene_paint_weights(ratios: Sequence[np.ndarray], region: str = "global") -> np.ndarray:
+    """Weights (S,) of the shades of ``paint_palette(region)`` given the band ratios (3,) of real cars
+    (:func:`band_ratio`).
+
+    Each car's posterior over the shades (prior: the square root of the region's family shares, shades by their share within the family; likelihood: log-normal in luminance,
+    :data:`SIGMA_LOG_LUMINANCE`, normal in chromaticity, :data:`SIGMA_CHROMATICITY`, around each shade's
+    :func:`predicted_band_ratio`) is summed with
+    :data:`PRIOR_CARS` cars' worth of the prior; the result sums to 1. No cars: the region's weights.
+    """
+    palette = paint_palette(region)
+    prior = np.array([p[3] for p in palette])
+    prior = prior / prior.sum()
+    est = [np.asarray(a, float) for a in ratios if a is not None and np.all(np.isfinite(a)) and np.max(a) > 0]
+    if not est:
+        return prior
+    families = [paint_family(p[0]) for p in palette]
+    family_total = {f: sum(w for w, g in zip(prior, families) if g == f) for f in set(families)}
+    within = np.array([w / family_total[f] * np.sqrt(family_total[f]) if family_total[f] > 0 else 0.0
+                       for w, f in zip(prior, families)])
+    shade_rgb = predicted_band_ratio(np.array([p[1] for p in palette]))
+    shade_y = np.log(np.maximum(luminance(shade_rgb), 1e-4))
+    shade_c = _chromaticity(shade_rgb)
+    total = PRIOR_CARS * prior
+    for a in est:
+        dy = shade_y - np.log(max(float(luminance(a)), 1e-4))
+        dc = np.linalg.norm(shade_c - _chromaticity(a), axis=1)
+        like = np.exp(-0.5 * (dy / SIGMA_LOG_LUMINANCE) ** 2 - 0.5 * (dc / SIGMA_CHROMATICITY) ** 2)
+        post = within * like
+        if post.sum() <= 1e-300:
+            continue  # a colour nothing in the palette explains (a mismeasured car): no vote
+        total = total + post / post.sum()
+    return total / total.sum()
+
+
+
+
+
+def _box_rect(K: np.ndarray, T_cam_from_box: np.ndarray, wlh: np.ndarray) -> np.ndarray:
+    w, l, h = (float(x) for x in wlh)
+    c = np.array([[sx * l / 2, sy * w / 2, sz * h / 2] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)])
+    uv, _ = project_points(K, c @ T_cam_from_box[:3, :3].T + T_cam_from_box[:3, 3])
+    if np.isnan(uv).all():
+        return np.full(4, np.nan)
+    return np.array([np.nanmin(uv[:, 0]), np.nanmin(uv[:, 1]), np.nanmax(uv[:, 0]), np.nanmax(uv[:, 1])])
+
+
+def sample_car_ratios(sample, channels: Sequence[str] | None = None, category_prefix: str = "vehicle.car"
+                       ) -> list[np.ndarray]:
+    """Band ratios (3,) (:func:`band_ratio`) of the annotated cars of a sample, each car once (the camera that sees most
+    of its band), measured in ``channels`` (None: every camera).
+
+    ``sample`` is duck-typed (no import of the datasets layer): ``sample.cameras[channel]`` with ``image``
+    (H, W, 3) uint8, ``K`` (3, 3) and ``T_cam_from_global`` (4, 4); ``sample.boxes`` with ``T_global_from_box``,
+    ``wlh``, ``category`` and ``token``. Cars farther than :data:`MAX_DISTANCE_M` are left out.
+    """
+    best: dict[str, tuple[int, np.ndarray]] = {}
+    boxes = list(sample.boxes)
+    if not any(b.category.startswith(category_prefix) for b in boxes):
+        return []
+    for channel in (channels if channels is not None else list(sample.cameras)):
+        view = sample.cameras[channel]
+        T_cam_from_global = np.asarray(view.T_cam_from_global, float)
+        K = np.asarray(view.K, float)
+        poses = [T_cam_from_global @ b.T_global_from_box for b in boxes]
+        dist = np.array([np.linalg.norm(T[:3, 3]) if T[2, 3] > 1.0 else np.inf for T in poses])
+        cars = [i for i, b in enumerate(boxes) if b.category.startswith(category_prefix) and dist[i] <= MAX_DISTANCE_M]
+        if not cars:
+            continue
+        image = view.image
+        reference = image_reference_level(image)
+        rects = [_box_rect(K, T, b.wlh) if np.isfinite(d) else None for T, b, d in zip(poses, boxes, dist)]
+        for i in cars:
+            nearer = [rects[j] for j in range(len(boxes)) if j != i and rects[j] is not None and dist[j] < dist[i] - 0.5]
+            band = paint_band_rgb(image, K, poses[i], boxes[i].wlh, nearer)
+            ratio = band_ratio(band, reference)
+            key = boxes[i].token or f"{channel}:{i}"
+            if ratio is not None and len(band) > best.get(key, (0, None))[0]:
+                best[key] = (len(band), ratio)
+    return [a for _, a in best.values()]
+
+
+def scene_paint_mix(sample, channels: Sequence[str] | None = None) -> tuple[float, ...] | None:
+    """The shade weights (:func:`scene_paint_weights`, the palette of ``sample.location``'s region) of a sample's
+    annotated cars seen by ``channels`` (None: every camera), rounded to 4 decimals (a hashable cache key for
+    :func:`~.select.select_assets`' ``paint_weights``), or None when no car could be measured (callers then
+    draw from the region's table). A camera whose image cannot be read is left out."""
+    readable = []
+    for channel in (channels if channels is not None else list(sample.cameras)):
+        try:
+            sample.cameras[channel].image
+        except (OSError, ValueError):
+            continue
+        readable.append(channel)
+    ratios = sample_car_ratios(sample, readable)
+    if not ratios:
+        return None
+    w = np.round(scene_paint_weights(ratios, paint_region_for_location(getattr(sample, "location", None))), 4)
+    return tuple(float(x) for x in w / w.sum())
+
+
+__all__ = ["band_ratio", "image_reference_level", "paint_band_rgb", "predicted_band_ratio", "sample_car_ratios",
+           "scene_paint_mix", "scene_paint_weights"]
