@@ -60,11 +60,11 @@ def main(argv=None) -> None:
     import cv2
 
     import streetaug.augment.pipeline as pipeline
-    from streetaug.augment.assets.car_paint import paint_family, paint_region_for_location
+    from streetaug.augment.assets.car_paint import paint_family, paint_palette, paint_region_for_location
     from streetaug.augment.assets.scene_paint import (_box_rect, band_ratio, image_reference_level,
                                                       paint_band_rgb, sample_car_ratios, scene_paint_weights)
     from streetaug.augment.assets.select import select_assets
-    from streetaug.augment.core import luminance, make_transform, quat_to_rotation  # noqa: F401
+    from streetaug.augment.core import luminance, make_transform
     from streetaug.datasets.nuscenes import NuScenesReader
 
     reader = NuScenesReader(args.dataroot, args.version)
@@ -122,7 +122,7 @@ def main(argv=None) -> None:
                 asset = min(drawn, key=lambda q: float(np.abs(q.wlh - np.array(g["size"])).sum()))
                 paint = asset.materials[0]
                 family = paint_family(asset.name.split("-")[-1].replace("_", " "))
-                ins_rows.append({"family": family, "albedo": float(luminance(paint.base_color)),
+                ins_rows.append({"family": family, "ratio": est.tolist(), "albedo": float(luminance(paint.base_color)),
                                  "estimate": float(luminance(est)), "distance_m": float(d), "n_px": len(band)})
     a = np.array([r["albedo"] for r in ins_rows])
     e = np.array([r["estimate"] for r in ins_rows])
@@ -135,11 +135,26 @@ def main(argv=None) -> None:
         s = np.array([r["family"] == fam for r in ins_rows])
         print(f"  {fam:7s} n={s.sum():3d} albedo {np.median(a[s]):.3f} estimate median {np.median(e[s]):.3f} "
               f"(p25 {np.percentile(e[s], 25):.3f}, p75 {np.percentile(e[s], 75):.3f})")
+    # Each inserted car's most probable family by its band (car_shade_posterior) against its true paint family.
+    from streetaug.augment.assets.scene_paint import car_shade_posterior
+
+    fams = [paint_family(q[0]) for q in paint_palette(region)]
+    order = sorted(set(fams), key=fams.index)
+    confusion: dict = {}
+    for row in ins_rows:
+        post = car_shade_posterior(np.array(row["ratio"]), region)
+        if post is None:
+            continue
+        by_family = {f: float(sum(w for w, g in zip(post, fams) if g == f)) for f in order}
+        guess = max(by_family, key=by_family.get)
+        confusion.setdefault(row["family"], {}).setdefault(guess, 0)
+        confusion[row["family"]][guess] += 1
+    hits = sum(c.get(f, 0) for f, c in confusion.items())
+    print(f"inserted cars' family from their band: {hits} / {sum(sum(c.values()) for c in confusion.values())} "
+          f"right; true -> guessed: {confusion}")
     r = np.array([float(luminance(x)) for x in real_all])
     print(f"real cars measured: {len(r)}; band ratio percentiles 10/25/50/75/90: "
           f"{np.round(np.percentile(r, [10, 25, 50, 75, 90]), 3).tolist()}")
-    from streetaug.augment.assets.car_paint import paint_palette
-
     prior = np.array([q[3] for q in paint_palette(region)])
     mixes = np.array([scene_paint_weights(al, region) for al in per_sample])
     print(f"family shares, region {region}: {family_shares(prior / prior.sum(), region)}")

@@ -13,8 +13,8 @@ weighting of the palette's shades, with the regional table as the prior (and the
    of its lower half: ground, kerbs, walls, lit by the same sky); a paint of albedo rho shows about
    ``REFLECTED_RATIO + LIT_RATIO rho`` (:func:`predicted_band_ratio`).
 3. :func:`scene_paint_weights`: for every measured car a posterior over the palette's shades (prior: the
-   square root of the region's family shares, the shades by their share within the family: the table itself
-   would outvote the measurement, its 48 % white turning a light silver car white; likelihood: a log-normal in luminance and a normal in chromaticity around each shade's
+   region's family shares to the power :data:`FAMILY_PRIOR_POWER`, the shades by their share within the family:
+   the table itself would outvote the measurement, its 48 % white turning a silver car white; likelihood: a log-normal in luminance and a normal in chromaticity around each shade's
    predicted ratio), their sum plus :data:`PRIOR_CARS` cars' worth of the prior, normalised.
 
 Convention: box frame as nuScenes (x front, y left, z up, origin at the box centre); ``wlh`` = (width along y,
@@ -42,8 +42,9 @@ MAX_DISTANCE_M = 45.0
 # cars); the line through them; rank correlation of ratio and albedo 0.86.
 REFLECTED_RATIO = 0.18
 LIT_RATIO = 2.0
-SIGMA_LOG_LUMINANCE = 0.4  # spread (log) of a paint's band ratio over cars and views (interquartile ~x1.6-1.8)
+SIGMA_LOG_LUMINANCE = 0.3  # spread (log) of a paint's band ratio over cars and views (interquartile ~x1.6-1.8)
 SIGMA_CHROMATICITY = 0.03  # spread of the ratio's chromaticity (r, g of rgb / sum): white balance, reflections
+FAMILY_PRIOR_POWER = 0.25  # a car's prior: the region's family shares to this power (0: every family alike)
 PRIOR_CARS = 4.0  # the regional table counts as this many observed cars
 
 
@@ -125,41 +126,47 @@ def _chromaticity(rgb: np.ndarray) -> np.ndarray:
     return (rgb / rgb.sum(axis=-1, keepdims=True))[..., :2]
 
 
-def scene_paint_weights(ratios: Sequence[np.ndarray], region: str = "global") -> np.ndarray:
-    """Weights (S,) of the shades of ``paint_palette(region)`` given the band ratios (3,) of real cars
-    (:func:`band_ratio`).
-
-    Each car's posterior over the shades (prior: the square root of the region's family shares, shades by their share within the family; likelihood: log-normal in luminance,
-    :data:`SIGMA_LOG_LUMINANCE`, normal in chromaticity, :data:`SIGMA_CHROMATICITY`, around each shade's
-    :func:`predicted_band_ratio`) is summed with
-    :data:`PRIOR_CARS` cars' worth of the prior; the result sums to 1. No cars: the region's weights.
-    """
+def _shade_prior(region: str) -> tuple[np.ndarray, np.ndarray]:
+    """(region's shade weights (S,) summing to 1, the per-car prior (S,): :data:`FAMILY_PRIOR_POWER` of the
+    family shares times the shade's share within its family)."""
     palette = paint_palette(region)
     prior = np.array([p[3] for p in palette])
     prior = prior / prior.sum()
-    est = [np.asarray(a, float) for a in ratios if a is not None and np.all(np.isfinite(a)) and np.max(a) > 0]
-    if not est:
-        return prior
     families = [paint_family(p[0]) for p in palette]
     family_total = {f: sum(w for w, g in zip(prior, families) if g == f) for f in set(families)}
-    within = np.array([w / family_total[f] * np.sqrt(family_total[f]) if family_total[f] > 0 else 0.0
-                       for w, f in zip(prior, families)])
-    shade_rgb = predicted_band_ratio(np.array([p[1] for p in palette]))
-    shade_y = np.log(np.maximum(luminance(shade_rgb), 1e-4))
-    shade_c = _chromaticity(shade_rgb)
+    per_car = np.array([w / family_total[f] * family_total[f] ** FAMILY_PRIOR_POWER if family_total[f] > 0 else 0.0
+                        for w, f in zip(prior, families)])
+    return prior, per_car / per_car.sum()
+
+
+def car_shade_posterior(ratio: np.ndarray, region: str = "global") -> np.ndarray | None:
+    """One car's posterior (S,) over the shades of ``paint_palette(region)`` given its band ratio (3,)
+    (:func:`band_ratio`): the per-car prior (:func:`_shade_prior`) times a log-normal likelihood in luminance
+    (:data:`SIGMA_LOG_LUMINANCE`) and a normal one in chromaticity (:data:`SIGMA_CHROMATICITY`) around each
+    shade's :func:`predicted_band_ratio`; None for a colour no shade explains (a mismeasured car)."""
+    a = np.asarray(ratio, float)
+    if not (np.all(np.isfinite(a)) and a.max() > 0):
+        return None
+    _, per_car = _shade_prior(region)
+    shade = predicted_band_ratio(np.array([p[1] for p in paint_palette(region)]))
+    dy = np.log(np.maximum(luminance(shade), 1e-4)) - np.log(max(float(luminance(a)), 1e-4))
+    dc = np.linalg.norm(_chromaticity(shade) - _chromaticity(a), axis=1)
+    post = per_car * np.exp(-0.5 * (dy / SIGMA_LOG_LUMINANCE) ** 2 - 0.5 * (dc / SIGMA_CHROMATICITY) ** 2)
+    return post / post.sum() if post.sum() > 1e-300 else None
+
+
+def scene_paint_weights(ratios: Sequence[np.ndarray], region: str = "global") -> np.ndarray:
+    """Weights (S,) of the shades of ``paint_palette(region)`` given the band ratios (3,) of real cars
+    (:func:`band_ratio`): the cars' posteriors (:func:`car_shade_posterior`) summed with :data:`PRIOR_CARS`
+    cars' worth of the region's table, normalised. No cars: the region's weights.
+    """
+    prior, _ = _shade_prior(region)
     total = PRIOR_CARS * prior
-    for a in est:
-        dy = shade_y - np.log(max(float(luminance(a)), 1e-4))
-        dc = np.linalg.norm(shade_c - _chromaticity(a), axis=1)
-        like = np.exp(-0.5 * (dy / SIGMA_LOG_LUMINANCE) ** 2 - 0.5 * (dc / SIGMA_CHROMATICITY) ** 2)
-        post = within * like
-        if post.sum() <= 1e-300:
-            continue  # a colour nothing in the palette explains (a mismeasured car): no vote
-        total = total + post / post.sum()
+    for r in ratios:
+        post = None if r is None else car_shade_posterior(r, region)
+        if post is not None:
+            total = total + post
     return total / total.sum()
-
-
-
 
 
 def _box_rect(K: np.ndarray, T_cam_from_box: np.ndarray, wlh: np.ndarray) -> np.ndarray:
@@ -225,5 +232,5 @@ def scene_paint_mix(sample, channels: Sequence[str] | None = None) -> tuple[floa
     return tuple(float(x) for x in w / w.sum())
 
 
-__all__ = ["band_ratio", "image_reference_level", "paint_band_rgb", "predicted_band_ratio", "sample_car_ratios",
+__all__ = ["band_ratio", "car_shade_posterior", "image_reference_level", "paint_band_rgb", "predicted_band_ratio", "sample_car_ratios",
            "scene_paint_mix", "scene_paint_weights"]
