@@ -120,5 +120,5 @@ def paint_family(name: str) -> str:
     raise KeyError(name)
 
 
-__all__ = ["MAX_PAINT_ALBEDO", "REGION_FAMILY_SHARES", "check_paint_region", "paint_family", "paint_palette", "paint_region_for_location",
-           "srgb_to_linear"]
+__all__ = ["MAX_PAINT_ALBEDO", "REGION_FAMILY_SHARES", "check_paint_region", "paint_family", "paint_palette",
+           "paint_region_for_location", "srgb_to_linear"]

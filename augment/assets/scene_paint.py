@@ -12,10 +12,11 @@ weighting of the palette's shades, with the regional table as the prior (and the
 2. :func:`band_ratio`: the band's median radiance (3,) over the image's reference level (the median luminance
    of its lower half: ground, kerbs, walls, lit by the same sky); a paint of albedo rho shows about
    ``REFLECTED_RATIO + LIT_RATIO rho`` (:func:`predicted_band_ratio`).
-3. :func:`scene_paint_weights`: for every measured car a posterior over the palette's shades (prior: the
-   region's family shares to the power :data:`FAMILY_PRIOR_POWER`, the shades by their share within the family:
-   the table itself would outvote the measurement, its 48 % white turning a silver car white; likelihood: a log-normal in luminance and a normal in chromaticity around each shade's
-   predicted ratio), their sum plus :data:`PRIOR_CARS` cars' worth of the prior, normalised.
+3. :func:`scene_paint_weights`: for every measured car a posterior over the palette's shades
+   (:func:`car_shade_posterior`; prior: the region's family shares to the power :data:`FAMILY_PRIOR_POWER`, the
+   shades by their share within the family: the table itself would outvote the measurement, its 48 % white
+   turning a silver car white; likelihood: a log-normal in luminance and a normal in chromaticity around each
+   shade's predicted ratio), their sum plus :data:`PRIOR_CARS` cars' worth of the region's table, normalised.
 
 Convention: box frame as nuScenes (x front, y left, z up, origin at the box centre); ``wlh`` = (width along y,
 length along x, height along z) in metres; ``T_cam_from_box`` (4, 4) maps box points to the OpenCV camera
@@ -204,7 +205,8 @@ def sample_car_ratios(sample, channels: Sequence[str] | None = None, category_pr
         reference = image_reference_level(image)
         rects = [_box_rect(K, T, b.wlh) if np.isfinite(d) else None for T, b, d in zip(poses, boxes, dist)]
         for i in cars:
-            nearer = [rects[j] for j in range(len(boxes)) if j != i and rects[j] is not None and dist[j] < dist[i] - 0.5]
+            nearer = [rects[j] for j in range(len(boxes))
+                      if j != i and rects[j] is not None and dist[j] < dist[i] - 0.5]
             band = paint_band_rgb(image, K, poses[i], boxes[i].wlh, nearer)
             ratio = band_ratio(band, reference)
             key = boxes[i].token or f"{channel}:{i}"
@@ -232,5 +234,5 @@ def scene_paint_mix(sample, channels: Sequence[str] | None = None) -> tuple[floa
     return tuple(float(x) for x in w / w.sum())
 
 
-__all__ = ["band_ratio", "car_shade_posterior", "image_reference_level", "paint_band_rgb", "predicted_band_ratio", "sample_car_ratios",
-           "scene_paint_mix", "scene_paint_weights"]
+__all__ = ["band_ratio", "car_shade_posterior", "image_reference_level", "paint_band_rgb", "predicted_band_ratio",
+           "sample_car_ratios", "scene_paint_mix", "scene_paint_weights"]

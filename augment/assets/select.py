@@ -43,7 +43,8 @@ def _procedural_of(detection_class: str, seed: int, still: bool = False, sizes_p
                    plate_style: str = "eu", paint_region: str = "global", anonymised_plates: bool = True,
                    paint_weights: tuple[float, ...] | None = None) -> Asset:
     return procedural_object(detection_class, seed, read_class_sizes(sizes_path), still=still, plate_style=plate_style,
-                             paint_region=paint_region, anonymised_plates=anonymised_plates, paint_weights=paint_weights)
+                             paint_region=paint_region, anonymised_plates=anonymised_plates,
+                             paint_weights=paint_weights)
 
 
 def forget_procedural_assets() -> None:
