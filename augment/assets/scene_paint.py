@@ -12,11 +12,11 @@ weighting of the palette's shades, with the regional table as the prior (and the
 2. :func:`band_ratio`: the band's median radiance (3,) over the image's reference level (the median luminance
    of its lower half: ground, kerbs, walls, lit by the same sky); a paint of albedo rho shows about
    ``REFLECTED_RATIO + LIT_RATIO rho`` (:func:`predicted_band_ratio`).
-3. :func:`scene_paint_weights`: for every measured car a posterior over the palette's shades
-   (:func:`car_shade_posterior`; prior: the region's family shares to the power :data:`FAMILY_PRIOR_POWER`, the
-   shades by their share within the family: the table itself would outvote the measurement, its 48 % white
-   turning a silver car white; likelihood: a log-normal in luminance and a normal in chromaticity around each
-   shade's predicted ratio), their sum plus :data:`PRIOR_CARS` cars' worth of the region's table, normalised.
+3. :func:`scene_paint_weights`: the shade mix that explains the measured cars best (likelihood per car and shade:
+   :func:`car_shade_likelihood`, log-normal in luminance and normal in chromaticity around each shade's
+   predicted ratio), with :data:`PRIOR_CARS` cars' worth of the region's table as a Dirichlet prior; EM from a
+   start where the region's family shares count only to the power :data:`FAMILY_PRIOR_POWER` (the table itself
+   would outvote the measurement, its 48 % white turning a silver car white).
 
 Convention: box frame as nuScenes (x front, y left, z up, origin at the box centre); ``wlh`` = (width along y,
 length along x, height along z) in metres; ``T_cam_from_box`` (4, 4) maps box points to the OpenCV camera
@@ -46,7 +46,8 @@ LIT_RATIO = 2.0
 SIGMA_LOG_LUMINANCE = 0.3  # spread (log) of a paint's band ratio over cars and views (interquartile ~x1.6-1.8)
 SIGMA_CHROMATICITY = 0.03  # spread of the ratio's chromaticity (r, g of rgb / sum): white balance, reflections
 FAMILY_PRIOR_POWER = 0.25  # a car's prior: the region's family shares to this power (0: every family alike)
-PRIOR_CARS = 4.0  # the regional table counts as this many observed cars
+PRIOR_CARS = 4.0
+EM_ITERATIONS = 30  # the regional table counts as this many observed cars
 
 
 def _band_points_box(T_cam_from_box: np.ndarray, wlh: np.ndarray, n_along: int = 12, n_up: int = 5) -> np.ndarray:
@@ -140,34 +141,48 @@ def _shade_prior(region: str) -> tuple[np.ndarray, np.ndarray]:
     return prior, per_car / per_car.sum()
 
 
-def car_shade_posterior(ratio: np.ndarray, region: str = "global") -> np.ndarray | None:
-    """One car's posterior (S,) over the shades of ``paint_palette(region)`` given its band ratio (3,)
-    (:func:`band_ratio`): the per-car prior (:func:`_shade_prior`) times a log-normal likelihood in luminance
-    (:data:`SIGMA_LOG_LUMINANCE`) and a normal one in chromaticity (:data:`SIGMA_CHROMATICITY`) around each
-    shade's :func:`predicted_band_ratio`; None for a colour no shade explains (a mismeasured car)."""
+def car_shade_likelihood(ratio: np.ndarray, region: str = "global") -> np.ndarray | None:
+    """(S,) likelihood of a car's band ratio (3,) (:func:`band_ratio`) under each shade of ``paint_palette(region)``:
+    log-normal in luminance (:data:`SIGMA_LOG_LUMINANCE`) and normal in chromaticity (:data:`SIGMA_CHROMATICITY`)
+    around the shade's :func:`predicted_band_ratio`; None for a ratio that is not finite and positive."""
     a = np.asarray(ratio, float)
     if not (np.all(np.isfinite(a)) and a.max() > 0):
         return None
-    _, per_car = _shade_prior(region)
     shade = predicted_band_ratio(np.array([p[1] for p in paint_palette(region)]))
     dy = np.log(np.maximum(luminance(shade), 1e-4)) - np.log(max(float(luminance(a)), 1e-4))
     dc = np.linalg.norm(_chromaticity(shade) - _chromaticity(a), axis=1)
-    post = per_car * np.exp(-0.5 * (dy / SIGMA_LOG_LUMINANCE) ** 2 - 0.5 * (dc / SIGMA_CHROMATICITY) ** 2)
+    return np.exp(-0.5 * (dy / SIGMA_LOG_LUMINANCE) ** 2 - 0.5 * (dc / SIGMA_CHROMATICITY) ** 2)
+
+
+def car_shade_posterior(ratio: np.ndarray, region: str = "global") -> np.ndarray | None:
+    """One car's posterior (S,) over the shades of ``paint_palette(region)`` given its band ratio (3,) alone: the
+    per-car prior (:func:`_shade_prior`) times :func:`car_shade_likelihood`; None for a colour no shade explains."""
+    like = car_shade_likelihood(ratio, region)
+    if like is None:
+        return None
+    post = _shade_prior(region)[1] * like
     return post / post.sum() if post.sum() > 1e-300 else None
 
 
 def scene_paint_weights(ratios: Sequence[np.ndarray], region: str = "global") -> np.ndarray:
     """Weights (S,) of the shades of ``paint_palette(region)`` given the band ratios (3,) of real cars
-    (:func:`band_ratio`): the cars' posteriors (:func:`car_shade_posterior`) summed with :data:`PRIOR_CARS`
-    cars' worth of the region's table, normalised. No cars: the region's weights.
+    (:func:`band_ratio`): the mix that explains them best, with :data:`PRIOR_CARS` cars' worth of the region's
+    table as a Dirichlet prior (MAP mixture weights by :data:`EM_ITERATIONS` EM steps from the per-car prior of
+    :func:`_shade_prior`). Summing each car's own posterior instead spread every mix towards the prior: on
+    scene-0916 the inserted cars' band ratios stayed brighter than the real cars' (75th percentile 1.35 vs 0.85).
+    No cars: the region's weights.
     """
-    prior, _ = _shade_prior(region)
-    total = PRIOR_CARS * prior
-    for r in ratios:
-        post = None if r is None else car_shade_posterior(r, region)
-        if post is not None:
-            total = total + post
-    return total / total.sum()
+    prior, weights = _shade_prior(region)
+    likes = [car_shade_likelihood(r, region) for r in ratios if r is not None]
+    likes = [lk for lk in likes if lk is not None and lk.max() > 1e-300]
+    if not likes:
+        return prior
+    L = np.array(likes)  # (cars, shades)
+    for _ in range(EM_ITERATIONS):
+        resp = L * weights
+        resp /= np.maximum(resp.sum(axis=1, keepdims=True), 1e-300)
+        weights = (PRIOR_CARS * prior + resp.sum(axis=0)) / (PRIOR_CARS + len(L))
+    return weights / weights.sum()
 
 
 def _box_rect(K: np.ndarray, T_cam_from_box: np.ndarray, wlh: np.ndarray) -> np.ndarray:
@@ -234,5 +249,5 @@ def scene_paint_mix(sample, channels: Sequence[str] | None = None) -> tuple[floa
     return tuple(float(x) for x in w / w.sum())
 
 
-__all__ = ["band_ratio", "car_shade_posterior", "image_reference_level", "paint_band_rgb", "predicted_band_ratio",
+__all__ = ["band_ratio", "car_shade_likelihood", "car_shade_posterior", "image_reference_level", "paint_band_rgb", "predicted_band_ratio",
            "sample_car_ratios", "scene_paint_mix", "scene_paint_weights"]

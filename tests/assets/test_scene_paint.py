@@ -191,3 +191,16 @@ def test_white_cars_albedo_is_bounded():
     assert lab[:, 0].max() <= 93.5 and lab[:, 0].min() > 85.0, lab[:, 0]
     # the brightest channel is capped, the hue kept: a capped paint stays neutral
     assert np.all(np.abs(lab[:, 1]) < 1.0) and np.all(np.abs(lab[:, 2]) < 2.0)
+
+
+def test_mix_reproduces_the_composition_of_the_cars():
+    # 12 mid-grey, 6 black and 6 white cars (their predicted bands, +-10 %): the MAP mix draws about those shares,
+    # pulled a little towards the region's table (4 cars' worth), not spread over every neighbour.
+    ratios = ([predicted_band_ratio(shade_rgb("mid grey")) * f for f in np.linspace(0.9, 1.1, 12)]
+              + [predicted_band_ratio(shade_rgb("jet black")) * f for f in np.linspace(0.9, 1.1, 6)]
+              + [predicted_band_ratio(shade_rgb("pure white")) * f for f in np.linspace(0.9, 1.1, 6)])
+    mix = family_shares(scene_paint_weights(ratios, REGION))
+    prior = family_shares(scene_paint_weights([], REGION))
+    for family, share in (("grey", 0.5), ("black", 0.25), ("white", 0.25)):
+        expected = (24 * share + 4 * prior[family]) / 28
+        assert abs(mix[family] - expected) < 0.12, (family, mix)
