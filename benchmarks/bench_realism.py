@@ -98,8 +98,14 @@ def render_worker(args) -> None:
         t0 = time.perf_counter()
         sample = reader.sample(token)
         views = [sample.cameras[c] for c in cameras]
-        # Older checkouts (--code-root) have no location argument: their cars have no plates.
-        where = {"location": sample.location} if "location" in inspect.signature(select_assets).parameters else {}
+        # Older checkouts (--code-root) have no location argument: their cars have no plates; nor the scene's
+        # paint mix (the CLI's and the batch's: scene_paint_mix of the sample's own cars, here every camera).
+        params = inspect.signature(select_assets).parameters
+        where = {"location": sample.location} if "location" in params else {}
+        if "paint_weights" in params:
+            from streetaug.augment.assets.scene_paint import scene_paint_mix
+
+            where["paint_weights"] = scene_paint_mix(sample, cameras)
         assets = {c: select_assets(pipeline.item_seed(args.seed, "asset", token, c), args.n_objects, **where)
                   for c in cameras}
         result = pipeline.insert_into_sample(sample, views, assets, options)

@@ -180,6 +180,7 @@ def insert(dataroot, version, scene, sample_token, camera, asset, assets_dir, as
     # Deferred: the pipeline and the assets load scipy (torch only if the sky network runs); `--help` must not.
     with library_imports():
         from streetaug.augment.assets.classes import ClassMix
+        from streetaug.augment.assets.scene_paint import scene_paint_mix
         from streetaug.augment.assets.select import load_asset_options, select_assets
         from streetaug.augment.pipeline import (InsertOptions, check_image_input, insert_image_to_files,
                                                 insert_view_to_files, item_seed)
@@ -208,9 +209,10 @@ def insert(dataroot, version, scene, sample_token, camera, asset, assets_dir, as
         refuse_output_inside(out, reader.dataroot)  # never write into the source (nor contain it)
         sample = reader.sample(resolve_sample(reader, scene, sample_token))
         view = camera_view(sample, camera)
+        paint = scene_paint_mix(sample, [camera]) if asset is None and assets_dir is None else None  # its cars
         assets = select_assets(item_seed(seed, "asset", sample.token, camera), n_objects, asset, assets_dir,
                                asset_front, asset_length, class_mix, class_sizes=class_sizes,
-                               location=sample.location)
+                               location=sample.location, paint_weights=paint)
         result, path = insert_view_to_files(sample, view, assets, options, out, debug, explain)
     if result.skipped_reason:
         click.echo(f"no object inserted: {result.skipped_reason} (image copied unchanged to {path})")

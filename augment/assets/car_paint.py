@@ -13,6 +13,11 @@ mid and dark greys in similar shares).
 White paints are neutral by construction (sRGB channels equal within 1-2 levels, CIELAB b* between -1.5
 and +0.5): real white paints seen in daylight measure about neutral (solid "pure" whites of chip books
 are b* ~ -1 to +1); the old cream / warm pearl whites (b* +3.6 / +7.4) made every white car yellowish.
+White paints are also not brighter than paint is: solid whites of paint chip books measure L* ~90-94 with the
+specular excluded (what a base colour is: the clear coat's 4 % comes on top), and a car in service carries a
+road film; the old F2F2F2 / EAEBEC / EDEFF1 (L* 95.2 / 93.0 / 94.0), times the per-car variation of up to 7 %,
+drew a third of the white cars at L* 95-98. The whites are now L* 91.2-92.0 and every drawn paint is scaled down to
+:data:`MAX_PAINT_ALBEDO` (L* 93) in its brightest channel.
 "metallic" is how metallic a paint looks: the flakes' share of the base coat (``Material.flake``).
 """
 
@@ -24,9 +29,9 @@ from .locations import nuscenes_city
 
 # (family, name, sRGB hex, metallic, share within the family)
 _SHADES: tuple[tuple[str, str, str, float, float], ...] = (
-    ("white", "pure white", "F2F2F2", 0.0, 0.40),
-    ("white", "pearl white", "EAEBEC", 0.3, 0.35),
-    ("white", "arctic white", "EDEFF1", 0.0, 0.25),
+    ("white", "pure white", "E8E8E8", 0.0, 0.40),
+    ("white", "pearl white", "E5E6E7", 0.3, 0.35),
+    ("white", "arctic white", "E6E8EA", 0.0, 0.25),
     ("black", "jet black", "0C0C0D", 0.0, 0.45),
     ("black", "black metallic", "141518", 0.5, 0.40),
     ("black", "midnight black", "1A1B20", 0.4, 0.15),
@@ -59,6 +64,8 @@ _SHADES: tuple[tuple[str, str, str, float, float], ...] = (
     ("other", "orange", "D9621C", 0.2, 0.60),
     ("other", "purple", "3E2A52", 0.5, 0.40),
 )
+
+MAX_PAINT_ALBEDO = 0.83  # linear, the brightest channel of any drawn paint (sRGB 0.92, L* ~93)
 
 # Percent of new cars per colour family (Axalta reports, approximate: see the module docstring).
 REGION_FAMILY_SHARES: dict[str, dict[str, float]] = {
@@ -113,5 +120,5 @@ def paint_family(name: str) -> str:
     raise KeyError(name)
 
 
-__all__ = ["REGION_FAMILY_SHARES", "check_paint_region", "paint_family", "paint_palette", "paint_region_for_location",
-           "srgb_to_linear"]
+__all__ = ["MAX_PAINT_ALBEDO", "REGION_FAMILY_SHARES", "check_paint_region", "paint_family", "paint_palette",
+           "paint_region_for_location", "srgb_to_linear"]

@@ -76,7 +76,7 @@ def _variant_wlh(variant: str | None, wlh: np.ndarray, size: CategorySize) -> np
 
 def procedural_object(detection_class: str, seed: int, sizes: dict[str, CategorySize] | None = None,
                       still: bool = False, plate_style: str = "eu", paint_region: str = "global",
-                      anonymised_plates: bool = False) -> Asset:
+                      anonymised_plates: bool = False, paint_weights: tuple[float, ...] | None = None) -> Asset:
     """One procedural object of ``detection_class``, deterministic in ``seed``.
 
     Args:
@@ -86,7 +86,8 @@ def procedural_object(detection_class: str, seed: int, sizes: dict[str, Category
         still: an object that stays put for a whole track: pedestrians stand, two-wheelers have no rider.
         plate_style: cars' number plates and driving side (``sg``, ``us``, ``eu``; see
             :func:`~.number_plates.plate_style_for_location`); other classes ignore it.
-        paint_region, anonymised_plates: cars' paint colours and plates (see :func:`~.procedural.procedural_car`).
+        paint_region, anonymised_plates, paint_weights: cars' paint colours and plates (see
+            :func:`~.procedural.procedural_car`).
 
     Raises:
         InputError: unknown class, or the table lacks the drawn category.
@@ -100,7 +101,7 @@ def procedural_object(detection_class: str, seed: int, sizes: dict[str, Category
         variant = "without_rider"
     if detection_class == "car":
         return procedural_car(int(rng.integers(2**31)), plate_style=plate_style, paint_region=paint_region,
-                              anonymised_plates=anonymised_plates)
+                              anonymised_plates=anonymised_plates, paint_weights=paint_weights)
     table = sizes if sizes is not None else read_class_sizes()
     if category not in table:
         raise InputError(f"class sizes table: no entry for {category!r} (needed for class {detection_class!r})")

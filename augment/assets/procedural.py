@@ -26,7 +26,7 @@ from .car_body import BODY_SPECS, BODY_WEIGHTS, N_SLOTS, BodySpec, body_part, ji
 from .car_details import (BodySurface, door_handle_parts, grille_parts, lamp_parts, mirror_parts,
                           paint_over_loft_lamps, plate_parts, wiper_parts)
 from .car_interior import interior_parts
-from .car_paint import check_paint_region, paint_palette, srgb_to_linear
+from .car_paint import MAX_PAINT_ALBEDO, check_paint_region, paint_palette, srgb_to_linear
 from .car_wheels import wheel_parts, wheel_well_parts
 from .mesh_parts import MeshPart, merge_parts
 from .number_plates import PlateStyle, anonymised_plate_rgb, car_plate_style, check_plate_style, plate_style_for_location
@@ -62,7 +62,8 @@ def pane_specular(tint: np.ndarray, opacity: float) -> float:
 
 
 def procedural_car(seed: int, body: str | None = None, paint: tuple | None = None, plate_style: str = "eu",
-                   paint_region: str = "global", anonymised_plates: bool = False) -> Asset:
+                   paint_region: str = "global", anonymised_plates: bool = False,
+                   paint_weights: tuple[float, ...] | None = None) -> Asset:
     """A plausible car mesh, deterministic for ``seed``.
 
     Args:
@@ -77,13 +78,16 @@ def procedural_car(seed: int, body: str | None = None, paint: tuple | None = Non
             ``north_america`` or ``europe`` (:func:`~.car_paint.paint_region_for_location` maps a location).
         anonymised_plates: plates without characters, of the plate's mean colour (as the blurred plates of
             nuScenes' images); False: readable characters.
+        paint_weights: the draw's weight of every shade of ``paint_palette(paint_region)`` (same order, >= 0,
+            any sum > 0) instead of the region's: the paint mix of the scene's own cars
+            (:func:`~.scene_paint.scene_paint_mix`); None: the region's table.
 
     Returns:
         An :class:`Asset` (category ``vehicle.car``), object frame (x front, y left, z up, metres),
         origin at the bottom centre; the tyres touch z = 0; the mirrors reach the box's sides.
         About 18.3-19.5 k triangles.
     """
-    groups, materials, name = _build(seed, body, paint, plate_style, paint_region, anonymised_plates)
+    groups, materials, name = _build(seed, body, paint, plate_style, paint_region, anonymised_plates, paint_weights)
     parts = [p for group in groups.values() for p in group]
     vertices, faces, face_material = merge_parts(parts)
 
@@ -107,7 +111,8 @@ def procedural_car_parts(seed: int, body: str | None = None, paint: tuple | None
 
 
 def _build(seed: int, body: str | None, paint: tuple | None, plate_style: str, paint_region: str = "global",
-           anonymised_plates: bool = False) -> tuple[dict[str, list[MeshPart]], tuple[Material, ...], str]:
+           anonymised_plates: bool = False, paint_weights: tuple[float, ...] | None = None
+           ) -> tuple[dict[str, list[MeshPart]], tuple[Material, ...], str]:
     """(parts by group, material table, asset name) of :func:`procedural_car`."""
     style = car_plate_style(plate_style, seed)
     check_paint_region(paint_region)
@@ -122,7 +127,8 @@ def _build(seed: int, body: str | None, paint: tuple | None, plate_style: str, p
         raise ValueError(f"procedural_car: unknown body {body!r}; expected one of {', '.join(names)}")
     spec = jitter_spec(BODY_SPECS[body](), rng)
     detail_rng = np.random.default_rng([int(seed) & 0xFFFFFFFF, 0xDE7A])
-    materials, paint_name, looks = _materials(rng, detail_rng, paint, body, style, paint_region, anonymised_plates)
+    materials, paint_name, looks = _materials(rng, detail_rng, paint, body, style, paint_region, anonymised_plates,
+                                              paint_weights)
     groups = _car_parts(spec, style, looks, detail_rng, anonymised_plates)
     return groups, materials, f"procedural-{body}-{seed}-{paint_name.replace(' ', '_')}"
 
@@ -149,8 +155,8 @@ def _car_parts(spec: BodySpec, style: PlateStyle, looks: dict, rng: np.random.Ge
 
 
 def _materials(rng: np.random.Generator, detail_rng: np.random.Generator, paint: tuple | None, body: str,
-               style: PlateStyle | None = None, paint_region: str = "global", anonymised_plates: bool = False
-               ) -> tuple[tuple[Material, ...], str, dict]:
+               style: PlateStyle | None = None, paint_region: str = "global", anonymised_plates: bool = False,
+               paint_weights: tuple[float, ...] | None = None) -> tuple[tuple[Material, ...], str, dict]:
     """The material table in slot order (:mod:`.car_body`), the paint's name and the detail choices.
 
     ``rng`` draws exactly what it drew before the details existed (paint, roughness, glass opacity and
@@ -158,9 +164,16 @@ def _materials(rng: np.random.Generator, detail_rng: np.random.Generator, paint:
     """
     palette = paint_palette(paint_region)
     weights = np.array([p[3] for p in palette])
+    if paint_weights is not None:
+        w = np.asarray(paint_weights, dtype=np.float64).ravel()
+        if w.shape != weights.shape or not np.all(np.isfinite(w)) or w.min() < 0 or w.sum() <= 0:
+            raise ValueError(f"procedural_car: paint_weights must be {len(weights)} finite weights >= 0 with a "
+                             f"positive sum (one per shade of paint_palette), got {len(w)} values")
+        weights = w
     idx = int(rng.choice(len(palette), p=weights / weights.sum()))
     name, color, metallic, _ = palette[idx]
     color = np.clip(color * rng.uniform(0.93, 1.07), 0.0, 1.0)  # small per-car variation
+    color = color * min(1.0, MAX_PAINT_ALBEDO / max(float(color.max()), 1e-9))  # no paint brighter (hue kept)
     if paint is not None:
         p = np.asarray(paint, dtype=np.float64).ravel()
         if p.size not in (3, 4) or not np.all(np.isfinite(p)) or p.min() < 0 or p[:3].max() > 1:

@@ -32,16 +32,19 @@ def load_asset_options(asset: str | Path, asset_front: str = "+z", asset_length:
 
 
 @lru_cache(maxsize=64)
-def _procedural(seed: int, plate_style: str = "eu", paint_region: str = "global", anonymised_plates: bool = True
-                ) -> Asset:
-    return procedural_car(seed, plate_style=plate_style, paint_region=paint_region, anonymised_plates=anonymised_plates)
+def _procedural(seed: int, plate_style: str = "eu", paint_region: str = "global", anonymised_plates: bool = True,
+                paint_weights: tuple[float, ...] | None = None) -> Asset:
+    return procedural_car(seed, plate_style=plate_style, paint_region=paint_region, anonymised_plates=anonymised_plates,
+                          paint_weights=paint_weights)
 
 
 @lru_cache(maxsize=256)
 def _procedural_of(detection_class: str, seed: int, still: bool = False, sizes_path: str | None = None,
-                   plate_style: str = "eu", paint_region: str = "global", anonymised_plates: bool = True) -> Asset:
+                   plate_style: str = "eu", paint_region: str = "global", anonymised_plates: bool = True,
+                   paint_weights: tuple[float, ...] | None = None) -> Asset:
     return procedural_object(detection_class, seed, read_class_sizes(sizes_path), still=still, plate_style=plate_style,
-                             paint_region=paint_region, anonymised_plates=anonymised_plates)
+                             paint_region=paint_region, anonymised_plates=anonymised_plates,
+                             paint_weights=paint_weights)
 
 
 def forget_procedural_assets() -> None:
@@ -75,6 +78,7 @@ def select_assets(
     class_sizes: str | Path | None = None,
     location: str | None = None,
     anonymised_plates: bool = True,
+    paint_weights: tuple[float, ...] | None = None,
 ) -> list[Asset]:
     """``n_objects`` assets: the file ``asset`` repeated, random files of ``assets_dir``, or procedural objects.
 
@@ -95,6 +99,8 @@ def select_assets(
         anonymised_plates: procedural cars' plates without characters, in the plate's mean colour (the
             default: nuScenes' images blur every plate, so readable plates would give inserted cars away);
             False: readable characters.
+        paint_weights: procedural cars' paint draw, a weight per shade of the location's palette (the scene's
+            own cars: :func:`~.scene_paint.scene_paint_mix`); None: the region's table.
     """
     if n_objects < 1:
         raise ValueError(f"n_objects must be >= 1, got {n_objects}")
@@ -121,7 +127,8 @@ def select_assets(
     if class_mix is not None:
         names = class_mix.draw(rng, n_objects)
         sizes_path = None if class_sizes is None else str(class_sizes)
-        return [_procedural_of(name, int(s), still, sizes_path, plate_style, paint_region, anonymised_plates)
+        return [_procedural_of(name, int(s), still, sizes_path, plate_style, paint_region, anonymised_plates,
+                               paint_weights)
                 for name, s in zip(names, rng.integers(0, _SEED_RANGE, size=n_objects))]
-    return [_procedural(int(s), plate_style, paint_region, anonymised_plates)
+    return [_procedural(int(s), plate_style, paint_region, anonymised_plates, paint_weights)
             for s in rng.integers(0, _SEED_RANGE, size=n_objects)]

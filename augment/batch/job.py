@@ -9,6 +9,7 @@ from pathlib import Path
 from streetaug.datasets.nuscenes import NuScenesReader
 from streetaug.datasets.sample import CameraView, Sample
 
+from ..assets.scene_paint import scene_paint_mix
 from ..assets.select import select_assets
 from ..pipeline import InsertOptions, SamplePlacement, insert_into_sample, insert_placed_into_sample, item_seed, \
     place_in_sample
@@ -70,9 +71,11 @@ def augment_sample(reader: NuScenesReader, config: BatchConfig, out_dir: Path, t
     sample = reader.sample(token)
     views, failed = readable_views_and_failures(sample, token, cameras, fail_fast)
     mix = config.class_mix
+    procedural = config.asset is None and config.assets_dir is None
+    paint = scene_paint_mix(sample, [v.channel for v in views]) if procedural else None  # the sample's own cars
     assets = {v.channel: select_assets(item_seed(config.seed, "asset", token, v.channel), config.n_objects,
                                        config.asset, config.assets_dir, config.asset_front, config.asset_length, mix,
-                                       class_sizes=config.class_sizes, location=sample.location)
+                                       class_sizes=config.class_sizes, location=sample.location, paint_weights=paint)
               for v in views}
     options = insert_options(config)
     load_s = time.perf_counter() - t0

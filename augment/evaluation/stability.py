@@ -10,7 +10,14 @@ insertion is re-run with the same seed.  Measured against the unperturbed run:
 * ``placement_change_m`` / ``placement_yaw_change_deg``: movement of the first placed box (global);
 * ``composite_psnr_db``: PSNR (dB, 8-bit) of the perturbed run's composite against the unperturbed
   composite with the same perturbation applied afterwards (so only the insertion's reaction is
-  measured, not the perturbation itself), over the pixels the insertion changed in either run.
+  measured, not the perturbation itself), over the pixels the insertion changed in either run;
+* ``lighting_psnr_db`` (families that scale the image's radiance, ``Family.radiance_gain``: exposure): PSNR
+  of the perturbed run's composite against the same objects rendered into the same perturbed image under the
+  unperturbed lighting times that gain (what a perfectly stable estimate gives: the map follows the image's
+  exposure by design), over the pixels either changed. The renderer's own reaction to the image (its camera
+  matching: noise and blur measured around the object) is the same in both, so this measures the lighting
+  estimate alone; ``composite_psnr_db`` measures both (with a perfectly scaled lighting it reaches only about
+  27 / 33 dB at -1 / +1 EV on the bundled sunny sample's default placement at L1, 27 / 29 at L2).
 
 Conventions: perturbations are deterministic given their strength and ``seed``; a perturbation of the
 calibration changes what the pipeline *believes* (K or T_ego_from_cam), not the pixels.
@@ -36,7 +43,10 @@ from ..core import atomic_path, hdr_to_ldr_uint8, ldr_uint8_to_hdr, make_transfo
 from ..lighting.api import estimate_lighting_from_image
 from ..lighting.light import DistantLight
 from ..lighting.types import LightingEstimate
-from ..pipeline import InsertOptions, InsertResult, insert_into_view
+from ..lighting.types import SampleLighting
+from ..pipeline import InsertOptions, InsertResult
+from ..pipeline.results import SampleInsertResult
+from ..pipeline.sample import insert_into_sample, insert_placed_into_sample
 from .metrics import psnr_db
 
 ImageFn = Callable[[np.ndarray], np.ndarray]  # (H, W, 3) uint8 -> the same image perturbed
@@ -56,6 +66,7 @@ class Family:
     unit: str
     strengths: tuple[float, ...]
     apply: PerturbFn
+    radiance_gain: Callable[[float], float] | None = None  # strength -> the factor on the image's radiance
 
 
 def _with_image(sample: Sample, view: CameraView, image_fn: ImageFn) -> Perturbed:
@@ -154,7 +165,7 @@ def lidar_dropout(sample: Sample, view: CameraView, percent: float, rng: np.rand
 
 def _families() -> dict[str, Family]:
     fams = (
-        Family("exposure", "EV", (-1.0, -0.5, 0.5, 1.0), exposure),
+        Family("exposure", "EV", (-1.0, -0.5, 0.5, 1.0), exposure, lambda ev: 2.0**ev),
         Family("noise", "sigma (8-bit levels)", (2.0, 5.0, 10.0), sensor_noise),
         Family("jpeg", "quality", (90.0, 70.0, 50.0), jpeg),
         Family("focal", "% error", (-2.0, -1.0, 1.0, 2.0), focal_error),
@@ -207,11 +218,12 @@ def measure(sample: Sample, view: CameraView, assets: Sequence[Asset], options: 
     """One perturbation at one strength vs the unperturbed run (``baseline`` = (result, image_lighting))."""
     if baseline is None:
         baseline = run_once(sample, view, assets, options)
-    base, base_image_light = baseline
+    base, base_image_light = baseline[0], baseline[1]
+    base_sample = baseline[2] if len(baseline) > 2 else None
     rng = np.random.default_rng([seed, zlib.crc32(family.name.encode()), int(round(abs(strength) * 1000))])
     p_sample, p_view, image_fn = family.apply(sample, view, strength, rng)
     t = time.perf_counter()
-    result = insert_into_view(p_sample, p_view, assets, options)
+    result = _insert_one(p_sample, p_view, assets, options)
     seconds = time.perf_counter() - t
     image_light = estimate_lighting_from_image(p_view.image, p_view.K)
 
@@ -233,16 +245,58 @@ def measure(sample: Sample, view: CameraView, assets: Sequence[Asset], options: 
     expected = image_fn(base.image)
     where = _affected(base, view.image) | _affected(result, p_view.image)
     row["composite_psnr_db"] = psnr_db(expected, result.image, where)
+    row["lighting_psnr_db"] = None
+    if family.radiance_gain is not None and base_sample is not None and base_sample.placements and result.objects:
+        ideal = insert_placed_into_sample(
+            p_sample, [p_view], base_sample.placements, base_sample.assets, options,
+            lighting=scaled_lighting(base_sample.shared_lighting, family.radiance_gain(strength))).views[p_view.channel]
+        changed = _affected(ideal, p_view.image) | _affected(result, p_view.image)
+        row["lighting_psnr_db"] = psnr_db(ideal.image, result.image, changed)
     row["finite"] = bool(np.isfinite(result.lighting.light_cam.envmap).all() and np.isfinite(result.shadow_ratio).all())
     return row
 
 
-Baseline = tuple[InsertResult, LightingEstimate]  # the insertion and the single-image lighting of the same view
+def scaled_lighting(lighting: SampleLighting, gain: float) -> SampleLighting:
+    """A sample's lighting with every radiance (maps, sun, volume) times ``gain``: what a perfectly stable
+    estimate gives for the sample's images ``gain`` times brighter."""
+    k = float(gain)
+    if lighting.level in ("L0", "L1"):
+        per_view = {}
+        for channel, est in lighting.per_view.items():
+            light = est.light_cam
+            sun = None if light.sun is None else dataclasses.replace(light.sun, irradiance_rgb=np.asarray(
+                light.sun.irradiance_rgb) * k)
+            per_view[channel] = dataclasses.replace(est, light_cam=dataclasses.replace(
+                light, envmap=(light.envmap * np.float32(k)).astype(np.float32), sun=sun))
+        return dataclasses.replace(lighting, per_view=per_view)
+    # L2 / L3: a camera's image units per volume unit (its exposure ratio) scale its map, sun and local light
+    return dataclasses.replace(lighting, exposure_ratio={c: r * k for c, r in lighting.exposure_ratio.items()})
+
+
+def _insert_sample(sample: Sample, view: CameraView, assets: Sequence[Asset],
+                   options: InsertOptions) -> SampleInsertResult:
+    return insert_into_sample(sample, [view], {view.channel: assets}, options)
+
+
+def _insert_one(sample: Sample, view: CameraView, assets: Sequence[Asset], options: InsertOptions) -> InsertResult:
+    """:func:`streetaug.augment.pipeline.insert_into_view` (the same result)."""
+    return _view_result(_insert_sample(sample, view, assets, options), view)
+
+
+def _view_result(result: SampleInsertResult, view: CameraView) -> InsertResult:
+    out = result.views[view.channel]
+    return dataclasses.replace(out, skipped_reason=result.skipped_reason) if result.skipped_reason else out
+
+
+# the insertion, the single-image lighting of the same view and (optional) the sample-level insertion (its
+# placements and shared lighting: ``lighting_psnr_db``)
+Baseline = tuple[InsertResult, LightingEstimate] | tuple[InsertResult, LightingEstimate, SampleInsertResult]
 
 
 def run_once(sample: Sample, view: CameraView, assets: Sequence[Asset], options: InsertOptions) -> Baseline:
-    """The unperturbed insertion and single-image lighting (the report's baseline)."""
-    return insert_into_view(sample, view, assets, options), estimate_lighting_from_image(view.image, view.K)
+    """The unperturbed insertion, single-image lighting and sample-level insertion (the report's baseline)."""
+    whole = _insert_sample(sample, view, assets, options)
+    return _view_result(whole, view), estimate_lighting_from_image(view.image, view.K), whole
 
 
 def stability_report(sample: Sample, view: CameraView, assets: Sequence[Asset], options: InsertOptions, families: Sequence[str] | None = None,

@@ -25,7 +25,8 @@ import shapely
 from shapely.ops import unary_union
 
 from ...datasets.sample import Box
-from ..core import PinholeCamera, check_shape, ldr_uint8_to_hdr, luminance, project_points, scale_intrinsics
+from ..core import (PinholeCamera, check_shape, clipped_to_lower_bound, ldr_uint8_to_hdr, luminance, project_points,
+                    scale_intrinsics)
 
 WORK_WIDTH = 480
 SKY_MIN_ELEVATION_DEG = 3.0
@@ -237,7 +238,10 @@ def ground_evidence(work: PreparedImage, up_cam: np.ndarray, camera_height_m: fl
     dist = camera_height_m / np.maximum(cos_down, 1e-3)  # along the ray to the ground (rays going down)
     lateral = np.abs(work.rays_cam[..., 0] * dist)
     horizontal = np.sqrt(np.maximum(dist**2 - camera_height_m**2, 0.0))
-    mask = down & (horizontal > 4.0) & (horizontal < 40.0) & (lateral < 8.0) & ~work.clipped
+    # Clipped pixels stay in, at the saturation level (a lower bound, above every unclipped value): the sunlit
+    # road's brightest part clips first, and leaving it out would lower the lit median as the exposure rises;
+    # kept, the medians are exact while fewer than half of a class is clipped (censored medians).
+    mask = down & (horizontal > 4.0) & (horizontal < 40.0) & (lateral < 8.0)
     # Roads are grey: drop saturated colours (vegetation, barriers, painted cars).
     ldr = work.ldr
     ldr_min = np.minimum(np.minimum(ldr[..., 0], ldr[..., 1]), ldr[..., 2])
@@ -247,7 +251,7 @@ def ground_evidence(work: PreparedImage, up_cam: np.ndarray, camera_height_m: fl
         mask = grey
     if mask.sum() < 50:
         return None
-    lum = np.maximum(luminance(work.hdr[mask]), 1e-6)
+    lum = np.maximum(luminance(clipped_to_lower_bound(work.hdr[mask], ldr[mask])), 1e-6)
     log_lum = np.log(lum)
     eta, w_lo, mu_lo, mu_hi = otsu_log(log_lum)
     contrast = float(np.exp(mu_hi - mu_lo))

@@ -36,7 +36,7 @@ import numpy as np
 
 from ..core import (SATURATION_RADIANCE, camera_dir_to_lonlat, camera_envmap_directions, check_shape, lonlat_to_uv,
                     luminance)
-from .evidence import PreparedImage
+from .evidence import SATURATED_LDR, PreparedImage
 from .fill import UNSEEN_KEEP, mean_colour_radiance, shrink_unseen
 from .skydome import blend_observed
 
@@ -83,12 +83,21 @@ class SeenPixels:
         radiance: (N, 3) float64 linear radiance (the map's image units).
         clipped: (N,) bool, the pixel is clipped (its radiance is a lower bound).
         sky: (N,) bool, the pixel is sky.
+        clipped_rgb: (N, 3) bool, the channel is clipped (its radiance is the saturation level, a lower bound;
+            the pixel's other channels are measurements), or None: every channel of a clipped pixel.
     """
 
     rays: np.ndarray
     radiance: np.ndarray
     clipped: np.ndarray
     sky: np.ndarray
+    clipped_rgb: np.ndarray | None = None
+
+    def channel_clipped(self) -> np.ndarray:
+        """(N, 3) bool: ``clipped_rgb``, else ``clipped`` in every channel."""
+        if self.clipped_rgb is not None:
+            return self.clipped_rgb
+        return np.repeat(self.clipped[:, None], 3, axis=1)
 
 
 def seen_pixels(work: PreparedImage, R_map_from_cam: np.ndarray | None = None, gain: float = 1.0,
@@ -104,7 +113,27 @@ def seen_pixels(work: PreparedImage, R_map_from_cam: np.ndarray | None = None, g
     rad = work.hdr.reshape(-1, 3) * float(gain)  # a copy: the clipped pixels are lowered in place
     # clipped: a lower bound (core.clipped_to_lower_bound, in place on the copy)
     rad[clipped] = np.minimum(rad[clipped], SATURATION_RADIANCE * float(gain))
-    return SeenPixels(rays, rad, clipped, is_sky)
+    clipped_rgb = (work.ldr >= SATURATED_LDR).reshape(-1, 3)
+    return SeenPixels(rays, rad, clipped, is_sky, clipped_rgb)
+
+
+def sky_log_gain(radiance: np.ndarray, clipped_rgb: np.ndarray, model: np.ndarray) -> np.ndarray | None:
+    """(3,) log image/model ratio of the sky: per channel the log ratio of the medians of the sky pixels'
+    radiance (N, 3) and the model's there (N, 3); None with fewer than ``MIN_SKY_PIXELS`` pixels.
+
+    A clipped channel (``clipped_rgb`` (N, 3)) holds the saturation level, above every unclipped value of its
+    channel: its median is exact while fewer than half of the channel is clipped (a censored median; the
+    unclipped pixels alone are the sky's darker part, its edges and haze). Past half, the median is only a
+    lower bound: the sky is at least that bright, and the model's (gain >= 0) unless the bound is brighter. So
+    the sky of a brighter exposure is never darker than that of a darker one (an all-clipped sky used to
+    take the ratio of the highest unclipped band: trees and facades).
+    """
+    if len(radiance) < MIN_SKY_PIXELS:
+        return None
+    med = np.median(radiance, axis=0)
+    gain = np.log(np.maximum(med, 1e-9) / np.maximum(np.median(model, axis=0), 1e-9))
+    censored = clipped_rgb.mean(axis=0) >= 0.5
+    return np.where(censored, np.maximum(gain, 0.0), gain)
 
 
 def band_log_gains(log_ratio_cells: np.ndarray, cell_elev_deg: np.ndarray, all_elev_deg: np.ndarray,
@@ -217,7 +246,6 @@ def image_corrected_envmap(model_envmap: np.ndarray, pixels: SeenPixels | list[S
     rad = np.concatenate([p.radiance for p in pixels])
     clipped = np.concatenate([p.clipped for p in pixels])
     cell = map_cells(rays, H, W)
-    ok = ~clipped
     # a cell's mean over all its pixels, clipped ones at their recorded value: exact where nothing clipped, a
     # lower bound where something did (a fully clipped cell keeps the model if that is brighter)
     count = np.bincount(cell, minlength=H * W).astype(np.float64)
@@ -234,11 +262,9 @@ def image_corrected_envmap(model_envmap: np.ndarray, pixels: SeenPixels | list[S
         return model_envmap.astype(np.float32), stats
     unclipped = seen & ~all_clipped
     log_ratio = np.log(np.maximum(mean_obs[unclipped], 1e-9) / model[unclipped])
-    is_sky = np.concatenate([p.sky for p in pixels]) & ok
-    sky_gain = None
-    if is_sky.sum() >= MIN_SKY_PIXELS:
-        sky_model = model.reshape(-1, 3)[cell[is_sky]].mean(axis=0)
-        sky_gain = np.log(np.maximum(rad[is_sky].mean(axis=0), 1e-9) / sky_model)
+    is_sky = np.concatenate([p.sky for p in pixels])
+    clipped_rgb = np.concatenate([p.channel_clipped() for p in pixels])
+    sky_gain = sky_log_gain(rad[is_sky], clipped_rgb[is_sky], model.reshape(-1, 3)[cell[is_sky]])
     gains = band_log_gains(log_ratio, elev[unclipped], elev.reshape(-1), sky_gain)
     gains = np.clip(gains, -MAX_LOG_GAIN, MAX_LOG_GAIN).reshape(H, W, 3)
     corrected = model * np.exp(gains)

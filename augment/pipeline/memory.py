@@ -22,6 +22,18 @@ sums and shade's light-sample batch (~155 MB at ``shade.SHADE_CHUNK_RAYS``): a c
 MB what a worker holds after a sample once its freed heap is returned (``batch.execute.release_free_heap``,
 after each sample); the rest was freed memory the tuned malloc kept. A worker's peak (0.64-0.76 GB) is now
 within one sample, in the lighting's level choice (``lighting.multiview.choose_auto``: ~250 MB transient).
+
+Session 10 (issue #19; scene-0916, default, ``benchmarks/bench_batch.py``): with ``choose_auto`` bounded
+(``levels.HeightMap.blocked``) the peak was in the render of an object late in a sample: ~300-400 MB live
+(the sample's lighting with its seen surfaces ~70 MB, six depth maps 33 MB, the images 25 MB, the cameras
+already rendered: image, mask and shadow ratio, ~16 MB each) plus the render's largest batches: the shadow's
+sky test (``render.shadow.SHADOW_CHUNK_RAYS`` 1M rays: ~210 MB), shade's environment samples
+(``render.shade.SHADE_CHUNK_RAYS`` 300k: ~130 MB) and the composite's nine full-frame layers (69 MB; the veil
+in float64 over the object's box, up to ~130 MB for a near object). With 250k / 100k rays, the layers held in
+the object's box (``render.composite.ObjectLayers``) and the veil on the object's pixels, no stage of a render
+adds more than ~70 MB (tracemalloc): peak RSS 772 -> 660 MB (first 4 keyframes, 1 worker) and 732 -> 640 MB
+(8 keyframes, 2 workers). A worker holds ~190-235 MB between samples (RSS after the heap release; ~75-110 MB
+of it malloc'd): nothing of a sample stays alive into the next.
 """
 
 from __future__ import annotations

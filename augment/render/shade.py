@@ -39,7 +39,7 @@ from .surface import PreparedAsset
 
 RAY_EPS_M = 1e-3  # ray origin offset along the geometric normal
 FIS_LEVEL_BIAS = 1  # filtered importance sampling one level sharper than the sample footprint (less blur bias)
-SHADE_CHUNK_RAYS = 300_000  # light-sample rays per batch: bounds memory, keeps Embree batches large
+SHADE_CHUNK_RAYS = 100_000  # light-sample rays per batch: bounds memory (~45 MB a batch; 300k: ~130), keeps Embree batches large
 SPEC_CV_ROUGHNESS = (0.5, 0.75)  # the specular control variate fades in between these roughnesses (measured)
 MIRROR_CV_ROUGHNESS = (0.1, 0.15)  # specular lobes below this roughness (glass, chrome) are mirrors for their variate
 

@@ -50,7 +50,7 @@ from .surface import PreparedAsset
 
 RAY_EPS_M = 0.01
 RATIO_SNAP = 5e-4  # ratios this close to 1 are 1 (an eighth of an 8-bit level; the faded tails end there)
-SHADOW_CHUNK_RAYS = 1_000_000  # rays per batch: bounds memory
+SHADOW_CHUNK_RAYS = 250_000  # rays per batch: bounds memory (~55 MB a batch of the sky test; 1M: ~210)
 
 
 @dataclass(frozen=True)

@@ -68,13 +68,23 @@ class Veil:
     def apply(self, radiance_premult: np.ndarray, coverage: np.ndarray, depth_m: np.ndarray) -> np.ndarray:
         """(h, w, 3) premultiplied object radiance seen through the veil: ``L t + A (1 - t) coverage``.
 
+        Evaluated only at the object's pixels (coverage or radiance not 0; elsewhere the result is 0): a near
+        object's pixel box can be the whole frame, whose float64 temporaries were ~130 MB.
+
         Args:
             radiance_premult: (h, w, 3) linear radiance x coverage; coverage: (h, w) 0..1;
             depth_m: (h, w) the object's camera-z (inf where none).
         """
-        haze = self.haze_at(depth_m)[..., None]
-        cov = np.asarray(coverage, np.float64)[..., None]
-        return (radiance_premult * (1.0 - haze) + self.airlight_rgb * haze * cov).astype(np.float32)
+        rad = np.asarray(radiance_premult)
+        cov = np.asarray(coverage)
+        out = np.zeros(rad.shape, np.float32)
+        on = (cov > 0) | (rad != 0).any(axis=-1)
+        if not on.any():
+            return out
+        haze = self.haze_at(np.asarray(depth_m)[on])[:, None]
+        c = cov[on].astype(np.float64)[:, None]
+        out[on] = (rad[on] * (1.0 - haze) + self.airlight_rgb * haze * c).astype(np.float32)
+        return out
 
     def shadow_ratio(self, ratio_rgb: np.ndarray, image_rgb: np.ndarray, depth_m: np.ndarray,
                      ev: float = 0.0) -> np.ndarray:
@@ -85,13 +95,17 @@ class Veil:
             ratio_rgb: (h, w, 3) shadow ratio S (1 = unchanged); image_rgb: (h, w, 3) uint8 the scene;
             depth_m: (h, w) its camera-z (inf: sky, no veil is kept).
         """
-        S = np.asarray(ratio_rgb, np.float64)
+        S = np.asarray(ratio_rgb)
         if not np.any(S < 1.0):
             return ratio_rgb
-        V = self.haze_at(depth_m)[..., None] * self.airlight_rgb
-        I = ldr_uint8_to_hdr(image_rgb, ev).astype(np.float64)
+        on = (S != 1.0).any(axis=-1)  # only where there is a shadow (elsewhere S' = S = 1)
+        s = S[on].astype(np.float64)
+        V = self.haze_at(np.asarray(depth_m)[on])[:, None] * self.airlight_rgb
+        I = ldr_uint8_to_hdr(np.asarray(image_rgb)[on], ev).astype(np.float64)
         share = np.clip(V / np.maximum(I, 1e-9), 0.0, 1.0)
-        return (S + (1.0 - S) * share).astype(np.float32)
+        out = S.astype(np.float32)  # a copy
+        out[on] = (s + (1.0 - s) * share).astype(np.float32)
+        return out
 
 
 def dark_channel_blocks(image_rgb: np.ndarray) -> np.ndarray:

@@ -29,7 +29,8 @@ OPTIONS = InsertOptions(quality="draft", seed=0)  # the default lighting level: 
 def lane_rules(tmp_path_factory):
     """The car placed with the table's fixed lane / kerb weights: the sunlit placement the bounds below were measured at.
     (By default the bundled scene's cars park, so the car parks with them under the trees, where the exposure
-    moves the car more: L2 25.6 / 25.3 dB at -1 / +1 EV, L1 26.1 / 19.0, measured in session 8; issue #16.)"""
+    moves the car more: L2 25.6 / 25.3 dB at -1 / +1 EV, L1 26.1 / 19.0, measured in session 8; issue #16; the
+    default placement's own bounds: test_stability_kerb.py.)"""
     path = tmp_path_factory.mktemp("rules") / "lane_car.json"
     path.write_text(json.dumps({"schema": "streetaug.class_rules/1",
                                 "classes": {"car": {"zones": {"lane": 0.6, "kerb": 0.4}, "zone_weights": "fixed"}}}))

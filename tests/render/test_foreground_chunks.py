@@ -78,3 +78,22 @@ def test_chunks_bound_the_foreground_memory(monkeypatch):
     monkeypatch.setattr(shade, "SHADE_CHUNK_RAYS", 20_000)  # the shading batch small: what is left is the trace's
     unchunked, chunked = _peak_mb(monkeypatch, 10**9), _peak_mb(monkeypatch, 2048)
     assert chunked < 0.6 * unchunked, (chunked, unchunked)
+
+
+def test_shadow_sky_batches_change_nothing(monkeypatch):
+    """The shadow's sky test is batched by ``shadow.SHADOW_CHUNK_RAYS`` (memory, issue #19): each ground point's
+    directions are drawn in order, so any batch size gives the same shadow and composite, byte for byte."""
+    import streetaug.augment.render.shadow as shadow
+    from render_fixtures import ground_scene
+    from streetaug.augment.render import render_insertion
+
+    light, car = sunny_light(sun_dir_cam=(0.6, -0.55, 0.58)), primitive_car()
+    image, depth, ev = ground_scene(light, CAMERA.K, W, H)
+    T = pose_camera_to_transform(0.3, 1.5, 9.0, 35.0)
+    a = render_insertion(image, CAMERA.K, depth, light, car, T, ev=ev, seed=2, quality="draft")
+    monkeypatch.setattr(shadow, "SHADOW_CHUNK_RAYS", 3001)
+    b = render_insertion(image, CAMERA.K, depth, light, car, T, ev=ev, seed=2, quality="draft")
+    assert (a.shadow_ratio_rgb < 0.9).sum() > 100  # a real shadow, many batches of 3001 rays
+    assert a.stats["rays"]["shadow_sky"] > 10 * 3001
+    assert a.shadow_ratio_rgb.tobytes() == b.shadow_ratio_rgb.tobytes()
+    assert a.image.tobytes() == b.image.tobytes()
