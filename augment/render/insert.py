@@ -8,12 +8,13 @@
 
 from __future__ import annotations
 
-import contextlib
+import functools
 import time
 from dataclasses import dataclass
 from functools import cached_property
 
 import numpy as np
+from threadpoolctl import ThreadpoolController
 
 from ..assets.asset import Asset
 from ..core import InputError, PinholeCamera, check_shape
@@ -133,24 +134,19 @@ def render_insertion(image_rgb: np.ndarray, K: np.ndarray, depth_m: np.ndarray, 
 
 
 def _one_blas_thread():
-    """A context running BLAS on one thread (threadpoolctl, when installed; else nothing).
+    """A context running BLAS on one thread.
 
     The renderer's matrix products are (N, 3) x (3, 3) or (3,): OpenBLAS splits them over its threads from
     N ~ 30 k on, where the threads cost more than they compute and spin while numpy works (on two threads an
     insert took 1.5x the CPU and the wall time of one, bench_render_reference's sunrise / sedan).
     """
-    global _BLAS
-    if _BLAS is None:
-        try:
-            from threadpoolctl import ThreadpoolController
-
-            _BLAS = ThreadpoolController()
-        except ImportError:  # optional: without it BLAS keeps its threads
-            _BLAS = False
-    return _BLAS.limit(limits=1, user_api="blas") if _BLAS else contextlib.nullcontext()
+    return _blas_controller().limit(limits=1, user_api="blas")
 
 
-_BLAS = None
+@functools.cache
+def _blas_controller() -> ThreadpoolController:
+    """The process's thread pools (looked up once, after numpy has loaded its BLAS)."""
+    return ThreadpoolController()
 
 
 def _render_insertion(image_rgb: np.ndarray, K: np.ndarray, depth_m: np.ndarray, light: DistantLight, asset: Asset,

@@ -2,13 +2,13 @@
 
 import numpy as np
 import pytest
+import threadpoolctl
 
 from render_fixtures import ground_scene, primitive_car, sunny_light
 from streetaug.augment.core import intrinsics_from_fov, pose_camera_to_transform
 from streetaug.augment.render import insert as insert_module
 from streetaug.augment.render import render_insertion
 
-threadpoolctl = pytest.importorskip("threadpoolctl")
 
 W, H = 320, 180
 K = intrinsics_from_fov(W, H, 60.0)
