@@ -209,7 +209,8 @@ def insert(dataroot, version, scene, sample_token, camera, asset, assets_dir, as
         refuse_output_inside(out, reader.dataroot)  # never write into the source (nor contain it)
         sample = reader.sample(resolve_sample(reader, scene, sample_token))
         view = camera_view(sample, camera)
-        paint = scene_paint_mix(sample, [camera]) if asset is None and assets_dir is None else None  # its cars
+        # the paint of the sample's own cars, seen by all its cameras (as `batch` measures it: the same cars)
+        paint = scene_paint_mix(sample) if asset is None and assets_dir is None else None
         assets = select_assets(item_seed(seed, "asset", sample.token, camera), n_objects, asset, assets_dir,
                                asset_front, asset_length, class_mix, class_sizes=class_sizes,
                                location=sample.location, paint_weights=paint)

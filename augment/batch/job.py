@@ -72,7 +72,7 @@ def augment_sample(reader: NuScenesReader, config: BatchConfig, out_dir: Path, t
     views, failed = readable_views_and_failures(sample, token, cameras, fail_fast)
     mix = config.class_mix
     procedural = config.asset is None and config.assets_dir is None
-    paint = scene_paint_mix(sample, [v.channel for v in views]) if procedural else None  # the sample's own cars
+    paint = scene_paint_mix(sample) if procedural else None  # the sample's own cars, seen by all its cameras
     assets = {v.channel: select_assets(item_seed(config.seed, "asset", token, v.channel), config.n_objects,
                                        config.asset, config.assets_dir, config.asset_front, config.asset_length, mix,
                                        class_sizes=config.class_sizes, location=sample.location, paint_weights=paint)
