@@ -52,7 +52,7 @@ def insert_into_image(
     objects = [object_label(T_cam_from_object, asset.wlh, asset.category, camera, obj.full_mask(),
                             obj.full_coverage(), attribute=attribute)]
     timing["total"] = time.perf_counter() - t0
-    return InsertResult(rendered.image, objects, rendered.mask, rendered.shadow_ratio, timing)
+    return InsertResult.of(rendered.image, objects, rendered.mask, rendered.shadow_ratio, timing)
 
 
 def ground_normal_from_depth(camera: PinholeCamera, depth_m: np.ndarray, T_cam_from_object: np.ndarray,

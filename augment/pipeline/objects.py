@@ -13,6 +13,7 @@ from ..core import PinholeCamera
 from ..lighting.light import DistantLight
 from ..render import Insertion, PixelBox, estimate_veil, footprint, render_insertion
 from .options import InsertOptions, render_settings
+from .results import changed_pixel_box
 
 
 @dataclass(frozen=True)
@@ -47,10 +48,7 @@ class RenderedObject:
     @classmethod
     def from_insertion(cls, T_cam_from_object: np.ndarray, asset: Asset, ins: Insertion) -> RenderedObject:
         """The labels' part of ``ins`` (copies: nothing of ``ins`` stays referenced)."""
-        on = (ins.mask != 0) | (ins.coverage != 0)
-        rows, cols = np.flatnonzero(on.any(axis=1)), np.flatnonzero(on.any(axis=0))
-        box = (PixelBox(int(cols[0]), int(rows[0]), int(cols[-1]) + 1, int(rows[-1]) + 1) if len(rows)
-               else PixelBox(0, 0, 0, 0))
+        box = changed_pixel_box((ins.mask != 0) | (ins.coverage != 0))
         return cls(T_cam_from_object, asset, ins.mask.shape[:2], box, ins.mask[box.slices].copy(),
                    ins.coverage[box.slices].copy(), ins.visible_px, ins.coverage_px, dict(ins.timing_s), ins.stats)
 

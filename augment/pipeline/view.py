@@ -103,9 +103,8 @@ def render_into_view(context: ViewContext, token: str, placed: SamplePlacement, 
     shown = [i for i in range(n) if reaches_view(context.camera, assets[i], poses[i], lights[i], options)]
     if not shown:
         timing["total"] = timing["lighting"] + timing["placement"] + time.perf_counter() - t0
-        result = InsertResult(image=image, objects=[], mask=np.zeros(image.shape[:2], np.float32),
-                              shadow_ratio=np.ones(image.shape[:2], np.float32), timing_s=timing, lighting=estimate,
-                              placement=placement, skipped_reason=skip_reason(placement, n))
+        result = InsertResult.of(image, [], None, None, timing, lighting=estimate, placement=placement,
+                                 skipped_reason=skip_reason(placement, n))
         return ViewInsertion(result, visible_px, coverage_px)
     t = time.perf_counter()
     depth_m = context.depth_m
@@ -131,6 +130,6 @@ def render_into_view(context: ViewContext, token: str, placed: SamplePlacement, 
             label.update(placed.label_fields[i])
         objects.append(label)
     timing["total"] = timing["lighting"] + timing["placement"] + time.perf_counter() - t0
-    result = InsertResult(image=rendered.image, objects=objects, mask=rendered.mask,
-                          shadow_ratio=rendered.shadow_ratio, timing_s=timing, lighting=estimate, placement=placement)
+    result = InsertResult.of(rendered.image, objects, rendered.mask, rendered.shadow_ratio, timing, lighting=estimate,
+                             placement=placement)
     return ViewInsertion(result, visible_px, coverage_px)
