@@ -20,7 +20,7 @@ from ..assets.asset import Asset
 from ..core import InputError, PinholeCamera, check_shape
 from ..lighting.light import DistantLight
 from .bounce import BounceLight
-from .camera_look import DAY_EXPOSURE_S, NIGHT_EXPOSURE_S, image_motion_px
+from .camera_look import DAY_EXPOSURE_S, NIGHT_EXPOSURE_S, apply_neutral_axis, image_motion_px, neutral_axis
 from .composite import Composited, ObjectLayers, composite_layers, object_layers
 from .footprint import Footprint, footprint
 from .foreground import Foreground, render_foreground
@@ -182,9 +182,12 @@ def _render_insertion(image_rgb: np.ndarray, K: np.ndarray, depth_m: np.ndarray,
         veil = estimate_veil(x.image_rgb, x.depth_m, ev)
     out = composite_layers(x.image_rgb, layers, x.camera, settings.match_camera, ev, rng, motion, jpeg_quality,
                            veil)
+    image = out.image
+    if settings.match_camera:  # the camera's neutral axis (its tone-dependent cast) on the object's pixels
+        image = apply_neutral_axis(image, layers.mask, neutral_axis(x.image_rgb))
     timing["composite"] = time.perf_counter() - t0
     timing["total"] = time.perf_counter() - t_start
-    return Insertion(image=out.image, mask=layers.solid_mask, coverage=layers.solid_coverage,
+    return Insertion(image=image, mask=layers.solid_mask, coverage=layers.solid_coverage,
                      shadow_ratio=out.shadow_ratio, object_depth_m=layers.depth_m, timing_s=timing,
                      stats=_stats(quality, fg, sh, prepared, out), shadow_ratio_rgb=layers.ratio_rgb,
                      object_radiance=out.object_radiance, footprint=where, alpha=layers.mask)
