@@ -43,8 +43,9 @@ box-locally, the composite's noise is drawn in 64k-pixel row chunks (same random
 tracemalloc peak for a whole-frame box) and the shadow's coarse-to-fine sky grid is interpolated in blocks
 (52 -> 6 MB for a whole-frame grid); outputs byte-identical. Peak RSS, first 4 keyframes, 1 worker:
 611 -> 592 MB (median of 3 interleaved runs each: 618, 611, 605 -> 592, 591, 602;
-``benchmarks/results/batch_seq4_s10_mem2_{before,after}.json``). The worker's high-water creep over a
-scene (fragmentation of the tuned heap?) is not addressed.
+``benchmarks/results/batch_seq4_s10_mem2_{before,after}.json``). The whole scene, 2 workers: 671 / 687 MB
+(``batch_seq_full_s10_mem2.json``; 692 / 726 at session 10's end, before the results were cropped). The
+worker's high-water creep over a scene (fragmentation of the tuned heap?) is not addressed.
 """
 
 from __future__ import annotations
