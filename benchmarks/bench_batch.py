@@ -171,6 +171,8 @@ def main() -> None:
     parser.add_argument("--limit", type=int, help="the first N keyframes only (with --dataroot)")
     parser.add_argument("--cameras", default="", help="comma-separated channels (with --dataroot; default all)")
     parser.add_argument("--workers", type=int, nargs="+", default=[2], help="worker counts (with --dataroot)")
+    parser.add_argument("--keep", type=Path, help="move each run's output folder under this folder (with --dataroot; "
+                        "to compare the outputs of two code trees)")
     parser.add_argument("--label", default="", help="a name for this code tree in the report (with --dataroot)")
     args = parser.parse_args()
     if args.dataroot is not None:
@@ -256,7 +258,11 @@ def dataset_main(args: argparse.Namespace) -> None:
                                    args.limit, cameras)
                 runs[f"{w} workers"].append(result)
                 print(f"{w} workers: {json.dumps(result)}", flush=True)
-                shutil.rmtree(out)
+                if args.keep:
+                    args.keep.mkdir(parents=True, exist_ok=True)
+                    shutil.move(str(out), str(args.keep / out.name))
+                else:
+                    shutil.rmtree(out)
     report = {
         "benchmark": "streetaug batch on a dataset",
         "code": args.label or str(Path(streetaug.augment.__file__).resolve().parent.parent),

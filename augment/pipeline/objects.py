@@ -48,9 +48,15 @@ class RenderedObject:
     @classmethod
     def from_insertion(cls, T_cam_from_object: np.ndarray, asset: Asset, ins: Insertion) -> RenderedObject:
         """The labels' part of ``ins`` (copies: nothing of ``ins`` stays referenced)."""
-        box = changed_pixel_box((ins.mask != 0) | (ins.coverage != 0))
-        return cls(T_cam_from_object, asset, ins.mask.shape[:2], box, ins.mask[box.slices].copy(),
-                   ins.coverage[box.slices].copy(), ins.visible_px, ins.coverage_px, dict(ins.timing_s), ins.stats)
+        L = ins.layers
+        box = PixelBox(0, 0, 0, 0)
+        if L.box is not None:
+            local = changed_pixel_box((L.solid_mask_box != 0) | (L.solid_coverage_box != 0))
+            if local.width and local.height:
+                box = PixelBox(local.x0 + L.box.x0, local.y0 + L.box.y0, local.x1 + L.box.x0, local.y1 + L.box.y0)
+        return cls(T_cam_from_object, asset, L.shape_px, box, L.crop("solid_mask", box).copy(),
+                   L.crop("solid_coverage", box).copy(), ins.visible_px, ins.coverage_px, dict(ins.timing_s),
+                   ins.stats)
 
     def _full(self, box_layer: np.ndarray) -> np.ndarray:
         full = np.zeros(self.image_shape_px, box_layer.dtype)
@@ -117,6 +123,7 @@ def render_objects(image: np.ndarray, K: np.ndarray, depth_m: np.ndarray, lights
     # the photo's haze and veiling glare, measured once on the image as captured (not on the objects drawn)
     veil = estimate_veil(image, depth_m, options.ev) if settings.match_camera and n else None
     rendered: list[RenderedObject | None] = [None] * n
+    depth_in = depth_m
     for i in order:
         ins = render_insertion(
             image, K, depth_m, lights[i], assets[i], T_cam_from_objects[i], ground_normal_cam=ground_normals_cam[i],
@@ -127,11 +134,17 @@ def render_objects(image: np.ndarray, K: np.ndarray, depth_m: np.ndarray, lights
             if stage != "total":
                 timing[f"render.{stage}"] = timing.get(f"render.{stage}", 0.0) + seconds
         image = ins.image
-        depth_m = np.where(ins.mask > 0.5, np.minimum(depth_m, ins.object_depth_m), depth_m)
-        mask_union = np.maximum(mask_union, ins.mask)
-        shadow = shadow * ins.shadow_ratio
+        # box-local: outside its layers' box an object's mask is 0, outside the composite's its shadow ratio 1
+        if ins.layers.box is not None:
+            sl, vis = ins.layers.box.slices, ins.layers.solid_mask_box
+            if depth_m is depth_in:  # the caller's depth is not written to
+                depth_m = depth_m.copy()
+            depth_m[sl] = np.where(vis > 0.5, np.minimum(depth_m[sl], ins.layers.depth_box), depth_m[sl])
+            mask_union[sl] = np.maximum(mask_union[sl], vis)
+        if ins.composited.box is not None:
+            shadow[ins.composited.box.slices] *= ins.composited.shadow_ratio_box
         rendered[i] = RenderedObject.from_insertion(T_cam_from_objects[i], assets[i], ins)
-        del ins  # its full-frame layers are not kept while the next object renders
+        del ins  # its layers are not kept while the next object renders
     timing["render"] = time.perf_counter() - t
     return RenderedImage(image, mask_union, shadow, rendered)
 

@@ -165,8 +165,15 @@ def blur_object_layer(radiance_premult: np.ndarray, alpha: np.ndarray, sigma_px:
     return blur(radiance_premult), np.clip(blur(alpha), 0.0, 1.0)
 
 
+NOISE_CHUNK_PX = 65536  # pixels per noise draw of add_object_noise (~1.5 MB of float64 noise)
+
+
 def add_object_noise(image_rgb: np.ndarray, alpha: np.ndarray, noise_sigma: float, rng: np.random.Generator) -> np.ndarray:
     """Add Gaussian noise (LDR std ``noise_sigma`` less 8-bit quantisation) where the object covers the image.
+
+    The noise is drawn in row chunks of ~:data:`NOISE_CHUNK_PX` pixels, in order: the same random stream and
+    the same bytes as one (h, w, 3) float64 draw (~50 MB for a near object's whole-frame box), with chunks
+    where ``alpha`` is 0 left as they are (adding 0 noise does not change an 8-bit level).
 
     Args:
         image_rgb: (h, w, 3) uint8 composited image (a box of it).
@@ -175,6 +182,16 @@ def add_object_noise(image_rgb: np.ndarray, alpha: np.ndarray, noise_sigma: floa
     extra = float(np.sqrt(max(noise_sigma**2 - QUANT_NOISE**2, 0.0)))
     if extra <= 0 or not np.any(alpha > 0):
         return image_rgb
-    out = image_rgb.astype(np.float32) / 255.0
-    noise = rng.normal(0.0, extra, size=image_rgb.shape).astype(np.float32) * alpha[..., None]
-    return np.clip(np.round((out + noise) * 255.0), 0, 255).astype(np.uint8)
+    h, w = image_rgb.shape[:2]
+    out = image_rgb.copy()
+    rows = max(1, NOISE_CHUNK_PX // max(w, 1))
+    for y0 in range(0, h, rows):
+        sl = slice(y0, min(y0 + rows, h))
+        draw = rng.normal(0.0, extra, size=(sl.stop - y0, w, 3))  # drawn whatever alpha: the stream stays
+        a = alpha[sl]
+        if not np.any(a > 0):
+            continue
+        noise = draw.astype(np.float32) * a[..., None]
+        del draw
+        out[sl] = np.clip(np.round((image_rgb[sl].astype(np.float32) / 255.0 + noise) * 255.0), 0, 255)
+    return out

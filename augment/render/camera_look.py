@@ -12,6 +12,7 @@ from the object's image motion during the exposure, and the source image's JPEG 
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
 
@@ -134,3 +135,89 @@ def _jpeg_noise_survival(quality: int, sigma_quarter_levels: int) -> float:
     out = cv2.imdecode(buf, cv2.IMREAD_COLOR).astype(np.float64)
     before, after = patch.astype(np.float64).std(), out.std()
     return float(np.clip(after / max(before, 1e-9), 0.25, 1.0))
+
+
+# ----------------------------------------------------------------------------- neutral axis (tone-dependent cast)
+# A camera's neutral axis: the LDR colour it records for neutral (grey) surfaces at each level. The contract's
+# response is the same curve for R, G and B, so a neutral rendered surface comes out neutral at every level;
+# real cameras are not: on scene-0916 (nuScenes, overcast) near-neutral pixels of the road, the cars and
+# the buildings read G 2-3.5 DN above R and B at every level from 8 to 96 (an additive offset, not a
+# multiplicative light colour: their ratio G/R falls from 1.24 at level 12 to 1.03 at level 80), none at
+# 128-192 (the camera's white balance point): dark real grey cars have CIELAB a* -1 to -2, rendered ones 0
+# (benchmarks/diag_colour_cast.py). The estimate below measures that offset per level band in the image
+# itself; :func:`apply_neutral_axis` adds it to the object's pixels (weighted by its alpha).
+NEUTRAL_BIN_EDGES = (0.0, 8.0, 16.0, 32.0, 64.0, 96.0, 128.0, 192.0, 256.0)  # LDR level bands (mean of R, G, B)
+NEUTRAL_SPREAD = (0.06, 4.0)  # near-neutral: max - min channel <= a x level + b (DN)
+NEUTRAL_MIN_PX = 100  # a band with fewer near-neutral pixels (after subsampling) has no offset
+NEUTRAL_PRIOR_PX = 400  # a band's offset is shrunk towards 0 by n / (n + this)
+NEUTRAL_MAX_DN = 8.0  # offsets are clipped to +- this (a larger one is a tinted scene, not the camera)
+# Only the red-green part (CIELAB a*) is the camera's: the blue-yellow part (b*) of near-neutral pixels is the
+# road's own tint (scene-0916's asphalt reads b* +2.4..+2.9 at L 20-50 where its real cars read b* 0, as the
+# rendered ones do; both real read a* -1..-1.3 there). The offset is G - R, carried along the sRGB direction
+# that moves a* alone (L* and b* kept; linearised at grey, the same from sRGB 0.1 to 0.5): G - R of 1 DN moves
+# a* by about -0.5 at L 40. ``(-0.5, 0.5, 0)`` instead moved b* by +0.29 per -1 of a* (realism b_mean gap
+# +0.60 -> +0.69 with it).
+GREEN_AXIS = np.array([-0.770, 0.230, -0.015])  # R, G, B offset (DN) per DN of G - R
+
+
+@dataclass(frozen=True)
+class NeutralAxis:
+    """The camera's neutral axis in one image: per level band, the LDR offset (DN) of each channel from the
+    mean of the three on near-neutral pixels.
+
+    Attributes:
+        levels: (B,) the mean LDR level (0..255) of the near-neutral pixels of each band that has enough.
+        offsets_dn: (B, 3) R, G, B offset (DN) from the pixel's mean level, shrunk and clipped.
+        n_px: (len(NEUTRAL_BIN_EDGES) - 1,) near-neutral pixels counted per band (subsampled), all bands.
+    """
+
+    levels: np.ndarray
+    offsets_dn: np.ndarray
+    n_px: np.ndarray
+
+    def offset_at(self, level: np.ndarray) -> np.ndarray:
+        """(N, 3) the offset (DN) at LDR levels (N,) (linear between band levels, constant beyond the ends)."""
+        lv = np.asarray(level, dtype=np.float64).reshape(-1)
+        return np.stack([np.interp(lv, self.levels, self.offsets_dn[:, c]) for c in range(3)], axis=-1)
+
+
+def neutral_axis(image_rgb: np.ndarray, step: int = 4) -> NeutralAxis:
+    """The neutral axis of an (H, W, 3) uint8 image (every ``step``-th pixel each way): per level band of
+    :data:`NEUTRAL_BIN_EDGES` with enough near-neutral pixels (:data:`NEUTRAL_SPREAD`), the median offset of
+    each channel from the pixel's mean, its green-magenta part only (:data:`GREEN_AXIS`), shrunk towards 0
+    (no cast) with few pixels; bands with too few are left out (the nearest band's offset holds there)."""
+    x = np.asarray(image_rgb)[::step, ::step].reshape(-1, 3).astype(np.float32)
+    m = x.mean(axis=1)
+    a, b = NEUTRAL_SPREAD
+    keep = (x.max(axis=1) - x.min(axis=1)) <= a * m + b
+    x, m = x[keep], m[keep]
+    edges = np.asarray(NEUTRAL_BIN_EDGES)
+    n_bins = len(edges) - 1
+    levels, offsets, counts = [], [], np.zeros(n_bins, np.int64)
+    band = np.clip(np.digitize(m, edges) - 1, 0, n_bins - 1)
+    for i in range(n_bins):
+        sel = band == i
+        n = int(sel.sum())
+        counts[i] = n
+        if n < NEUTRAL_MIN_PX:
+            continue
+        off = np.median(x[sel] - m[sel, None], axis=0)
+        green = float(off[1] - off[0]) * n / (n + NEUTRAL_PRIOR_PX)
+        levels.append(float(m[sel].mean()))
+        offsets.append(np.clip(green * GREEN_AXIS, -NEUTRAL_MAX_DN, NEUTRAL_MAX_DN))
+    if not levels:
+        return NeutralAxis(np.array([128.0]), np.zeros((1, 3)), counts)
+    return NeutralAxis(np.array(levels), np.array(offsets), counts)
+
+
+def apply_neutral_axis(image_rgb: np.ndarray, alpha: np.ndarray, axis: NeutralAxis) -> np.ndarray:
+    """``image_rgb`` (H, W, 3) uint8 with the neutral axis's offset at each pixel's level added where ``alpha``
+    (H, W) > 0, weighted by it (the object's pixels; the rest stays byte-identical)."""
+    out = np.asarray(image_rgb).copy()
+    ys, xs = np.nonzero(np.asarray(alpha) > 0)
+    if not len(ys):
+        return out
+    px = out[ys, xs].astype(np.float64)
+    off = axis.offset_at(px.mean(axis=1)) * np.asarray(alpha, dtype=np.float64)[ys, xs, None]
+    out[ys, xs] = np.clip(np.round(px + off), 0, 255).astype(np.uint8)
+    return out

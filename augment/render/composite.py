@@ -198,15 +198,35 @@ class Composited:
 
     Attributes:
         image: (H, W, 3) uint8 the composite (byte-identical to the input outside ``box``).
-        object_radiance: (H, W, 3) float32 un-premultiplied linear object radiance (0 where no coverage).
-        shadow_ratio: (H, W) float32 luminance of the per-channel ratio, 1 = unchanged.
+        box: the pixel box the composite changed (the layers' box grown by the blurred rim), or None.
+        object_radiance_box: (h, w, 3) float32 un-premultiplied linear object radiance inside ``box`` (0 where
+            no coverage); :attr:`object_radiance` gives it over the full image (0 outside ``box``).
+        shadow_ratio_box: (h, w) float32 luminance of the per-channel ratio inside ``box``, 1 = unchanged;
+            :attr:`shadow_ratio` gives it over the full image (1 outside ``box``).
         effects: the blur and noise matched to the image, or None.
     """
 
     image: np.ndarray
-    object_radiance: np.ndarray
-    shadow_ratio: np.ndarray
+    box: PixelBox | None
+    object_radiance_box: np.ndarray
+    shadow_ratio_box: np.ndarray
     effects: CameraEffects | None
+
+    def _full(self, layer: np.ndarray, fill: float, channels: tuple[int, ...]) -> np.ndarray:
+        out = np.full(self.image.shape[:2] + channels, fill, np.float32)
+        if self.box is not None:
+            out[self.box.slices] = layer
+        return out
+
+    @property
+    def object_radiance(self) -> np.ndarray:
+        """(H, W, 3) float32 un-premultiplied linear object radiance (0 where no coverage); a new array."""
+        return self._full(self.object_radiance_box, 0.0, (3,))
+
+    @property
+    def shadow_ratio(self) -> np.ndarray:
+        """(H, W) float32 luminance of the per-channel ratio, 1 = unchanged; a new array."""
+        return self._full(self.shadow_ratio_box, 1.0, ())
 
 
 def composite_layers(image_rgb: np.ndarray, layers: ObjectLayers, camera: PinholeCamera, match_camera: bool,
@@ -220,7 +240,7 @@ def composite_layers(image_rgb: np.ndarray, layers: ObjectLayers, camera: Pinhol
     H, W = image_rgb.shape[:2]
     image = image_rgb.copy()
     if layers.box is None:
-        return Composited(image, np.zeros((H, W, 3), np.float32), np.ones((H, W), np.float32), None)
+        return Composited(image, None, np.zeros((0, 0, 3), np.float32), np.ones((0, 0), np.float32), None)
     box, effects = layers.box, None
     if match_camera:
         g = CAMERA_EFFECTS_MARGIN_PX
@@ -254,11 +274,8 @@ def composite_layers(image_rgb: np.ndarray, layers: ObjectLayers, camera: Pinhol
             touched = np.zeros((H, W), bool)
             touched[ub] = mask_b > 1.0 / 255.0
             image = jpeg_round_trip(image, touched, jpeg_quality)
-    # the full-frame outputs, allocated once the composite's own buffers are gone
-    obj_rad = np.zeros((H, W, 3), np.float32)
-    ratio_lum = np.ones((H, W), np.float32)
+    # the outputs inside the changed box (the full frame on access), allocated once the composite's buffers are gone
     cov = L.crop("coverage", box)[..., None]
     with np.errstate(divide="ignore", invalid="ignore"):
-        obj_rad[ub] = np.where(cov > 0, rad / cov, 0.0)
-    ratio_lum[ub] = luminance(ratio)
-    return Composited(image, obj_rad, ratio_lum, effects)
+        obj_rad = np.where(cov > 0, rad / cov, 0.0).astype(np.float32, copy=False)
+    return Composited(image, box, obj_rad, luminance(ratio).astype(np.float32, copy=False), effects)

@@ -8,6 +8,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import time
 from dataclasses import dataclass
@@ -20,7 +21,7 @@ from ..assets.asset import Asset
 from ..core import InputError, PinholeCamera, check_shape
 from ..lighting.light import DistantLight
 from .bounce import BounceLight
-from .camera_look import DAY_EXPOSURE_S, NIGHT_EXPOSURE_S, image_motion_px
+from .camera_look import DAY_EXPOSURE_S, NIGHT_EXPOSURE_S, apply_neutral_axis, image_motion_px, neutral_axis
 from .composite import Composited, ObjectLayers, composite_layers, object_layers
 from .footprint import Footprint, footprint
 from .foreground import Foreground, render_foreground
@@ -40,33 +41,44 @@ INTERIOR_SKY_FRACTION = 0.1  # a car interior receives roughly a tenth of the sk
 class Insertion:
     """Result of :func:`render_insertion`.
 
+    Only the object's and shadow's pixel boxes are held (``layers``, ``composited``): the full-frame float
+    layers below build a new (H, W) array on each access (they were ~63 MB per object at 1600 x 900). Use
+    ``layers.box`` / :meth:`~.composite.ObjectLayers.crop` and ``composited.box`` for box-local work.
+
     Attributes:
         image: (H, W, 3) uint8 composited image (pixels outside ``footprint.box`` byte-identical).
+        layers: the object and its shadow as layers inside their union box (:class:`~.composite.ObjectLayers`).
+        composited: the composite's box and its box-local outputs (radiance, shadow ratio).
+        timing_s: seconds per stage: "prepare" (cached BVH, irradiance), "shadow", "foreground" (= "raycast"
+            inside it + "shade"), "composite", and "total".
+        stats: rays cast per stage, sample counts, pixel boxes.
+        footprint: the pixel boxes the object and its shadow could reach (:func:`~.footprint.footprint`).
+
+    Full-frame properties (new arrays):
         mask: (H, W) float32 the object's visible extent after occlusion, 0..1 (its see-through glass counts as
             the object: labels, the 2D box, occluding the objects rendered after it).
         coverage: (H, W) float32 the object's extent before occlusion (for the visible fraction).
         shadow_ratio: (H, W) float32 ratio map S (luminance of the per-channel ratio), 1 = unchanged.
         object_depth_m: (H, W) float32 camera-z of the object, inf where none.
-        timing_s: seconds per stage: "prepare" (cached BVH, irradiance), "shadow", "foreground" (= "raycast"
-            inside it + "shade"), "composite", and "total".
-        stats: rays cast per stage, sample counts, pixel boxes.
         shadow_ratio_rgb: (H, W, 3) float32 per-channel ratio actually used in the composite.
         object_radiance: (H, W, 3) float32 un-premultiplied linear object radiance (0 where no coverage).
-        footprint: the pixel boxes the object and its shadow could reach (:func:`~.footprint.footprint`).
         alpha: (H, W) float32 the composited alpha after occlusion (``mask`` less what its glass lets through).
     """
 
     image: np.ndarray
-    mask: np.ndarray
-    coverage: np.ndarray
-    shadow_ratio: np.ndarray
-    object_depth_m: np.ndarray
+    layers: ObjectLayers
+    composited: Composited
     timing_s: dict[str, float]
     stats: dict
-    shadow_ratio_rgb: np.ndarray | None = None
-    object_radiance: np.ndarray | None = None
     footprint: Footprint | None = None
-    alpha: np.ndarray | None = None
+
+    mask = property(lambda self: self.layers.solid_mask, doc="(H, W) float32, a new array")
+    coverage = property(lambda self: self.layers.solid_coverage, doc="(H, W) float32, a new array")
+    object_depth_m = property(lambda self: self.layers.depth_m, doc="(H, W) float32, a new array")
+    shadow_ratio_rgb = property(lambda self: self.layers.ratio_rgb, doc="(H, W, 3) float32, a new array")
+    alpha = property(lambda self: self.layers.mask, doc="(H, W) float32, a new array")
+    shadow_ratio = property(lambda self: self.composited.shadow_ratio, doc="(H, W) float32, a new array")
+    object_radiance = property(lambda self: self.composited.object_radiance, doc="(H, W, 3) float32, a new array")
 
     @cached_property
     def coverage_px(self) -> float:
@@ -182,12 +194,14 @@ def _render_insertion(image_rgb: np.ndarray, K: np.ndarray, depth_m: np.ndarray,
         veil = estimate_veil(x.image_rgb, x.depth_m, ev)
     out = composite_layers(x.image_rgb, layers, x.camera, settings.match_camera, ev, rng, motion, jpeg_quality,
                            veil)
+    image = out.image
+    if settings.match_camera:  # the camera's neutral axis (its tone-dependent cast) on the object's pixels
+        image = apply_neutral_axis(image, layers.mask, neutral_axis(x.image_rgb))
     timing["composite"] = time.perf_counter() - t0
     timing["total"] = time.perf_counter() - t_start
-    return Insertion(image=out.image, mask=layers.solid_mask, coverage=layers.solid_coverage,
-                     shadow_ratio=out.shadow_ratio, object_depth_m=layers.depth_m, timing_s=timing,
-                     stats=_stats(quality, fg, sh, prepared, out), shadow_ratio_rgb=layers.ratio_rgb,
-                     object_radiance=out.object_radiance, footprint=where, alpha=layers.mask)
+    layers = dataclasses.replace(layers, scene_depth_m=None)  # the full-frame depth is not kept in the result
+    return Insertion(image=image, layers=layers, composited=out, timing_s=timing,
+                     stats=_stats(quality, fg, sh, prepared, out), footprint=where)
 
 
 def _image_motion(x: _Inputs, layers: ObjectLayers, velocity_cam_mps: np.ndarray | None,
@@ -201,9 +215,9 @@ def _image_motion(x: _Inputs, layers: ObjectLayers, velocity_cam_mps: np.ndarray
         night = np.median(x.image_rgb[::8, ::8].mean(axis=2)) < NIGHT_MEDIAN_LEVEL
         exposure_s = NIGHT_EXPOSURE_S if night else DAY_EXPOSURE_S
     sl = layers.box.slices
-    depth = layers.depth_m[sl]
+    depth = layers.crop("depth_m", layers.box)
     hit = np.isfinite(depth)
-    w = layers.solid_mask[sl] * hit
+    w = layers.crop("solid_mask", layers.box) * hit
     if w.sum() < 1.0:
         return None
     ys, xs = np.mgrid[sl]

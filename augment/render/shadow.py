@@ -232,6 +232,7 @@ def _sky_occlusion(geo: "_Ground", box: PixelBox, light: DistantLight, prep: Pre
     return SkyOcclusion(uv, valid, D0, C, sky_def, bounce_gain)
 
 
+
 def _coarse_to_fine_cells(hl: int, wl: int, valid: np.ndarray, evaluate, D0: np.ndarray, C: np.ndarray,
                           E_safe: np.ndarray, stats: dict) -> None:
     """Fill the sky deficit (D0, C) of the (hl x wl) cell grid, in place, at the resolution it needs.
@@ -261,12 +262,20 @@ def _coarse_to_fine_cells(hl: int, wl: int, valid: np.ndarray, evaluate, D0: np.
     tx = ((np.arange(wl) - rx[qx]) / (rx[qx + 1] - rx[qx]))[None, :, None]
     is_node = np.zeros((hl, wl), bool)
     is_node[ry[:, None], rx[None, :]] = True
+    # Bilinear between the nodes, in blocks of grid rows (the same values as over the whole grid at once,
+    # whose float64 temporaries were ~8 (hl, wl, 3) arrays: ~69 MB for a whole-frame box).
+    rows = max(1, SKY_INTERP_CHUNK_CELLS // wl)
     for a in (D0, C):
         g = a[nodes].reshape(len(ry), len(rx), 3)
-        top = g[qy][:, qx] * (1 - tx) + g[qy][:, qx + 1] * tx
-        bot = g[qy + 1][:, qx] * (1 - tx) + g[qy + 1][:, qx + 1] * tx
-        interp = (top * (1 - ty) + bot * ty).reshape(-1, 3)
-        a[~is_node.ravel()] = np.where(valid[~is_node.ravel()][:, None], interp[~is_node.ravel()], 0.0)
+        for r0 in range(0, hl, rows):
+            r = slice(r0, min(r0 + rows, hl))
+            top = g[qy[r]][:, qx] * (1 - tx) + g[qy[r]][:, qx + 1] * tx
+            bot = g[qy[r] + 1][:, qx] * (1 - tx) + g[qy[r] + 1][:, qx + 1] * tx
+            interp = (top * (1 - ty[r]) + bot * ty[r]).reshape(-1, 3)
+            del top, bot
+            off = ~is_node[r].ravel()
+            block = a[r0 * wl : r.stop * wl]  # a view: the block's cells, row-major
+            block[off] = np.where(valid[r0 * wl : r.stop * wl][off][:, None], interp[off], 0.0)
     fine = np.flatnonzero((refine[qy][:, qx] & ~is_node).ravel() & valid)
     evaluate(fine)
     stats["sky_cells_evaluated"] = int(valid[nodes].sum() + len(fine))
@@ -370,6 +379,7 @@ GROUND_SNAP_END_M = 0.5  # ... and from this far on as the depth map says (smoot
 REFINE_RANGE_SIGMA = 0.12  # deficit difference (fraction of E) the refined band's smoothing does not cross
 SKY_COARSE_STEP = 4  # the sky deficit is first evaluated every this many cells ...
 SKY_COARSE_TOL = 0.01  # ... and at every cell where those nodes differ by more than this (fraction of E)
+SKY_INTERP_CHUNK_CELLS = 32768  # cells per block of grid rows interpolated between the nodes at once
 SKY_ROTATIONS = 128  # the sky spiral of a ground point is rotated by one of this many angles (random per point)
 SKY_REFINE_JUMP = 0.08  # sky-occlusion change (fraction of E) between neighbouring cells that asks for full resolution
 

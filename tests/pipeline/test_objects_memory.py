@@ -70,3 +70,59 @@ def test_no_full_frame_layer_of_a_composited_object_stays_referenced(monkeypatch
         arrays = [v for v in vars(obj).values() if isinstance(v, np.ndarray)]
         assert all(a.size < H * W for a in arrays)
     assert sum(o.coverage_px > 0 for o in out.objects) >= 2
+
+
+def _held_arrays(obj, seen=None) -> list[np.ndarray]:
+    """Every numpy array an object holds, through its dataclass fields (recursively)."""
+    seen = set() if seen is None else seen
+    if id(obj) in seen:
+        return []
+    seen.add(id(obj))
+    if isinstance(obj, np.ndarray):
+        return [obj]
+    if not hasattr(obj, "__dataclass_fields__"):
+        return []
+    return [a for name in obj.__dataclass_fields__ for a in _held_arrays(getattr(obj, name), seen)]
+
+
+def test_insertion_holds_no_full_frame_layer_but_its_image():
+    image, K, depth, lights, cars, poses, options = _scene()
+    ins = render_insertion(image, K, depth, lights[1], cars[1], poses[1], ground_normal_cam=poses[1][:3, 2],
+                           quality="draft", ev=options.ev, seed=3)
+    H, W = image.shape[:2]
+    held = [a for a in _held_arrays(ins) if a is not ins.image]
+    assert len(held) >= 10 and all(a.shape[0] * a.shape[1] < 0.5 * H * W for a in held)  # pixels, not values
+    assert ins.layers.scene_depth_m is None
+    mask, shadow, radiance = ins.mask, ins.shadow_ratio, ins.object_radiance
+    assert mask.shape == shadow.shape == (H, W) and radiance.shape == (H, W, 3)
+    assert mask.sum() > 100 and (shadow < 0.9).sum() > 100  # a visible car and its shadow
+    outside = np.ones((H, W), bool)
+    outside[ins.layers.box.slices] = False
+    assert not mask[outside].any() and np.isinf(ins.object_depth_m[outside]).all()
+    outside[:] = True
+    outside[ins.composited.box.slices] = False
+    assert (shadow[outside] == 1).all() and not radiance[outside].any()
+    assert ins.visible_px == float(mask.sum()) and ins.coverage_px == float(ins.coverage.sum())
+
+
+def test_render_objects_box_local_updates_are_the_dense_ones(monkeypatch):
+    image, K, depth, lights, cars, poses, options = _scene()
+    depth_before = depth.copy()
+    seen: list[tuple] = []  # per render: the depth it got, its full mask, object depth and shadow ratio
+
+    def spy(*args, **kwargs):
+        ins = render_insertion(*args, **kwargs)
+        seen.append((np.array(args[2], copy=True), ins.mask, ins.object_depth_m, ins.shadow_ratio))
+        return ins
+
+    monkeypatch.setattr(objects_module, "render_insertion", spy)
+    out = render_objects(image, K, depth, lights, cars, poses, [T[:3, 2] for T in poses], options,
+                         np.random.default_rng(0), {})
+    assert np.array_equal(depth, depth_before)  # the caller's depth is not written to
+    dense_depth, union, shadow = depth.copy(), np.zeros(depth.shape, np.float32), np.ones(depth.shape, np.float32)
+    for got_depth, mask, obj_depth, ratio in seen:
+        assert np.array_equal(got_depth, dense_depth)
+        dense_depth = np.where(mask > 0.5, np.minimum(dense_depth, obj_depth), dense_depth)
+        union, shadow = np.maximum(union, mask), shadow * ratio
+    assert not np.array_equal(dense_depth, depth)  # an object in front of the ground
+    assert np.array_equal(out.mask, union) and np.array_equal(out.shadow_ratio, shadow)
