@@ -194,13 +194,12 @@ def _render_insertion(image_rgb: np.ndarray, K: np.ndarray, depth_m: np.ndarray,
         veil = estimate_veil(x.image_rgb, x.depth_m, ev)
     out = composite_layers(x.image_rgb, layers, x.camera, settings.match_camera, ev, rng, motion, jpeg_quality,
                            veil)
-    image = out.image
     if settings.match_camera:  # the camera's neutral axis (its tone-dependent cast) on the object's pixels
-        image = apply_neutral_axis(image, layers.mask, neutral_axis(x.image_rgb))
+        out = dataclasses.replace(out, image=apply_neutral_axis(out.image, layers.mask, neutral_axis(x.image_rgb)))
     timing["composite"] = time.perf_counter() - t0
     timing["total"] = time.perf_counter() - t_start
     layers = dataclasses.replace(layers, scene_depth_m=None)  # the full-frame depth is not kept in the result
-    return Insertion(image=image, layers=layers, composited=out, timing_s=timing,
+    return Insertion(image=out.image, layers=layers, composited=out, timing_s=timing,
                      stats=_stats(quality, fg, sh, prepared, out), footprint=where)
 
 
