@@ -58,18 +58,13 @@ class RenderedObject:
                    L.crop("solid_coverage", box).copy(), ins.visible_px, ins.coverage_px, dict(ins.timing_s),
                    ins.stats)
 
-    def _full(self, box_layer: np.ndarray) -> np.ndarray:
-        full = np.zeros(self.image_shape_px, box_layer.dtype)
-        full[self.box.slices] = box_layer
-        return full
-
     def full_mask(self) -> np.ndarray:
         """(H, W) float32 the renderer's ``mask`` over the full image (a new array)."""
-        return self._full(self.mask_box)
+        return self.box.paste(self.mask_box, self.image_shape_px, 0.0)
 
     def full_coverage(self) -> np.ndarray:
         """(H, W) float32 the renderer's ``coverage`` over the full image (a new array)."""
-        return self._full(self.coverage_box)
+        return self.box.paste(self.coverage_box, self.image_shape_px, 0.0)
 
 
 @dataclass(frozen=True)

@@ -66,16 +66,12 @@ class InsertResult:
     @property
     def mask(self) -> np.ndarray:
         """(H, W) float32 union of the objects' alpha (a new array)."""
-        full = np.zeros(self.image.shape[:2], np.float32)
-        full[self.changed_box.slices] = self.mask_box
-        return full
+        return self.changed_box.paste(self.mask_box, self.image.shape[:2], 0.0)
 
     @property
     def shadow_ratio(self) -> np.ndarray:
         """(H, W) float32 product of the objects' shadow ratio maps, 1 = unchanged (a new array)."""
-        full = np.ones(self.image.shape[:2], np.float32)
-        full[self.changed_box.slices] = self.shadow_ratio_box
-        return full
+        return self.changed_box.paste(self.shadow_ratio_box, self.image.shape[:2], 1.0)
 
     @property
     def placement_report(self) -> dict[str, int] | None:

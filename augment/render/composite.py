@@ -212,21 +212,18 @@ class Composited:
     shadow_ratio_box: np.ndarray
     effects: CameraEffects | None
 
-    def _full(self, layer: np.ndarray, fill: float, channels: tuple[int, ...]) -> np.ndarray:
-        out = np.full(self.image.shape[:2] + channels, fill, np.float32)
-        if self.box is not None:
-            out[self.box.slices] = layer
-        return out
+    def _full(self, layer: np.ndarray, fill: float) -> np.ndarray:
+        return (self.box or PixelBox(0, 0, 0, 0)).paste(layer, self.image.shape[:2], fill)
 
     @property
     def object_radiance(self) -> np.ndarray:
         """(H, W, 3) float32 un-premultiplied linear object radiance (0 where no coverage); a new array."""
-        return self._full(self.object_radiance_box, 0.0, (3,))
+        return self._full(self.object_radiance_box, 0.0)
 
     @property
     def shadow_ratio(self) -> np.ndarray:
         """(H, W) float32 luminance of the per-channel ratio, 1 = unchanged; a new array."""
-        return self._full(self.shadow_ratio_box, 1.0, ())
+        return self._full(self.shadow_ratio_box, 1.0)
 
 
 def composite_layers(image_rgb: np.ndarray, layers: ObjectLayers, camera: PinholeCamera, match_camera: bool,

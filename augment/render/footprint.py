@@ -66,6 +66,13 @@ class PixelBox:
         """(rows, columns) slices of an (H, W, ...) image array."""
         return slice(self.y0, self.y1), slice(self.x0, self.x1)
 
+    def paste(self, layer: np.ndarray, shape_px: tuple[int, int], fill: float) -> np.ndarray:
+        """A new (H, W[, C]) array of ``shape_px`` holding ``layer`` (this box's (height, width[, C])) inside this box
+        and ``fill`` everywhere else (the full frame of a layer held only in its box)."""
+        out = np.full(tuple(shape_px) + layer.shape[2:], fill, layer.dtype)
+        out[self.slices] = layer
+        return out
+
     def union(self, other: "PixelBox | None") -> "PixelBox":
         """The smallest box holding this one and ``other``."""
         if other is None:
