@@ -194,8 +194,9 @@ def _render_insertion(image_rgb: np.ndarray, K: np.ndarray, depth_m: np.ndarray,
         veil = estimate_veil(x.image_rgb, x.depth_m, ev)
     out = composite_layers(x.image_rgb, layers, x.camera, settings.match_camera, ev, rng, motion, jpeg_quality,
                            veil)
-    if settings.match_camera:  # the camera's neutral axis (its tone-dependent cast) on the object's pixels
-        out = dataclasses.replace(out, image=apply_neutral_axis(out.image, layers.mask, neutral_axis(x.image_rgb)))
+    if settings.match_camera and layers.box is not None:  # the camera's neutral axis (its cast) on the object's pixels
+        sl = layers.box.slices  # out.image is this call's own copy of the image
+        out.image[sl] = apply_neutral_axis(out.image[sl], layers.crop("mask", layers.box), neutral_axis(x.image_rgb))
     timing["composite"] = time.perf_counter() - t0
     timing["total"] = time.perf_counter() - t_start
     layers = dataclasses.replace(layers, scene_depth_m=None)  # the full-frame depth is not kept in the result
