@@ -100,9 +100,10 @@ class BRDFParams:
                 out.__dict__[key] = self.__dict__[key][index]
         return out
 
-    def precompute(self) -> "BRDFParams":
-        """Compute the derived arrays now (so that :meth:`take` copies them instead of recomputing)."""
-        for key in ("c_diff", "c_spec", "alpha", "lobe_probs"):
+    def precompute(self, lobes: bool = True) -> "BRDFParams":
+        """Compute the derived arrays now (so that :meth:`take` copies them instead of recomputing); without
+        ``lobes`` not the lobe probabilities (only environment and BRDF samples need them)."""
+        for key in ("c_diff", "c_spec", "alpha") + (("lobe_probs",) if lobes else ()):
             getattr(self, key)
         return self
 

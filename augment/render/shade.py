@@ -178,10 +178,7 @@ def _shade_batch(ctx: ShadingContext, p: np.ndarray, n_s: np.ndarray, n_g: np.nd
                  params: BRDFParams, cv_scale: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """One chunk of :func:`shade`: (smooth, noisy) radiance parts, each (N, 3)."""
     N = len(p)
-    if ctx.residual:
-        params = params.precompute()
-    else:  # no environment / BRDF samples: their lobe probabilities are not needed (the other derived arrays are)
-        params.c_diff, params.c_spec, params.alpha  # noqa: B018 (cached properties, copied by take)
+    params = params.precompute(lobes=ctx.residual)  # no environment / BRDF samples: no lobe probabilities
     smooth = np.zeros((N, 3))
     noisy = np.zeros((N, 3))
     samples = []
