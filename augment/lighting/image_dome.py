@@ -84,20 +84,14 @@ class SeenPixels:
         clipped: (N,) bool, the pixel is clipped (its radiance is a lower bound).
         sky: (N,) bool, the pixel is sky.
         clipped_rgb: (N, 3) bool, the channel is clipped (its radiance is the saturation level, a lower bound;
-            the pixel's other channels are measurements), or None: every channel of a clipped pixel.
+            the pixel's other channels are measurements).
     """
 
     rays: np.ndarray
     radiance: np.ndarray
     clipped: np.ndarray
     sky: np.ndarray
-    clipped_rgb: np.ndarray | None = None
-
-    def channel_clipped(self) -> np.ndarray:
-        """(N, 3) bool: ``clipped_rgb``, else ``clipped`` in every channel."""
-        if self.clipped_rgb is not None:
-            return self.clipped_rgb
-        return np.repeat(self.clipped[:, None], 3, axis=1)
+    clipped_rgb: np.ndarray
 
 
 def seen_pixels(work: PreparedImage, R_map_from_cam: np.ndarray | None = None, gain: float = 1.0,
@@ -263,7 +257,7 @@ def image_corrected_envmap(model_envmap: np.ndarray, pixels: SeenPixels | list[S
     unclipped = seen & ~all_clipped
     log_ratio = np.log(np.maximum(mean_obs[unclipped], 1e-9) / model[unclipped])
     is_sky = np.concatenate([p.sky for p in pixels])
-    clipped_rgb = np.concatenate([p.channel_clipped() for p in pixels])
+    clipped_rgb = np.concatenate([p.clipped_rgb for p in pixels])
     sky_gain = sky_log_gain(rad[is_sky], clipped_rgb[is_sky], model.reshape(-1, 3)[cell[is_sky]])
     gains = band_log_gains(log_ratio, elev[unclipped], elev.reshape(-1), sky_gain)
     gains = np.clip(gains, -MAX_LOG_GAIN, MAX_LOG_GAIN).reshape(H, W, 3)
