@@ -46,8 +46,8 @@ LIT_RATIO = 2.0
 SIGMA_LOG_LUMINANCE = 0.3  # spread (log) of a paint's band ratio over cars and views (interquartile ~x1.6-1.8)
 SIGMA_CHROMATICITY = 0.03  # spread of the ratio's chromaticity (r, g of rgb / sum): white balance, reflections
 FAMILY_PRIOR_POWER = 0.25  # a car's prior: the region's family shares to this power (0: every family alike)
-PRIOR_CARS = 4.0
-EM_ITERATIONS = 30  # the regional table counts as this many observed cars
+PRIOR_CARS = 4.0  # the regional table counts as this many observed cars
+EM_ITERATIONS = 30
 
 
 def _band_points_box(T_cam_from_box: np.ndarray, wlh: np.ndarray, n_along: int = 12, n_up: int = 5) -> np.ndarray:

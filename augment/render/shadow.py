@@ -232,7 +232,6 @@ def _sky_occlusion(geo: "_Ground", box: PixelBox, light: DistantLight, prep: Pre
     return SkyOcclusion(uv, valid, D0, C, sky_def, bounce_gain)
 
 
-
 def _coarse_to_fine_cells(hl: int, wl: int, valid: np.ndarray, evaluate, D0: np.ndarray, C: np.ndarray,
                           E_safe: np.ndarray, stats: dict) -> None:
     """Fill the sky deficit (D0, C) of the (hl x wl) cell grid, in place, at the resolution it needs.
