@@ -35,7 +35,7 @@ adds more than ~70 MB (tracemalloc): peak RSS 772 -> 660 MB (first 4 keyframes, 
 (8 keyframes, 2 workers). A worker holds ~190-235 MB between samples (RSS after the heap release; ~75-110 MB
 of it malloc'd): nothing of a sample stays alive into the next.
 
-Session 11 (issue #19 follow-up, same scene and bench): the renderer's result (``render.Insertion``, and
+Later in session 10 (same scene and bench): the renderer's result (``render.Insertion``, and
 the composite's ``Composited``) holds its layers inside the object's / shadow's pixel box (mask, coverage,
 depth, ratios, radiance: ~63 MB of full-frame float layers per object before; the full-frame attributes are
 now properties building a new array), ``render_objects`` updates the depth, mask union and shadow product
@@ -44,7 +44,8 @@ tracemalloc peak for a whole-frame box) and the shadow's coarse-to-fine sky grid
 (52 -> 6 MB for a whole-frame grid); outputs byte-identical. Peak RSS, first 4 keyframes, 1 worker:
 611 -> 592 MB (median of 3 interleaved runs each: 618, 611, 605 -> 592, 591, 602;
 ``benchmarks/results/batch_seq4_s10_mem2_{before,after}.json``). The whole scene, 2 workers: 671 / 687 MB
-(``batch_seq_full_s10_mem2.json``; 692 / 726 at session 10's end, before the results were cropped). The
+(``batch_seq_full_s10_mem2.json``; 692 / 726 before the per-camera results were held in their box, 660 / 669
+with them: the peaks move by ~30 MB between runs). The
 worker's high-water creep over a scene (fragmentation of the tuned heap?) is not addressed.
 """
 
