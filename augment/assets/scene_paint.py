@@ -29,7 +29,7 @@ from typing import Sequence
 
 import numpy as np
 
-from ..core import check_shape, ldr_uint8_to_hdr, luminance, project_points
+from ..core import box_rect_px, check_shape, ldr_uint8_to_hdr, luminance, project_points
 from .car_paint import paint_family, paint_palette, paint_region_for_location
 
 BAND_HEIGHT = (0.30, 0.55)  # paint band, fractions of the box height from its bottom
@@ -185,15 +185,6 @@ def scene_paint_weights(ratios: Sequence[np.ndarray], region: str = "global") ->
     return weights / weights.sum()
 
 
-def _box_rect(K: np.ndarray, T_cam_from_box: np.ndarray, wlh: np.ndarray) -> np.ndarray:
-    w, l, h = (float(x) for x in wlh)
-    c = np.array([[sx * l / 2, sy * w / 2, sz * h / 2] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)])
-    uv, _ = project_points(K, c @ T_cam_from_box[:3, :3].T + T_cam_from_box[:3, 3])
-    if np.isnan(uv).all():
-        return np.full(4, np.nan)
-    return np.array([np.nanmin(uv[:, 0]), np.nanmin(uv[:, 1]), np.nanmax(uv[:, 0]), np.nanmax(uv[:, 1])])
-
-
 def sample_car_ratios(sample, channels: Sequence[str] | None = None, category_prefix: str = "vehicle.car"
                        ) -> list[np.ndarray]:
     """Band ratios (3,) (:func:`band_ratio`) of the annotated cars of a sample, each car once (the camera that sees most
@@ -218,7 +209,7 @@ def sample_car_ratios(sample, channels: Sequence[str] | None = None, category_pr
             continue
         image = view.image
         reference = image_reference_level(image)
-        rects = [_box_rect(K, T, b.wlh) if np.isfinite(d) else None for T, b, d in zip(poses, boxes, dist)]
+        rects = [box_rect_px(K, T, b.wlh) if np.isfinite(d) else None for T, b, d in zip(poses, boxes, dist)]
         for i in cars:
             nearer = [rects[j] for j in range(len(boxes))
                       if j != i and rects[j] is not None and dist[j] < dist[i] - 0.5]

@@ -15,7 +15,8 @@ It imports nothing else of the project; everything else may import it. The conve
 The light modules are re-exported here: ``from streetaug.augment.core import quat_to_rotation, PinholeCamera``.
 """
 
-from .camera import PinholeCamera, intrinsics_from_fov, pixel_rays, project_points, scale_intrinsics, unproject_depth
+from .camera import (PinholeCamera, box_corners_cam, box_rect_px, intrinsics_from_fov, pixel_rays, project_points,
+                     scale_intrinsics, unproject_depth)
 from .envmap import (camera_dir_to_lonlat, camera_envmap_directions, equirect_pixel_lonlat, equirect_solid_angles,
                      lonlat_to_camera_dir, lonlat_to_uv, lonlat_to_world_dir, sample_equirect, world_dir_to_lonlat)
 from .errors import ConventionError, InputError, check_rays, check_shape
@@ -27,7 +28,8 @@ from .response import (GAMMA, SATURATION_LDR, SATURATION_RADIANCE, SOFTCLIP_TAU,
                        hdr_to_ldr_uint8, inverse_softclip, ldr_to_hdr, ldr_uint8_to_hdr, luminance, softclip)
 
 __all__ = [
-    "PinholeCamera", "intrinsics_from_fov", "pixel_rays", "project_points", "scale_intrinsics", "unproject_depth",
+    "PinholeCamera", "box_corners_cam", "box_rect_px", "intrinsics_from_fov", "pixel_rays", "project_points",
+    "scale_intrinsics", "unproject_depth",
     "camera_dir_to_lonlat", "camera_envmap_directions", "equirect_pixel_lonlat", "equirect_solid_angles",
     "lonlat_to_camera_dir", "lonlat_to_uv", "lonlat_to_world_dir", "sample_equirect", "world_dir_to_lonlat",
     "ConventionError", "InputError", "check_rays", "check_shape",

@@ -1,4 +1,4 @@
-"""The pinhole camera: projection, pixel rays, intrinsics.
+"""The pinhole camera: projection (points and 3D boxes), pixel rays, intrinsics.
 
 Convention: pixel centres sit at integer coordinates, pixel (i, j) is the point u = i, v = j
 (OpenCV / nuScenes intrinsics), so a point on the camera's +z axis projects to (cx, cy).
@@ -30,6 +30,28 @@ def project_points(K: np.ndarray, points_cam: np.ndarray) -> tuple[np.ndarray, n
         uv = uvw[:, :2] / uvw[:, 2:3]
     uv[z <= 1e-9] = np.nan
     return uv, z
+
+
+# Box corners in units of the half size (x, y, z), the first four on the bottom face.
+_UNIT_BOX_CORNERS = np.array([[1, 1, -1], [1, -1, -1], [-1, -1, -1], [-1, 1, -1],
+                              [1, 1, 1], [1, -1, 1], [-1, -1, 1], [-1, 1, 1]], dtype=float)
+
+
+def box_corners_cam(T_cam_from_box: np.ndarray, wlh: np.ndarray) -> np.ndarray:
+    """(8, 3) corners of a centred box (nuScenes ``wlh``, x along its length) in the camera frame (metres);
+    the first four on the bottom face."""
+    half = 0.5 * np.array([wlh[1], wlh[0], wlh[2]], dtype=float)  # (length, width, height) along x, y, z
+    T = np.asarray(T_cam_from_box, dtype=float)
+    return (_UNIT_BOX_CORNERS * half) @ T[:3, :3].T + T[:3, 3]
+
+
+def box_rect_px(K: np.ndarray, T_cam_from_box: np.ndarray, wlh: np.ndarray) -> np.ndarray:
+    """(4,) x0, y0, x1, y1: the 2D bounding rectangle of the box's corners in front of the camera (NaN when
+    none is; a box across the camera plane gets the rectangle of its front corners only)."""
+    uv, _ = project_points(K, box_corners_cam(T_cam_from_box, wlh))
+    if np.isnan(uv).all():
+        return np.full(4, np.nan)
+    return np.array([np.nanmin(uv[:, 0]), np.nanmin(uv[:, 1]), np.nanmax(uv[:, 0]), np.nanmax(uv[:, 1])])
 
 
 def pixel_rays(K: np.ndarray, uv: np.ndarray) -> np.ndarray:

@@ -24,15 +24,10 @@ from typing import Sequence
 import cv2
 import numpy as np
 
-from ..core import project_points
+from ..core import box_corners_cam, box_rect_px, project_points
 
 FEATURE_NAMES = ("L_mean", "L_std", "a_mean", "b_mean", "chroma_mean", "rms_contrast", "laplacian_sharpness",
                  "edge_sharpness", "noise_sigma", "shadow_darkness", "saturated_fraction")
-
-# Box corners in units of the half size (x, y, z), the first four on the bottom face.
-_UNIT_CORNERS = np.array([[1, 1, -1], [1, -1, -1], [-1, -1, -1], [-1, 1, -1],
-                          [1, 1, 1], [1, -1, 1], [-1, -1, 1], [-1, 1, 1]], dtype=float)
-
 
 @dataclass(frozen=True)
 class CarCrop:
@@ -60,13 +55,6 @@ class CarCrop:
 
 # ----------------------------------------------------------------------------- geometry
 
-def box_corners_cam(T_cam_from_box: np.ndarray, wlh: np.ndarray) -> np.ndarray:
-    """(8, 3) box corners in the camera frame (metres); the first four on the bottom face."""
-    half = 0.5 * np.array([wlh[1], wlh[0], wlh[2]], dtype=float)  # (length, width, height) along x, y, z
-    corners_box = _UNIT_CORNERS * half
-    return corners_box @ T_cam_from_box[:3, :3].T + T_cam_from_box[:3, 3]
-
-
 def box_in_image(K: np.ndarray, T_cam_from_box: np.ndarray, wlh: np.ndarray, width: int, height: int,
                  min_depth_m: float = 0.5) -> bool:
     """True when all 8 corners are in front of the camera and project inside the image."""
@@ -75,15 +63,6 @@ def box_in_image(K: np.ndarray, T_cam_from_box: np.ndarray, wlh: np.ndarray, wid
         return False
     uv, _ = project_points(K, corners)
     return bool(np.all((uv[:, 0] >= 0) & (uv[:, 0] <= width - 1) & (uv[:, 1] >= 0) & (uv[:, 1] <= height - 1)))
-
-
-def box_rect_px(K: np.ndarray, T_cam_from_box: np.ndarray, wlh: np.ndarray) -> np.ndarray:
-    """(4,) x0, y0, x1, y1: the 2D bounding rectangle of the box's corners in front of the camera (NaN when
-    none is; a box across the camera plane gets the rectangle of its front corners only)."""
-    uv, _ = project_points(K, box_corners_cam(T_cam_from_box, wlh))
-    if np.isnan(uv).all():
-        return np.full(4, np.nan)
-    return np.array([np.nanmin(uv[:, 0]), np.nanmin(uv[:, 1]), np.nanmax(uv[:, 0]), np.nanmax(uv[:, 1])])
 
 
 def crop_window(rect_px: np.ndarray, width: int, height: int, side_margin: float = 0.15,
