@@ -7,8 +7,6 @@ camera-frame equirectangular convention of :mod:`streetaug.augment.core`.
 
 from __future__ import annotations
 
-import functools
-
 from dataclasses import dataclass
 
 import cv2
@@ -154,16 +152,13 @@ def irradiance_map(envmap: np.ndarray, height: int = 32, width: int = 64) -> np.
     return E.reshape(height + 2, width, 3)
 
 
-@functools.lru_cache(maxsize=2)
 def _irradiance_cosines(height: int, width: int) -> np.ndarray:
     """(height * width + 2, height * width) float32 ``max(0, n . m)`` of :func:`irradiance_map`'s normals (the
-    poles, then the texel centres) and texel moments: geometry alone, the same for every map (computed once;
-    read-only, 16.8 MB at 32 x 64)."""
+    poles, then the texel centres) and texel moments (geometry alone; not cached: 16.8 MB at 32 x 64 would stay
+    in every worker for ~6 ms per map)."""
     m = equirect_texel_moments(height, width).reshape(-1, 3)
     d = np.concatenate([[[0.0, -1.0, 0.0]], camera_envmap_directions(height, width).reshape(-1, 3), [[0.0, 1.0, 0.0]]])
-    cos = np.maximum(d.astype(np.float32) @ m.T.astype(np.float32), 0.0)  # (normals, texels): max(0, n . m)
-    cos.setflags(write=False)
-    return cos
+    return np.maximum(d.astype(np.float32) @ m.T.astype(np.float32), 0.0)  # (normals, texels): max(0, n . m)
 
 
 def lookup_irradiance(E: np.ndarray, normals_cam: np.ndarray) -> np.ndarray:
