@@ -174,7 +174,15 @@ def main() -> None:
     parser.add_argument("--keep", type=Path, help="move each run's output folder under this folder (with --dataroot; "
                         "to compare the outputs of two code trees)")
     parser.add_argument("--label", default="", help="a name for this code tree in the report (with --dataroot)")
+    parser.add_argument("--profile", action="store_true",
+                        help="with --dataroot, 1 worker: CPU seconds per image of each stage of the per-sample path "
+                             "(exclusive: a stage's nested stages are taken out of it), then a cProfile run for the "
+                             "top functions; written to --out")
+    parser.add_argument("--top", type=int, default=40, help="functions listed by --profile")
     args = parser.parse_args()
+    if args.dataroot is not None and args.profile:
+        profile_main(args)
+        return
     if args.dataroot is not None:
         dataset_main(args)
         return
@@ -280,6 +288,155 @@ def dataset_main(args: argparse.Namespace) -> None:
     args.out.write_text(json.dumps(report, indent=2) + "\n")
     print(json.dumps(report["medians"], indent=2))
     print(f"wrote {args.out}")
+
+
+# The per-sample path's stages: (stage, module, attribute) of the function whose calls make it (a class's method
+# as "Class.method"). Patched where the caller looks the name up; nested stages are taken out of their parents.
+PROFILE_STAGES = (
+    ("reading: tables and sample", "streetaug.datasets.nuscenes", "NuScenesReader.sample"),
+    ("reading: image decode", "streetaug.datasets.nuscenes", "NuScenesReader.camera_image"),
+    ("reading: LiDAR decode", "streetaug.datasets.nuscenes", "NuScenesReader.lidar_sweep"),
+    ("scene paint (per sample)", "streetaug.augment.batch.job", "scene_paint_mix"),
+    ("assets: procedural objects (per camera)", "streetaug.augment.batch.job", "select_assets"),
+    ("context: LiDAR into each camera", "streetaug.augment.pipeline.context", "ViewContext.of"),
+    ("depth: densified scene depth (per camera)", "streetaug.augment.pipeline.context", "scene_depth"),
+    ("placement", "streetaug.augment.pipeline.sample", "place_in_sample"),
+    ("lighting (per sample)", "streetaug.augment.pipeline.sample", "shared_sample_lighting"),
+    ("local light (per object, L2/L3 volume)", "streetaug.augment.pipeline.view", "object_light"),
+    ("render: reaches view (footprint)", "streetaug.augment.pipeline.view", "reaches_view"),
+    ("render: veil (per image)", "streetaug.augment.pipeline.objects", "estimate_veil"),
+    ("render: prepare (asset, bounce, ambient)", "streetaug.augment.render.insert", "_prepare"),
+    ("render: footprint", "streetaug.augment.render.insert", "footprint"),
+    ("render: shadow", "streetaug.augment.render.insert", "render_shadow"),
+    ("render: foreground (camera rays, surface, denoise)", "streetaug.augment.render.insert", "_foreground"),
+    ("render: foreground shading", "streetaug.augment.render.foreground", "shade"),
+    ("render: ray casting (embree, every stage)", "streetaug.augment.core.raycast", "RayScene.intersect"),
+    ("render: ray casting (embree, every stage)", "streetaug.augment.core.raycast", "RayScene.occluded"),
+    ("ray scene builds (BVH; every stage)", "streetaug.augment.core.raycast", "RayScene.__init__"),
+    ("render: occluder depth", "streetaug.augment.render.insert", "ground_snapped_depth"),
+    ("render: object layers", "streetaug.augment.render.insert", "object_layers"),
+    ("composite (veil, blur, noise, JPEG)", "streetaug.augment.render.insert", "composite_layers"),
+    ("camera look: blur and noise estimate (per object)", "streetaug.augment.render.composite",
+     "estimate_camera_effects"),
+    ("camera look: neutral axis", "streetaug.augment.render.insert", "neutral_axis"),
+    ("camera look: neutral axis", "streetaug.augment.pipeline.objects", "neutral_axis"),
+    ("camera look: apply neutral axis", "streetaug.augment.render.insert", "apply_neutral_axis"),
+    ("render: other (per object)", "streetaug.augment.pipeline.objects", "render_insertion"),
+    ("labels", "streetaug.augment.pipeline.view", "object_label"),
+    ("writing: images and labels", "streetaug.augment.batch.job", "write_sample"),
+    ("LiDAR: objects into the sweep, written", "streetaug.augment.batch.job", "write_lidar"),
+)
+
+
+class StageTimer:
+    """Exclusive CPU seconds (``time.process_time``) and calls per stage: wraps the stages' functions in place."""
+
+    def __init__(self) -> None:
+        self.cpu: dict[str, float] = {}
+        self.calls: dict[str, int] = {}
+        self._stack: list[list] = []
+        self._undo: list = []
+
+    def wrap(self, stage: str, module: str, attribute: str) -> bool:
+        import functools
+        import importlib
+
+        try:
+            owner = importlib.import_module(module)
+        except ImportError:
+            return False
+        *path, name = attribute.split(".")
+        for part in path:
+            owner = getattr(owner, part, None)
+        fn = getattr(owner, name, None) if owner is not None else None
+        if fn is None:
+            return False
+        timer = self
+
+        @functools.wraps(fn)
+        def timed(*a, **k):
+            timer._stack.append([time.process_time(), 0.0])
+            try:
+                return fn(*a, **k)
+            finally:
+                t0, child = timer._stack.pop()
+                spent = time.process_time() - t0
+                timer.cpu[stage] = timer.cpu.get(stage, 0.0) + spent - child
+                timer.calls[stage] = timer.calls.get(stage, 0) + 1
+                if timer._stack:
+                    timer._stack[-1][1] += spent
+
+        setattr(owner, name, timed)
+        self._undo.append((owner, name, fn))
+        return True
+
+    def unwrap(self) -> None:
+        for owner, name, fn in reversed(self._undo):
+            setattr(owner, name, fn)
+        self._undo.clear()
+
+
+def profile_main(args: argparse.Namespace) -> None:
+    """``--profile``: one run with the stage timers alone, one under cProfile (top functions); 1 worker, inline."""
+    import cProfile
+    import pstats
+
+    import streetaug.augment
+    from streetaug.augment.batch import job as _job  # noqa: F401 - the modules the stages are patched in
+    from streetaug.augment.pipeline import objects as _objects, view as _view  # noqa: F401
+
+    cameras = tuple(c for c in args.cameras.split(",") if c)
+    report: dict = {"benchmark": "streetaug batch profile: CPU seconds per image of each stage (1 worker, inline)",
+                    "code": args.label or str(Path(streetaug.augment.__file__).resolve().parent.parent),
+                    "dataset": str(args.dataroot), "limit": args.limit, "cameras": list(cameras) or "all",
+                    "quality": args.quality, "level": args.level,
+                    "machine": {"cpus": os.cpu_count(), "python": platform.python_version()}}
+    run = RunOptions(workers=1, progress=False, contact_sheet=0)
+    with tempfile.TemporaryDirectory() as tmp:
+        for mode in ("timers", "cprofile"):
+            timer = StageTimer()
+            missing = [f"{m}.{a}" for _, m, a in PROFILE_STAGES if not timer.wrap(_, m, a)]
+            prof = cProfile.Profile(time.process_time) if mode == "cprofile" else None
+            config = BatchConfig(dataroot=str(args.dataroot.resolve()), version=args.version, quality=args.quality,
+                                 level=args.level, seed=0, limit=args.limit, cameras=cameras)
+            load0 = os.getloadavg()[0]
+            cpu0 = time.process_time()
+            if prof:
+                prof.enable()
+            summary = run_batch(config, Path(tmp) / mode, run)
+            if prof:
+                prof.disable()
+            cpu = time.process_time() - cpu0
+            timer.unwrap()
+            n = summary["this_run"]["images"]
+            stages = {k: {"cpu_s_per_image": round(v / n, 4), "calls": timer.calls[k],
+                          "share": round(v / cpu, 3)} for k, v in sorted(timer.cpu.items(), key=lambda kv: -kv[1])}
+            rest = cpu - sum(timer.cpu.values())
+            stages["other (driver, tables, the rest)"] = {"cpu_s_per_image": round(rest / n, 4), "calls": 0,
+                                                          "share": round(rest / cpu, 3)}
+            entry = {"images": n, "cpu_s_total": round(cpu, 2), "cpu_s_per_image": round(cpu / n, 4),
+                     "load_avg_1min_before_after": [round(load0, 2), round(os.getloadavg()[0], 2)],
+                     "stages": stages, "unpatched": missing}
+            if prof:
+                stats = pstats.Stats(prof)
+                top = sorted(stats.stats.items(), key=lambda kv: -kv[1][2])[: args.top]  # by own time
+                entry["top_functions_by_own_time"] = [
+                    {"function": f"{_short(f)}:{line}({name})", "own_cpu_s_per_image": round(tt / n, 4),
+                     "cumulative_cpu_s_per_image": round(ct / n, 4), "calls": nc}
+                    for (f, line, name), (cc, nc, tt, ct, _) in top]
+                entry["note"] = "under cProfile (Python-heavy code is inflated); the timers run has the true stage costs"
+            report[mode] = entry
+            print(json.dumps({mode: {k: v["cpu_s_per_image"] for k, v in stages.items()}}, indent=1), flush=True)
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(json.dumps(report, indent=1) + "\n")
+    print(f"wrote {args.out}")
+
+
+def _short(path: str) -> str:
+    for marker in ("site-packages/", f"{ROOT}/", "/streetaug/", "python3.11/"):
+        if marker in path:
+            return path.split(marker, 1)[1]
+    return path
 
 
 if __name__ == "__main__":

@@ -11,7 +11,7 @@ import numpy as np
 from ..assets.asset import Asset
 from ..core import PinholeCamera
 from ..lighting.light import DistantLight
-from ..render import Insertion, PixelBox, estimate_veil, footprint, render_insertion
+from ..render import Insertion, PixelBox, estimate_veil, footprint, neutral_axis, render_insertion
 from .options import InsertOptions, render_settings
 from .results import changed_pixel_box
 
@@ -115,15 +115,17 @@ def render_objects(image: np.ndarray, K: np.ndarray, depth_m: np.ndarray, lights
     seeds = [int(rng.integers(2**31)) for _ in range(n)]
     velocities = list(velocities_cam_mps) if velocities_cam_mps is not None else [None] * n
     order = np.argsort([float(np.linalg.norm(np.asarray(T)[:3, 3])) for T in T_cam_from_objects], kind="stable")
-    # the photo's haze and veiling glare, measured once on the image as captured (not on the objects drawn)
+    # the photo's haze and veiling glare and its camera's neutral axis, measured once on the image as captured
+    # (not on the objects drawn into it)
     veil = estimate_veil(image, depth_m, options.ev) if settings.match_camera and n else None
+    neutral = neutral_axis(image) if settings.match_camera and n else None
     rendered: list[RenderedObject | None] = [None] * n
     depth_in = depth_m
     for i in order:
         ins = render_insertion(
             image, K, depth_m, lights[i], assets[i], T_cam_from_objects[i], ground_normal_cam=ground_normals_cam[i],
             quality=settings, ev=options.ev, seed=seeds[i], velocity_cam_mps=velocities[i], jpeg_quality=jpeg_quality,
-            veil=veil,
+            veil=veil, neutral=neutral,
         )
         for stage, seconds in ins.timing_s.items():
             if stage != "total":

@@ -10,14 +10,16 @@ assets and the light types)::
 Callers use this package's API only: :func:`render_insertion` and its :class:`Insertion` result, the
 :class:`RenderSettings` with their named :data:`QUALITY_PRESETS`, and :func:`footprint` to ask, before
 rendering, whether an object or its shadow reaches an image at all (the renderer uses the same boxes), and
-:func:`estimate_veil` to measure an image's haze and veiling glare once for all the objects put into it.
+:func:`estimate_veil` / :func:`neutral_axis` to measure an image's haze and veiling glare and its camera's neutral
+axis once for all the objects put into it.
 """
 
+from .camera_look import NeutralAxis, neutral_axis
 from .footprint import Footprint, PixelBox, footprint
 from .insert import Insertion, render_insertion
 from .settings import QUALITY_PRESETS, RenderSettings, resolve_settings
 from .surface import prepare_asset
 from .veil import Veil, estimate_veil
 
-__all__ = ["Footprint", "Insertion", "PixelBox", "QUALITY_PRESETS", "RenderSettings", "Veil", "estimate_veil",
-           "footprint", "prepare_asset", "render_insertion", "resolve_settings"]
+__all__ = ["Footprint", "Insertion", "NeutralAxis", "PixelBox", "QUALITY_PRESETS", "RenderSettings", "Veil",
+           "estimate_veil", "footprint", "neutral_axis", "prepare_asset", "render_insertion", "resolve_settings"]

@@ -22,6 +22,7 @@ quantisation noise the render already has) is added where the object covers the 
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import cv2
@@ -59,12 +60,18 @@ def _check(image_rgb: np.ndarray) -> np.ndarray:
     return img.astype(np.float32) / 255.0
 
 
-def _noise_sigma_channel(channel: np.ndarray, mask: np.ndarray | None = None, near_edge: np.ndarray | None = None) -> float:
-    """Noise std of one (H, W) float channel: MAD of the Laplacian-difference response off edges and clipping."""
+def _noise_sigma_channel(channel: np.ndarray, mask: np.ndarray | None = None, near_edge: np.ndarray | None = None,
+                         edges_out: list | None = None) -> float:
+    """Noise std of one (H, W) float channel: MAD of the Laplacian-difference response off edges and clipping.
+
+    ``edges_out``: receives (the first estimate, the pixels near edges found with it) when ``near_edge`` is None."""
     h = cv2.filter2D(channel, cv2.CV_32F, NOISE_MASK, borderType=cv2.BORDER_REFLECT)
+    np.abs(h, out=h)
     if near_edge is None:
-        first = 1.4826 * float(np.median(np.abs(h))) / 6.0
-        near_edge = cv2.dilate(_edges(channel, first).astype(np.uint8), np.ones((5, 5), np.uint8)) > 0
+        first = 1.4826 * float(np.median(h)) / 6.0
+        near_edge = _near_edges(channel, first)
+        if edges_out is not None:
+            edges_out.append((first, near_edge))
     c8 = np.round(channel * 255.0)
     clipped = cv2.dilate(((c8 <= 1) | (c8 >= 254)).astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
     keep = ~near_edge & ~clipped
@@ -74,17 +81,37 @@ def _noise_sigma_channel(channel: np.ndarray, mask: np.ndarray | None = None, ne
     keep[:, :1] = keep[:, -1:] = False
     if keep.sum() < 100:
         keep = np.ones_like(keep) if mask is None else mask.copy()
-    return 1.4826 * float(np.median(np.abs(h[keep]))) / 6.0
+    return 1.4826 * float(np.median(h[keep], overwrite_input=True)) / 6.0
 
 
-def _edges(gray: np.ndarray, noise_sigma: float, smooth_px: float = 0.0) -> np.ndarray:
-    """Canny edges (bool) with thresholds well above the noise (on an 8-bit copy, optionally pre-smoothed)."""
+def _near_edges(gray: np.ndarray, noise_sigma: float) -> np.ndarray:
+    """(H, W) bool: pixels within 2 of a Canny edge (:func:`_edges`)."""
+    return cv2.dilate(_edges(gray, noise_sigma).astype(np.uint8), np.ones((5, 5), np.uint8)) > 0
+
+
+def _canny_high(noise_sigma: float) -> float:
+    """Canny's high threshold (8-bit levels) for an image of noise std ``noise_sigma``: well above the noise."""
+    return max(30.0, 255.0 * 3.46 * 4.0 * noise_sigma)  # Canny's Sobel has noise gain sqrt(12) = 3.46
+
+
+def _edges(gray: np.ndarray, noise_sigma: float, smooth_px: float = 0.0, smoothed: np.ndarray | None = None) -> np.ndarray:
+    """Canny edges (bool) with thresholds well above the noise (on an 8-bit copy, optionally pre-smoothed;
+    ``smoothed``: ``gray`` already blurred by ``smooth_px``)."""
     if smooth_px > 0:
-        gray = cv2.GaussianBlur(gray, (0, 0), smooth_px, borderType=cv2.BORDER_REFLECT)
+        gray = _reblurred(gray, smooth_px) if smoothed is None else smoothed
         noise_sigma = noise_sigma / (2.0 * np.sqrt(np.pi) * smooth_px)  # white noise after a Gaussian
     g8 = np.clip(np.round(gray * 255.0), 0, 255).astype(np.uint8)
-    hi = max(30.0, 255.0 * 3.46 * 4.0 * noise_sigma)  # Canny's Sobel has noise gain sqrt(12) = 3.46
+    hi = _canny_high(noise_sigma)
     return cv2.Canny(g8, hi / 2.0, hi, L2gradient=True) > 0
+
+
+def _reblurred(gray: np.ndarray, sigma_px: float) -> np.ndarray:
+    return cv2.GaussianBlur(gray, (0, 0), sigma_px, borderType=cv2.BORDER_REFLECT)
+
+
+def _gray(img: np.ndarray) -> np.ndarray:
+    """(H, W) float32 luma of an (H, W, 3) float32 image."""
+    return img @ np.array([0.299, 0.587, 0.114], np.float32)
 
 
 def estimate_noise_sigma(image_rgb: np.ndarray, mask: np.ndarray | None = None) -> float:
@@ -93,8 +120,16 @@ def estimate_noise_sigma(image_rgb: np.ndarray, mask: np.ndarray | None = None) 
     ``mask`` (H, W) bool restricts the estimate to some pixels (e.g. an inserted object).
     """
     img = _check(image_rgb)
-    gray = img @ np.array([0.299, 0.587, 0.114], np.float32)
-    near_edge = cv2.dilate(_edges(gray, _noise_sigma_channel(gray, mask)).astype(np.uint8), np.ones((5, 5), np.uint8)) > 0
+    return _noise_sigma(img, _gray(img), mask)
+
+
+def _noise_sigma(img: np.ndarray, gray: np.ndarray, mask: np.ndarray | None = None) -> float:
+    """:func:`estimate_noise_sigma` of ``img`` (H, W, 3) float32 (LDR) and its luma ``gray`` (H, W)."""
+    found: list[tuple[float, np.ndarray]] = []
+    sigma_gray = _noise_sigma_channel(gray, mask, edges_out=found)
+    first, near_edge = found[0]
+    if _canny_high(sigma_gray) != _canny_high(first):  # else the same thresholds: the same edges
+        near_edge = _near_edges(gray, sigma_gray)
     return float(np.mean([_noise_sigma_channel(np.ascontiguousarray(img[..., c]), mask, near_edge) for c in range(3)]))
 
 
@@ -104,6 +139,7 @@ def _grad(img: np.ndarray) -> np.ndarray:
     return gx * gx + gy * gy
 
 
+@functools.cache
 def _noise_gain_sq() -> tuple[float, float]:
     """E|grad|^2 per unit noise variance of white noise, without and with the re-blur (measured on a delta)."""
     delta = np.zeros((41, 41), np.float32)
@@ -122,10 +158,15 @@ def estimate_blur_sigma(image_rgb: np.ndarray, noise_sigma: float | None = None,
     only edges whose re-blurred gradient stands far above the noise are used.  ``mask`` (H, W) bool
     restricts the edges used.
     """
-    img = _check(image_rgb)
-    gray = img @ np.array([0.299, 0.587, 0.114], np.float32)
+    return _blur_sigma(_gray(_check(image_rgb)), noise_sigma, mask)
+
+
+def _blur_sigma(gray: np.ndarray, noise_sigma: float | None = None,
+                mask: np.ndarray | None = None) -> tuple[float, int]:
+    """:func:`estimate_blur_sigma` of the luma ``gray`` (H, W) float32 (LDR) of an image."""
     sigma_n = _noise_sigma_channel(gray) if noise_sigma is None else float(noise_sigma) * 0.668  # grey of 3 channels
-    edges = _edges(gray, sigma_n, smooth_px=REBLUR_SIGMA_PX)
+    reblurred = _reblurred(gray, REBLUR_SIGMA_PX)
+    edges = _edges(gray, sigma_n, smooth_px=REBLUR_SIGMA_PX, smoothed=reblurred)
     if mask is not None:
         edges &= mask
     edges[:4] = edges[-4:] = False
@@ -135,7 +176,7 @@ def estimate_blur_sigma(image_rgb: np.ndarray, noise_sigma: float | None = None,
         return 0.0, int(len(ys))
     k0, k1 = _noise_gain_sq()
     g0 = _grad(gray)[ys, xs] - k0 * sigma_n**2
-    g1 = _grad(cv2.GaussianBlur(gray, (0, 0), REBLUR_SIGMA_PX, borderType=cv2.BORDER_REFLECT))[ys, xs] - k1 * sigma_n**2
+    g1 = _grad(reblurred)[ys, xs] - k1 * sigma_n**2
     snr_ok = g1 > (6.0 * sigma_n) ** 2 * k0  # the re-blurred edge is far above the unblurred noise gradient
     a, b = g0[snr_ok], g1[snr_ok]
     if len(a) < MIN_EDGE_PIXELS:
@@ -151,8 +192,10 @@ def estimate_blur_sigma(image_rgb: np.ndarray, noise_sigma: float | None = None,
 
 def estimate_camera_effects(image_rgb: np.ndarray) -> CameraEffects:
     """Blur and noise of an (H, W, 3) uint8 image (see the module docstring)."""
-    noise = estimate_noise_sigma(image_rgb)
-    blur, n = estimate_blur_sigma(image_rgb, noise)
+    img = _check(image_rgb)
+    gray = _gray(img)
+    noise = _noise_sigma(img, gray)
+    blur, n = _blur_sigma(gray, noise)
     return CameraEffects(blur_sigma_px=blur, noise_sigma=noise, edge_pixels=n)
 
 

@@ -74,7 +74,13 @@ def ijg_table(quality: int) -> np.ndarray:
 
 def jpeg_quality_from_table(luma_table: np.ndarray) -> int:
     """The IJG quality 1..100 whose luminance table (64,) natural order is nearest (in log steps) to ``luma_table``."""
-    t = np.log(np.maximum(np.asarray(luma_table, np.float64).ravel(), 1.0))
+    return _jpeg_quality_of_table(tuple(float(x) for x in np.asarray(luma_table, np.float64).ravel()))
+
+
+@lru_cache(maxsize=64)
+def _jpeg_quality_of_table(table: tuple[float, ...]) -> int:
+    """:func:`jpeg_quality_from_table` of a table's values (kept: a dataset's images share a few tables)."""
+    t = np.log(np.maximum(np.asarray(table, np.float64), 1.0))
     errs = [float(np.abs(np.log(ijg_table(q)) - t).sum()) for q in range(1, 101)]
     return int(np.argmin(errs)) + 1
 

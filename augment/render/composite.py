@@ -203,7 +203,7 @@ class Composited:
             no coverage); :attr:`object_radiance` gives it over the full image (0 outside ``box``).
         shadow_ratio_box: (h, w) float32 luminance of the per-channel ratio inside ``box``, 1 = unchanged;
             :attr:`shadow_ratio` gives it over the full image (1 outside ``box``).
-        effects: the blur and noise matched to the image, or None.
+        effects: the blur and noise matched to the image, or None (not matched, or no object pixel to match).
     """
 
     image: np.ndarray
@@ -226,6 +226,18 @@ class Composited:
         return self._full(self.shadow_ratio_box, 1.0)
 
 
+def object_drawn(layers: ObjectLayers) -> bool:
+    """Whether the object itself adds to any pixel of the composite (its visible alpha, or radiance it shows
+    where it is not occluded, e.g. glass all of whose rays went through); False for an object whose shadow
+    alone reaches the image."""
+    if layers.box is None:
+        return False
+    if np.any(layers.mask_box > 0):
+        return True
+    seen = layers.visibility_box > 0
+    return bool(np.any(seen) and np.any(layers.radiance_box[seen] != 0))
+
+
 def composite_layers(image_rgb: np.ndarray, layers: ObjectLayers, camera: PinholeCamera, match_camera: bool,
                      ev: float, rng: np.random.Generator, motion_px: np.ndarray | None = None,
                      jpeg_quality: int | None = None, veil: Veil | None = None) -> Composited:
@@ -240,18 +252,24 @@ def composite_layers(image_rgb: np.ndarray, layers: ObjectLayers, camera: Pinhol
         return Composited(image, None, np.zeros((0, 0, 3), np.float32), np.ones((0, 0), np.float32), None)
     box, effects = layers.box, None
     if match_camera:
+        # Blur and noise are measured only for an object with a pixel to match: of an object whose shadow alone
+        # reaches the image nothing is blurred or noised (the same bytes without the measurement).
         g = CAMERA_EFFECTS_MARGIN_PX
-        effects = estimate_camera_effects(image_rgb[max(box.y0 - g, 0) : box.y1 + g, max(box.x0 - g, 0) : box.x1 + g])
+        if object_drawn(layers):
+            effects = estimate_camera_effects(image_rgb[max(box.y0 - g, 0) : box.y1 + g,
+                                                        max(box.x0 - g, 0) : box.x1 + g])
+        blur_sigma_px = 0.0 if effects is None else effects.blur_sigma_px
+        noise_sigma = 0.0 if effects is None else effects.noise_sigma
         kernel = motion_kernel(np.zeros(2) if motion_px is None else motion_px)
-        box = box.grown(int(np.ceil(3 * effects.blur_sigma_px)) + kernel.shape[0] // 2, camera)  # the blurred rim
+        box = box.grown(int(np.ceil(3 * blur_sigma_px)) + kernel.shape[0] // 2, camera)  # the blurred rim
     ub = box.slices
     L = layers
     rad, ratio, mask = L.crop("radiance_premult", box), L.crop("ratio_rgb", box), L.crop("mask", box)
-    if effects is None:
+    if not match_camera:
         image[ub] = composite(image_rgb[ub], rad, mask, L.crop("visibility", box), ratio, ev)
     else:  # the veil, blur the visible object layer like the image, composite, then add the image's noise
         seen = rad if veil is None else veil.apply(rad, L.crop("coverage", box), L.crop("depth_m", box))
-        obj_b, mask_b = blur_object_layer(seen * L.crop("visibility", box)[..., None], mask, effects.blur_sigma_px)
+        obj_b, mask_b = blur_object_layer(seen * L.crop("visibility", box)[..., None], mask, blur_sigma_px)
         del seen
         if kernel.size > 1:  # motion blur: a line kernel along the object's image motion
             smear = lambda a: cv2.filter2D(np.ascontiguousarray(a, np.float32), -1, kernel,  # noqa: E731
@@ -262,10 +280,10 @@ def composite_layers(image_rgb: np.ndarray, layers: ObjectLayers, camera: Pinhol
             shadow = veil.shadow_ratio(ratio, image_rgb[ub], L.scene_depth_m[ub], ev)
         image[ub] = composite(image_rgb[ub], obj_b, mask_b, np.ones_like(mask_b), shadow, ev)
         del obj_b, shadow
-        sigma = effects.noise_sigma
-        if jpeg_quality is not None:  # the re-encoding below removes part of the added noise: add more
-            for _ in range(3):
-                sigma = effects.noise_sigma / jpeg_noise_survival(jpeg_quality, sigma)
+        sigma = noise_sigma
+        if jpeg_quality is not None and effects is not None:  # the re-encoding below removes part of the added
+            for _ in range(3):                                 # noise: add more
+                sigma = noise_sigma / jpeg_noise_survival(jpeg_quality, sigma)
         image[ub] = add_object_noise(image[ub], mask_b, sigma, rng)
         if jpeg_quality is not None:
             touched = np.zeros((H, W), bool)

@@ -21,7 +21,8 @@ from ..assets.asset import Asset
 from ..core import InputError, PinholeCamera, check_shape
 from ..lighting.light import DistantLight
 from .bounce import BounceLight
-from .camera_look import DAY_EXPOSURE_S, NIGHT_EXPOSURE_S, apply_neutral_axis, image_motion_px, neutral_axis
+from .camera_look import DAY_EXPOSURE_S, NIGHT_EXPOSURE_S, NeutralAxis, apply_neutral_axis, image_motion_px, \
+    neutral_axis
 from .composite import Composited, ObjectLayers, composite_layers, object_layers
 from .footprint import Footprint, footprint
 from .foreground import Foreground, render_foreground
@@ -117,7 +118,8 @@ def render_insertion(image_rgb: np.ndarray, K: np.ndarray, depth_m: np.ndarray, 
                      asset: Asset, T_cam_from_object: np.ndarray, ground_normal_cam: np.ndarray | None = None,
                      quality: str | RenderSettings = "default", ev: float = 0.0, seed: int = 0,
                      velocity_cam_mps: np.ndarray | None = None, exposure_s: float | None = None,
-                     jpeg_quality: int | None = None, veil: Veil | None = None) -> Insertion:
+                     jpeg_quality: int | None = None, veil: Veil | None = None,
+                     neutral: NeutralAxis | None = None) -> Insertion:
     """Render ``asset`` at ``T_cam_from_object`` into ``image_rgb`` with its shadow and occlusion.
 
     Args:
@@ -139,10 +141,13 @@ def render_insertion(image_rgb: np.ndarray, K: np.ndarray, depth_m: np.ndarray, 
             ``settings.match_camera`` the object's blocks are re-encoded at it (None: not re-encoded).
         veil: the image's haze and veiling glare (:func:`~.veil.estimate_veil` of the image and ``depth_m``);
             with ``settings.match_camera`` the object is seen through it (None: estimated here).
+        neutral: the camera's neutral axis in the image (:func:`~.camera_look.neutral_axis` of the image as
+            captured); with ``settings.match_camera`` it is added to the object's pixels (None: measured here on
+            ``image_rgb``). Several objects put into one image share the one measured before any is drawn.
     """
     with _one_blas_thread():
         return _render_insertion(image_rgb, K, depth_m, light, asset, T_cam_from_object, ground_normal_cam, quality, ev,
-                                 seed, velocity_cam_mps, exposure_s, jpeg_quality, veil)
+                                 seed, velocity_cam_mps, exposure_s, jpeg_quality, veil, neutral)
 
 
 def _one_blas_thread():
@@ -164,7 +169,7 @@ def _blas_controller() -> ThreadpoolController:
 def _render_insertion(image_rgb: np.ndarray, K: np.ndarray, depth_m: np.ndarray, light: DistantLight, asset: Asset,
                       T_cam_from_object: np.ndarray, ground_normal_cam: np.ndarray | None, quality: str | RenderSettings,
                       ev: float, seed: int, velocity_cam_mps: np.ndarray | None, exposure_s: float | None,
-                      jpeg_quality: int | None, veil: Veil | None) -> Insertion:
+                      jpeg_quality: int | None, veil: Veil | None, neutral: NeutralAxis | None) -> Insertion:
     """:func:`render_insertion` (with BLAS on one thread)."""
     t_start = time.perf_counter()
     x = _check_inputs(image_rgb, K, depth_m, T_cam_from_object)
@@ -195,8 +200,10 @@ def _render_insertion(image_rgb: np.ndarray, K: np.ndarray, depth_m: np.ndarray,
     out = composite_layers(x.image_rgb, layers, x.camera, settings.match_camera, ev, rng, motion, jpeg_quality,
                            veil)
     if settings.match_camera and layers.box is not None:  # the camera's neutral axis (its cast) on the object's pixels
-        sl = layers.box.slices  # out.image is this call's own copy of the image
-        out.image[sl] = apply_neutral_axis(out.image[sl], layers.crop("mask", layers.box), neutral_axis(x.image_rgb))
+        sl, alpha = layers.box.slices, layers.crop("mask", layers.box)  # out.image is this call's own copy
+        if np.any(alpha > 0):  # else no pixel to change (a shadow alone): nothing measured
+            axis = neutral if neutral is not None else neutral_axis(x.image_rgb)
+            out.image[sl] = apply_neutral_axis(out.image[sl], alpha, axis)
     timing["composite"] = time.perf_counter() - t0
     timing["total"] = time.perf_counter() - t_start
     layers = dataclasses.replace(layers, scene_depth_m=None)  # the full-frame depth is not kept in the result
