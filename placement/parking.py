@@ -135,7 +135,8 @@ def kerb_poses(zones: SurfaceZones, style: ParkingStyle | None, xy: np.ndarray, 
     directions is nearer to ``heading_rad`` (N,) (the lane's, or the ego's or its opposite).
     """
     xy = np.asarray(xy, float).reshape(-1, 2)
-    tangent = zones.edge_tangent(xy)
+    normal = zones.road_normal(xy)
+    tangent = np.c_[-normal[:, 1], normal[:, 0]]  # zones.edge_tangent(xy), from the same normal
     edge_yaw = np.arctan2(tangent[:, 1], tangent[:, 0])
     along = np.where(np.cos(np.asarray(heading_rad, float) - edge_yaw) >= 0, edge_yaw, edge_yaw + np.pi)
     out_xy, out_yaw = xy.copy(), _wrap(along)
@@ -144,7 +145,6 @@ def kerb_poses(zones: SurfaceZones, style: ParkingStyle | None, xy: np.ndarray, 
     d = np.linalg.norm(xy[:, None] - style.xy[None], axis=2)  # (N, P)
     j = d.argmin(axis=1)
     styled = d[np.arange(len(xy)), j] <= STYLE_REACH_M
-    normal = zones.road_normal(xy)
     s = zones.signed_distance(xy)
     moved = xy + (style.centre_edge_m[j] - s)[:, None] * normal
     yaw = _wrap(edge_yaw + style.yaw_to_edge_rad[j])
