@@ -138,12 +138,13 @@ def main() -> None:
     ap.add_argument("--version", default="v1.0-mini")
     ap.add_argument("--every", type=int, default=2, help="place in every N-th keyframe")
     ap.add_argument("--seeds", type=int, default=3)
+    ap.add_argument("--truncated-share", type=float, help="PlacementConfig.truncated_share (default: its default)")
     ap.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "results" / "placement_truncation.json")
     args = ap.parse_args()
     if not args.dataroot.is_dir():
         raise SystemExit(f"{args.dataroot} not found (the real scene; see ../shared/data/README.md)")
     reader = NuScenesReader(args.dataroot, args.version)
-    config = PlacementConfig()
+    config = PlacementConfig() if args.truncated_share is None else PlacementConfig(truncated_share=args.truncated_share)
     t0 = time.perf_counter()
     real, real_less_than_half = real_cars(reader, config)
     placed, attempts = placed_cars(reader, config, args.every, args.seeds)
@@ -151,7 +152,8 @@ def main() -> None:
     commit = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--short", "HEAD"], capture_output=True,
                             text=True).stdout.strip()
     result = {
-        "command": f"python benchmarks/bench_placement_truncation.py --every {args.every} --seeds {args.seeds}",
+        "command": f"python benchmarks/bench_placement_truncation.py --every {args.every} --seeds {args.seeds}"
+                   + (f" --truncated-share {args.truncated_share}" if args.truncated_share is not None else ""),
         "code": {"worktree_commit": commit, "placement_package": str(Path(placement_pkg.__path__[0]).resolve()),
                  "truncated_share": getattr(config, "truncated_share", None)},
         "machine": {"python": platform.python_version(), "load_avg": os.getloadavg()},
