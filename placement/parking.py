@@ -32,7 +32,7 @@ from streetaug.datasets.nuscenes_format import VEHICLE_MOVING, VEHICLE_PARKED, V
 from streetaug.datasets.sample import Box
 
 from .class_rules import ClassRule
-from .rules import footprint_corners
+from .rules import box_corners, box_transform, footprint_corners
 from .zones import SurfaceZones
 
 PRIOR_OBJECTS = 2.0  # weight of the class table's lane/kerb split, in annotated boxes
@@ -45,7 +45,7 @@ MIN_PARKED_FOR_GAP = 3
 
 
 def _yaw(box: Box) -> float:
-    R = box.T_global_from_box
+    R = box_transform(box)
     return float(np.arctan2(R[1, 0], R[0, 0]))
 
 
@@ -81,7 +81,7 @@ def parked_gap_m(boxes: Sequence[Box], static_clearance_m: float) -> float:
     parked = [b for b in boxes if b.category.startswith("vehicle.") and VEHICLE_PARKED in b.attributes]
     if len(parked) < MIN_PARKED_FOR_GAP:
         return float(static_clearance_m)
-    polys = shapely.polygons(np.stack([b.corners()[[0, 1, 5, 4], :2] for b in parked]))
+    polys = shapely.polygons(np.stack([box_corners(b)[[0, 1, 5, 4], :2] for b in parked]))
     d = shapely.distance(polys[:, None], polys[None, :])  # (P, P); tens of boxes
     np.fill_diagonal(d, np.inf)
     gap = float(np.quantile(d.min(axis=1), PARKED_GAP_QUANTILE))

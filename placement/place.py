@@ -6,7 +6,8 @@ camera's horizontal field of view. Yaw = the direction of travel of the nearest 
 the map has lanes and one lies within ``lane_max_distance_m`` of the candidate, else the ego heading
 (or its opposite, with probability ``opposite_heading_probability``); plus N(0, yaw_sigma_deg) noise.
 
-The rules are applied in ``RULE_ORDER``; the first surviving candidate (in sampling order) is chosen.
+The rules are applied in ``RULE_ORDER``; the first surviving candidate (in sampling order) of the kind the
+object drew is chosen: wholly in the image, or cut by its frame with probability ``truncated_share`` (:func:`place_one`).
 ``drivable`` and ``annotated_boxes`` first filter the flat footprints cheaply; each survivor then
 stands on the local ground plane fitted from LiDAR (roll/pitch from its normal, heading projected onto
 the plane) and every footprint rule is (re)applied to the footprint of that tilted box
