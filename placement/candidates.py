@@ -184,7 +184,7 @@ def stand_candidates(scene: PlacementScene, cands: Candidates, index: np.ndarray
     """
     config = config or scene.config
     fitter = scene.ground_for(config)
-    planes = [fitter.fit(p) for p in cands.xy[index]]
+    planes = fitter.fit_many(cands.xy[index])
     if is_small(wlh):
         T_ge = scene.view.T_global_from_ego
         planes = [support_plane(p, scene.obstacle_points, fp, ego_ground_plane(T_ge, fp.mean(axis=0)))

@@ -20,11 +20,13 @@ Grid convention: cell ``grid[iy, ix]`` covers global ``x in [x0 + ix res, x0 + (
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import cv2
 import numpy as np
 import shapely
+from scipy.spatial import cKDTree
 
 from streetaug.augment.core import check_shape, invert_transform, transform_points
 from streetaug.datasets.nuscenes_format import LIDARSEG_DRIVEABLE, LIDARSEG_EGO, LIDARSEG_NOISE
@@ -122,6 +124,45 @@ class DrivableArea:
         d[inside] = dist[iy[inside], ix[inside]]
         # distanceTransform measures centre-to-centre; subtract half a cell for the distance to the edge
         return np.maximum(d.reshape(pts.shape[:2]).min(axis=1) - 0.5 * self.resolution_m, 0.0)
+
+    @functools.cached_property
+    def _edge_segments(self) -> tuple[np.ndarray, shapely.STRtree, cKDTree]:
+        """The region boundary's segments (S, 2, 2) (end points; zero-length ones left out), an R-tree of their
+        bounding boxes and a k-d tree of their end points."""
+        segments = []
+        for line in shapely.get_parts(shapely.boundary(self.region)):
+            c = shapely.get_coordinates(line)
+            seg = np.stack([c[:-1], c[1:]], axis=1)
+            segments.append(seg[np.any(seg[:, 0] != seg[:, 1], axis=1)])
+        seg = np.concatenate(segments)
+        lo, hi = seg.min(axis=1), seg.max(axis=1)
+        return seg, shapely.STRtree(shapely.box(lo[:, 0], lo[:, 1], hi[:, 0], hi[:, 1])), cKDTree(seg.reshape(-1, 2))
+
+    def boundary_distance(self, xy: np.ndarray) -> np.ndarray:
+        """(N,) float64 distance (m) of global x/y points (N, 2) to the region's boundary (polygon sources).
+
+        The same numbers as ``shapely.distance(shapely.points(xy), shapely.boundary(region))``: GEOS measures a
+        point against a line string segment by segment (``Distance::pointToSegment``, whose arithmetic is repeated
+        here) and keeps the minimum, which is exact; only the segments that can be the nearest are measured,
+        those whose bounding box meets the square of half side the distance to the nearest segment end.
+        """
+        xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+        out = np.full(len(xy), np.inf)
+        if len(xy) == 0:
+            return out
+        seg, tree, ends = self._edge_segments
+        bound = ends.query(xy)[0] * (1.0 + 1e-9) + 1e-9
+        pi, si = tree.query(shapely.box(xy[:, 0] - bound, xy[:, 1] - bound, xy[:, 0] + bound, xy[:, 1] + bound))
+        px, py = xy[pi, 0], xy[pi, 1]
+        ax, ay, bx, by = seg[si, 0, 0], seg[si, 0, 1], seg[si, 1, 0], seg[si, 1, 1]
+        len2 = (bx - ax) * (bx - ax) + (by - ay) * (by - ay)
+        r = ((px - ax) * (bx - ax) + (py - ay) * (by - ay)) / len2
+        s = ((ay - py) * (bx - ax) - (ax - px) * (by - ay)) / len2
+        to_a = np.sqrt((px - ax) * (px - ax) + (py - ay) * (py - ay))
+        to_b = np.sqrt((px - bx) * (px - bx) + (py - by) * (py - by))
+        d = np.where(r <= 0.0, to_a, np.where(r >= 1.0, to_b, np.abs(s) * np.sqrt(len2)))
+        np.minimum.at(out, pi, d)
+        return out
 
     def _cells(self, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         rel = (xy - self.grid_origin_xy) / self.resolution_m

@@ -32,7 +32,7 @@ from streetaug.datasets.nuscenes_format import VEHICLE_MOVING, VEHICLE_PARKED, V
 from streetaug.datasets.sample import Box
 
 from .class_rules import ClassRule
-from .rules import footprint_corners
+from .rules import box_corners, box_transform, footprint_corners
 from .zones import SurfaceZones
 
 PRIOR_OBJECTS = 2.0  # weight of the class table's lane/kerb split, in annotated boxes
@@ -45,7 +45,7 @@ MIN_PARKED_FOR_GAP = 3
 
 
 def _yaw(box: Box) -> float:
-    R = box.T_global_from_box
+    R = box_transform(box)
     return float(np.arctan2(R[1, 0], R[0, 0]))
 
 
@@ -81,7 +81,7 @@ def parked_gap_m(boxes: Sequence[Box], static_clearance_m: float) -> float:
     parked = [b for b in boxes if b.category.startswith("vehicle.") and VEHICLE_PARKED in b.attributes]
     if len(parked) < MIN_PARKED_FOR_GAP:
         return float(static_clearance_m)
-    polys = shapely.polygons(np.stack([b.corners()[[0, 1, 5, 4], :2] for b in parked]))
+    polys = shapely.polygons(np.stack([box_corners(b)[[0, 1, 5, 4], :2] for b in parked]))
     d = shapely.distance(polys[:, None], polys[None, :])  # (P, P); tens of boxes
     np.fill_diagonal(d, np.inf)
     gap = float(np.quantile(d.min(axis=1), PARKED_GAP_QUANTILE))
@@ -135,7 +135,8 @@ def kerb_poses(zones: SurfaceZones, style: ParkingStyle | None, xy: np.ndarray, 
     directions is nearer to ``heading_rad`` (N,) (the lane's, or the ego's or its opposite).
     """
     xy = np.asarray(xy, float).reshape(-1, 2)
-    tangent = zones.edge_tangent(xy)
+    normal = zones.road_normal(xy)
+    tangent = np.c_[-normal[:, 1], normal[:, 0]]  # zones.edge_tangent(xy), from the same normal
     edge_yaw = np.arctan2(tangent[:, 1], tangent[:, 0])
     along = np.where(np.cos(np.asarray(heading_rad, float) - edge_yaw) >= 0, edge_yaw, edge_yaw + np.pi)
     out_xy, out_yaw = xy.copy(), _wrap(along)
@@ -144,7 +145,6 @@ def kerb_poses(zones: SurfaceZones, style: ParkingStyle | None, xy: np.ndarray, 
     d = np.linalg.norm(xy[:, None] - style.xy[None], axis=2)  # (N, P)
     j = d.argmin(axis=1)
     styled = d[np.arange(len(xy)), j] <= STYLE_REACH_M
-    normal = zones.road_normal(xy)
     s = zones.signed_distance(xy)
     moved = xy + (style.centre_edge_m[j] - s)[:, None] * normal
     yaw = _wrap(edge_yaw + style.yaw_to_edge_rad[j])

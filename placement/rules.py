@@ -7,13 +7,14 @@ objects are footprint-to-footprint (polygon) distances, not centre distances.
 
 from __future__ import annotations
 
+import functools
 from typing import Sequence
 
 import numpy as np
 import shapely
 from scipy.spatial import cKDTree
 
-from streetaug.augment.core import PinholeCamera, check_shape, invert_transform, transform_points
+from streetaug.augment.core import PinholeCamera, check_shape, invert_transform, make_transform, transform_points
 from streetaug.datasets.sample import Box
 
 from .drivable import DrivableArea
@@ -75,11 +76,33 @@ def box_footprint_rect(T_global_from_object: np.ndarray, wlh: np.ndarray) -> np.
     return T[:, None, :2, 3] + ca[..., None] * u[:, None] + cb[..., None] * v[:, None]
 
 
+@functools.lru_cache(maxsize=8192)
+def _box_transform(rotation: bytes, center: bytes) -> np.ndarray:
+    T = make_transform(np.frombuffer(rotation, np.float64), np.frombuffer(center, np.float64))
+    T.setflags(write=False)
+    return T
+
+
+def box_transform(box: Box) -> np.ndarray:
+    """``box.T_global_from_box`` (4, 4), read-only, computed once per rotation and centre: placement reads the
+    sample's boxes again for every camera, object and rule (a quaternion to matrix each time was a tenth of it)."""
+    return _box_transform(np.asarray(box.rotation, np.float64).tobytes(), np.asarray(box.center, np.float64).tobytes())
+
+
+def box_corners(box: Box) -> np.ndarray:
+    """``box.corners()`` (8, 3) (the same numbers) through :func:`box_transform`."""
+    w, l, h = box.wlh
+    x = np.array([1, 1, 1, 1, -1, -1, -1, -1]) * l / 2
+    y = np.array([1, -1, -1, 1, 1, -1, -1, 1]) * w / 2
+    z = np.array([1, 1, -1, -1, 1, 1, -1, -1]) * h / 2
+    return transform_points(box_transform(box), np.stack([x, y, z], axis=1))
+
+
 def box_footprints(boxes: Sequence[Box]) -> np.ndarray:
     """Footprints (B, 4, 2) of nuScenes :class:`Box` objects (global frame, bottom face corners in x/y)."""
     if len(boxes) == 0:
         return np.zeros((0, 4, 2))
-    return np.stack([b.corners()[[0, 1, 5, 4], :2] for b in boxes])
+    return np.stack([box_corners(b)[[0, 1, 5, 4], :2] for b in boxes])
 
 
 def box_bottoms(boxes: Sequence[Box]) -> np.ndarray:
@@ -87,14 +110,14 @@ def box_bottoms(boxes: Sequence[Box]) -> np.ndarray:
     height along each box's own up axis (where the object stands on the ground)."""
     if len(boxes) == 0:
         return np.zeros((0, 3))
-    return np.stack([np.asarray(b.center, np.float64) - 0.5 * float(b.wlh[2]) * b.T_global_from_box[:3, 2]
+    return np.stack([np.asarray(b.center, np.float64) - 0.5 * float(b.wlh[2]) * box_transform(b)[:3, 2]
                      for b in boxes])
 
 
 def points_in_box(points_global: np.ndarray, box: Box, margin_m: float = 0.0) -> np.ndarray:
     """(P,) bool: whether each point (P, 3) lies inside the box grown by ``margin_m``, boundary included
     (a nuScenes ``num_lidar_pts`` count with ``margin_m`` 0)."""
-    p = transform_points(invert_transform(box.T_global_from_box), np.asarray(points_global, np.float64).reshape(-1, 3))
+    p = transform_points(invert_transform(box_transform(box)), np.asarray(points_global, np.float64).reshape(-1, 3))
     return np.all(np.abs(p) <= np.asarray(box.wlh, np.float64)[[1, 0, 2]] / 2 + margin_m, axis=1)
 
 
