@@ -541,6 +541,26 @@ class HybridLighting:
                 for i in range(0, len(points), CHUNK_RAYS)]
         return ops.cat(outs, (0, 3), dtype)
 
+    def radiance_spread(self, points: np.ndarray, dirs: np.ndarray,
+                        include_sun: bool = True) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`radiance` (N, 3) numpy and each ray's angular reprojection uncertainty (N,) radians: where the ray
+        hits a seen surface, :meth:`.seen_surfaces.SeenSurfaces.trace_spread`'s; 0 elsewhere (the volume and the
+        dome carry no image-resolution detail to misplace)."""
+        if self.seen is None:
+            return as_numpy(self.radiance(points, dirs, include_sun)), np.zeros(len(points))
+        points, dirs = self._ops.rays(points, dirs, self.sky_world.dtype)  # as radiance() sees them
+        rads, spreads = [], []
+        for i in range(0, len(points), CHUNK_RAYS):
+            p, d = points[i : i + CHUNK_RAYS], dirs[i : i + CHUNK_RAYS]
+            hit, _, mesh_rgb, spread = self.seen.trace_spread(as_numpy(p), as_numpy(d))
+            out = mesh_rgb.astype(as_numpy(self.sky_world).dtype)
+            miss = np.flatnonzero(~hit)
+            if len(miss):
+                out[miss] = as_numpy(self._ops.volume_chunk(self, p[miss], d[miss], include_sun))
+            rads.append(out)
+            spreads.append(spread)
+        return np.concatenate(rads), np.concatenate(spreads)
+
     def transmittance(self, points: np.ndarray | torch.Tensor, dirs: np.ndarray | torch.Tensor) -> np.ndarray | torch.Tensor:
         """``tau_K`` (N,): the fraction of the distant light (sky, sun) that reaches points along directions."""
         ops, dtype = self._ops, self.sky_world.dtype
