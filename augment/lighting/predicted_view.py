@@ -26,21 +26,11 @@ import numpy as np
 from ...datasets.sample import CameraView
 from ..core import hdr_to_ldr, invert_transform, pixel_rays
 from .types import SampleLighting
+from .view_blur import SPREAD_SCALE, uncertainty_blurred
 from .volume import as_numpy
 
 PREDICTED_WIDTH_PX = 320
-# A view from a centre no input camera stood at is blurred per pixel by how far what it shows may lie from where
-# it is drawn: the seen surface's reprojection uncertainty (:meth:`.seen_surfaces.SeenSurfaces.trace_spread`, an
-# angle) times SPREAD_SCALE at the view's focal length, the map smoothed over SPREAD_SMOOTH_PX (320 px view) so
-# that it reaches across a surface's silhouette onto what lies behind it (the texture blur cannot: a canopy's
-# outline drawn sharp where it is uncertain costs twice, where it is drawn and where it is). SPREAD_SCALE > 1:
-# the depth is not the only thing misplaced (the vertical-facade prior above the LiDAR, poses, moved objects).
-# Chosen on scene-0916's even stride-4 keyframes (0, 8, 16, 24, 32), six-view forward mean PSNR: no blur 17.37,
-# scale 1 / 2 / 4 (smooth 4) 17.50 / 17.59 / 17.64, scale 4 smooth 2 / 8 / 16 / 32 17.58 / 17.69 / 17.72 / 17.71,
-# scale 6 smooth 16 17.69; held out (odd keyframes 4 ... 36): 16.27 -> 16.84 (each keyframe +0.35..+1.01).
-SPREAD_SCALE = 4.0
-SPREAD_SMOOTH_PX = 16.0
-VIEW_BLUR_LEVELS_PX = (0.0, 0.5, 1.0, 2.0, 4.0, 8.0)
+
 
 
 def view_rays(view: CameraView, width: int = PREDICTED_WIDTH_PX) -> tuple[np.ndarray, int]:
@@ -109,32 +99,6 @@ def predicted_radiance(lighting: SampleLighting, view: CameraView, width: int = 
         focal_px = float(view.K[0][0]) * width / view.width
         rad = uncertainty_blurred(rad, SPREAD_SCALE * focal_px * spread.reshape(h, width))
     return rad * float(lighting.exposure_ratio.get(view.channel, 1.0)) if same else auto_exposed(lighting, view, rad)
-
-
-def uncertainty_blurred(image: np.ndarray, sigma_px: np.ndarray, smooth_px: float | None = None) -> np.ndarray:
-    """``image`` (h, w, 3) linear, each pixel Gaussian-blurred by its own ``sigma_px`` (h, w) (the map first
-    smoothed by ``smooth_px``, default ``SPREAD_SMOOTH_PX``: a surface's uncertainty reaches across its silhouette), interpolated linearly
-    between the copies blurred by ``VIEW_BLUR_LEVELS_PX`` (clamped at the largest); the image itself where the
-    map is 0 (a view from an input camera's own centre)."""
-    sigma = np.asarray(sigma_px, np.float32)
-    if not np.any(sigma > 0):
-        return image
-    smooth_px = SPREAD_SMOOTH_PX if smooth_px is None else smooth_px
-    if smooth_px > 0:
-        sigma = cv2.GaussianBlur(sigma, (0, 0), smooth_px, borderType=cv2.BORDER_REPLICATE)
-    levels = np.asarray(VIEW_BLUR_LEVELS_PX, np.float32)
-    sigma = np.clip(sigma, 0.0, levels[-1])
-    img = np.asarray(image, np.float32)
-    hi = np.clip(np.searchsorted(levels, sigma), 1, len(levels) - 1)
-    w_hi = np.clip((sigma - levels[hi - 1]) / (levels[hi] - levels[hi - 1]), 0.0, 1.0)[..., None]
-    out = np.zeros_like(img)
-    for i, s in enumerate(levels):
-        w = np.where((hi == i)[..., None], w_hi, 0.0) + np.where((hi - 1 == i)[..., None], 1.0 - w_hi, 0.0)
-        if not np.any(w > 0):
-            continue
-        blurred = img if s == 0 else cv2.GaussianBlur(img, (0, 0), float(s), borderType=cv2.BORDER_REPLICATE)
-        out += w * blurred
-    return out
 
 
 def auto_exposed(lighting: SampleLighting, view: CameraView, radiance: np.ndarray) -> np.ndarray:

@@ -56,6 +56,7 @@ from ..core import (
     write_json_atomic,
 )
 from .seen_surfaces import SeenSurfaces
+from .view_blur import uncertainty_blurred_equirect
 from .volume_channels import CH_ALPHA, CH_AXIS, CH_COLOR, CH_SIGMA, N_CHANNELS  # noqa: F401 (re-exported)
 
 if TYPE_CHECKING:
@@ -594,7 +595,10 @@ class HybridLighting:
 
     def envmap_at(self, point: np.ndarray, height: int = 128, width: int = 256,
                   R_vol_from_frame: np.ndarray | None = None) -> np.ndarray:
-        """Local environment map (height, width, 3) float32 at a volume-frame point (3,), sun excluded.
+        """Local environment map (height, width, 3) float32 at a volume-frame point (3,), sun excluded; away from
+        the input cameras' centres, the expected map: blurred per pixel by how uncertain the place of the seen
+        surface it shows is (:func:`.view_blur.uncertainty_blurred_equirect`, as a predicted view is; ~0 at a
+        camera's own centre, where its surfaces lie where they are drawn).
 
         Without ``R_vol_from_frame`` the map uses the world (z-up) equirect convention of the volume frame; with
         it, the camera-frame convention of the frame whose directions rotate into the volume frame by it.
@@ -605,8 +609,9 @@ class HybridLighting:
             d = world_envmap_directions(height, width).reshape(-1, 3)
         else:
             d = camera_envmap_directions(height, width).reshape(-1, 3) @ np.asarray(R_vol_from_frame).T
-        rad = as_numpy(self.radiance(np.repeat(p[None], len(d), axis=0), d, include_sun=False))
-        return rad.reshape(height, width, 3).astype(np.float32)
+        rad, spread = self.radiance_spread(np.repeat(p[None], len(d), axis=0), d, include_sun=False)
+        return uncertainty_blurred_equirect(rad.reshape(height, width, 3).astype(np.float32),
+                                            spread.reshape(height, width))
 
     def envmap_at_cached(self, point: np.ndarray, height: int = 128, width: int = 256) -> np.ndarray:
         """World-convention :meth:`envmap_at`, remembered per point (to the millimetre) while the sky and volume

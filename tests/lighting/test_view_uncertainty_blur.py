@@ -127,3 +127,19 @@ def test_real_six_view_forward_gains_and_self_view_is_unchanged():
     finally:
         pv.SPREAD_SCALE = scale
     assert np.array_equal(own, sharp)
+
+
+def test_equirect_blur_wraps_across_the_seam_and_leaves_certain_pixels():
+    from streetaug.augment.lighting.view_blur import uncertainty_blurred_equirect
+
+    h, w = 32, 64
+    env = np.zeros((h, w, 3), np.float32)
+    env[:, 0] = 1.0  # a bright line at longitude 0, next to the seam
+    assert uncertainty_blurred_equirect(env, np.zeros((h, w))) is env  # nothing uncertain: the map itself
+    spread = np.full((h, w), 0.05, np.float32)
+    out = uncertainty_blurred_equirect(env, spread)
+    # blurred symmetrically across the seam: the last column gets as much as the second one
+    assert out[h // 2, 1, 0] > 0.05
+    assert out[h // 2, -1, 0] == pytest.approx(out[h // 2, 1, 0], rel=1e-3)
+    assert out[h // 2, 0, 0] < 0.9
+    assert out.sum() == pytest.approx(env.sum(), rel=0.02)  # energy kept
