@@ -3,7 +3,9 @@
 A camera's view is *rendered from the lighting* (:func:`..lighting.predicted_view.predicted_radiance`: the light
 field at the camera's centre along each pixel's ray, i.e. the local environment map there at full resolution),
 passed through the contract's camera response at EV 0 and compared with the real image shrunk to ``width``
-pixels (area filter):
+pixels (area filter). From a centre no input camera stood at, the rendered view is the *expected* view: each
+pixel blurred by how uncertain the place of what it shows is (:func:`..lighting.predicted_view.uncertainty_blurred`),
+which is what these squared-error scores reward; an input camera's own view is not blurred.
 
 * **PSNR** of the LDR images in [0, 1];
 * **si-PSNR**: the prediction scaled by its least-squares factor first (the paper's scale-invariant PSNR).

@@ -7,7 +7,9 @@ EV 0, reproduces the image's colours where the camera saw something.
 * L0/L1 (distant light): the camera's own estimate if it was an input (its frame and exposure), else the
   reference camera's distant light turned into its frame (reference exposure);
 * L2/L3: the volume's radiance traced from the camera's centre (lifted out of solid voxels) along each pixel's
-  ray, sun excluded, times the camera's exposure ratio if it was an input.
+  ray, sun excluded, times the camera's exposure ratio if it was an input; from a centre no input camera stood
+  at, each pixel blurred by how uncertain the place of what it shows is (:func:`uncertainty_blurred`: the
+  expected view, not a sharp guess; none for an input camera's own view).
 
 A camera that was *not* an input (another camera of the instant, or the same camera at another time) has an
 exposure no input measured: its auto-exposure sets it. Auto-exposure holds an image's mean brightness steady
@@ -24,9 +26,11 @@ import numpy as np
 from ...datasets.sample import CameraView
 from ..core import hdr_to_ldr, invert_transform, pixel_rays
 from .types import SampleLighting
+from .view_blur import SPREAD_SCALE, uncertainty_blurred
 from .volume import as_numpy
 
 PREDICTED_WIDTH_PX = 320
+
 
 
 def view_rays(view: CameraView, width: int = PREDICTED_WIDTH_PX) -> tuple[np.ndarray, int]:
@@ -89,8 +93,11 @@ def predicted_radiance(lighting: SampleLighting, view: CameraView, width: int = 
     T = invert_transform(lighting.T_global_from_vol) @ np.asarray(view.T_global_from_cam)
     centre = lighting.hybrid.lift_out_of_solid(T[:3, 3])
     dirs = rays @ T[:3, :3].T
-    rad = as_numpy(lighting.hybrid.radiance(np.repeat(centre[None], len(dirs), axis=0), dirs, include_sun=False))
+    rad, spread = lighting.hybrid.radiance_spread(np.repeat(centre[None], len(dirs), axis=0), dirs, include_sun=False)
     rad = rad.reshape(h, width, 3)
+    if not same:  # an input camera's own view is known: no blur there
+        focal_px = float(view.K[0][0]) * width / view.width
+        rad = uncertainty_blurred(rad, SPREAD_SCALE * focal_px * spread.reshape(h, width))
     return rad * float(lighting.exposure_ratio.get(view.channel, 1.0)) if same else auto_exposed(lighting, view, rad)
 
 

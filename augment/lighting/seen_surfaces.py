@@ -67,6 +67,8 @@ class DepthView:
             near object's top meets the farther structure that continues above it, that structure goes on a
             few rows down behind the object, so that no gap opens between the two (see :mod:`.observe`).
         rank: 0 for a camera of the estimate's instant, 1 for an earlier keyframe's (see module doc).
+        depth_uncertainty: (h, w) float32 each pixel's relative depth error (of ``depth_m``; the backdrop's is
+            ``DEPTH_UNCERTAINTY``), or None: ``DEPTH_UNCERTAINTY`` everywhere (see module doc).
     """
 
     channel: str
@@ -76,6 +78,7 @@ class DepthView:
     T_vol_from_cam: np.ndarray
     backdrop_depth_m: np.ndarray | None = None
     rank: int = 0
+    depth_uncertainty: np.ndarray | None = None
 
 
 def seen_through(view: DepthView, by: list[DepthView], margin: float = MAX_DEPTH_RATIO,
@@ -128,21 +131,36 @@ def depth_mesh(view: DepthView, step: int = GEOMETRY_STEP_PX) -> tuple[np.ndarra
     vertices have a finite depth and pass the depth-ratio test (see module doc). The backdrop (if any) is a
     second grid mesh of the same pixels, appended.
     """
-    v, f, uv = _grid_mesh(view, view.depth_m, step)
+    v, f, uv, _ = depth_mesh_uncertain(view, step)
+    return v, f, uv
+
+
+def depth_mesh_uncertain(view: DepthView, step: int = GEOMETRY_STEP_PX) -> tuple[np.ndarray, ...]:
+    """:func:`depth_mesh` and each vertex's relative depth uncertainty (V,) float32 (the view's
+    ``depth_uncertainty`` at its pixel; ``DEPTH_UNCERTAINTY`` without one and on the backdrop)."""
+    unc = view.depth_uncertainty
+    if unc is not None:
+        check_shape(np.asarray(unc), view.depth_m.shape, "depth_uncertainty")
+    v, f, uv, u = _grid_mesh(view, view.depth_m, step, unc)
     if view.backdrop_depth_m is None:
-        return v, f, uv
-    vb, fb, uvb = _grid_mesh(view, view.backdrop_depth_m, step)
-    return np.concatenate([v, vb]), np.concatenate([f, fb + len(v)]), np.concatenate([uv, uvb])
+        return v, f, uv, u
+    vb, fb, uvb, ub = _grid_mesh(view, view.backdrop_depth_m, step, None)
+    return (np.concatenate([v, vb]), np.concatenate([f, fb + len(v)]), np.concatenate([uv, uvb]),
+            np.concatenate([u, ub]))
 
 
-def _grid_mesh(view: DepthView, depth_m: np.ndarray, step: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """:func:`depth_mesh` of one depth image (h, w) of ``view``."""
+def _grid_mesh(view: DepthView, depth_m: np.ndarray, step: int,
+               uncertainty: np.ndarray | None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`depth_mesh_uncertain` of one depth image (h, w) of ``view`` with its relative uncertainty (h, w)
+    (None: ``DEPTH_UNCERTAINTY``)."""
     depth = np.asarray(depth_m, dtype=np.float64)
     check_shape(depth, ("H", "W"), "depth_m")
     rows = np.arange(0, depth.shape[0], step)
     cols = np.arange(0, depth.shape[1], step)
     u, v = np.meshgrid(cols.astype(np.float64), rows.astype(np.float64))
     d = depth[np.ix_(rows, cols)]
+    unc = (np.full(d.size, DEPTH_UNCERTAINTY, np.float32) if uncertainty is None
+           else np.asarray(uncertainty, np.float32)[np.ix_(rows, cols)].reshape(-1))
     d = np.where(d <= MAX_DEPTH_M, d, np.inf)
     uv = np.stack([u, v], axis=-1).reshape(-1, 2)
     finite = np.isfinite(d).reshape(-1)
@@ -165,7 +183,7 @@ def _grid_mesh(view: DepthView, depth_m: np.ndarray, step: int) -> tuple[np.ndar
     used = np.unique(faces)
     remap = np.full(len(vertices), -1, np.int64)
     remap[used] = np.arange(len(used))
-    return vertices[used], remap[faces], uv[used]
+    return vertices[used], remap[faces], uv[used], unc[used]
 
 
 @dataclass(frozen=True)
@@ -182,6 +200,8 @@ class SeenSurfaces:
         camera_centres: (C, 3) float64 each camera's centre, volume frame.
         focal_px: (C,) float64 each texture's focal length, pixels.
         rank: (C,) int8 each camera's rank (see module doc), or None: all 0.
+        vertex_uncertainty: (V,) float32 each vertex's relative depth uncertainty (the blur's, see module doc),
+            or None: ``DEPTH_UNCERTAINTY`` everywhere.
     """
 
     vertices: np.ndarray
@@ -193,6 +213,7 @@ class SeenSurfaces:
     camera_centres: np.ndarray
     focal_px: np.ndarray
     rank: np.ndarray | None = None
+    vertex_uncertainty: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         check_shape(self.vertices, ("V", 3), "vertices")
@@ -204,19 +225,22 @@ class SeenSurfaces:
         check_shape(self.focal_px, (len(self.channels),), "focal_px")
         if self.rank is not None:
             check_shape(self.rank, (len(self.channels),), "rank")
+        if self.vertex_uncertainty is not None:
+            check_shape(self.vertex_uncertainty, (len(self.vertices),), "vertex_uncertainty")
         if len(self.faces) == 0:
             raise ValueError("SeenSurfaces: no faces (use None for no seen surfaces)")
 
     @staticmethod
     def from_views(views: list[DepthView], step: int = GEOMETRY_STEP_PX) -> "SeenSurfaces | None":
         """The meshes of ``views`` in one layer, or None when no view has a face."""
-        verts, faces, uvs, owner, kept = [], [], [], [], []
+        verts, faces, uvs, owner, kept, uncs = [], [], [], [], [], []
         offset = 0
         for view in views:
-            v, f, uv = depth_mesh(view, step)
+            v, f, uv, unc = depth_mesh_uncertain(view, step)
             if not len(f):
                 continue
             verts.append(v)
+            uncs.append(unc)
             faces.append(f + offset)
             uvs.append(uv)
             owner.append(np.full(len(f), len(kept), np.int16))
@@ -235,7 +259,9 @@ class SeenSurfaces:
                             tuple(v.channel for v in kept),
                             np.array([np.asarray(v.T_vol_from_cam, np.float64)[:3, 3] for v in kept]),
                             np.array([0.5 * (v.K[0][0] + v.K[1][1]) for v in kept], np.float64),
-                            np.array([v.rank for v in kept], np.int8))
+                            np.array([v.rank for v in kept], np.int8),
+                            np.concatenate(uncs).astype(np.float32)
+                            if any(v.depth_uncertainty is not None for v in kept) else None)
 
     @functools.cached_property
     def scenes(self) -> list[tuple[RayScene, np.ndarray]]:
@@ -262,6 +288,15 @@ class SeenSurfaces:
 
         Returns (hit (N,) bool, t (N,) metres (inf on a miss), radiance (N, 3) float32 (0 on a miss)).
         """
+        hit, t, rgb, _ = self.trace_spread(origins, dirs, t_min)
+        return hit, t, rgb
+
+    def trace_spread(self, origins: np.ndarray, dirs: np.ndarray,
+                     t_min: float = T_MIN_M) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`trace` and each hit's reprojection uncertainty as an angle (N,) float64 radians (0 on a miss):
+        how far the hit surface may lie from where the ray meets it, seen from the ray's origin, ``relative depth
+        uncertainty x baseline across the ray / t`` (the texture blur's sigma is this times the source camera's
+        focal length; a view rendered from the origin is uncertain by this times its own)."""
         origins = np.asarray(origins, np.float64)
         dirs = np.asarray(dirs, np.float64)
         n = len(origins)
@@ -288,22 +323,29 @@ class SeenSurfaces:
         hit = np.isfinite(t_near)
         t_best, face_best, bary_best = t_all[best, rows], face_all[best, rows], bary_all[best, rows]
         rgb = np.zeros((n, 3), np.float32)
+        spread = np.zeros(n)
         k = np.flatnonzero(hit)
         if len(k):
             face = face_best[k]
             tri = self.faces[face]
             bu, bv = bary_best[k, :1], bary_best[k, 1:]
             uv = (1 - bu - bv) * self.pixel_uv[tri[:, 0]] + bu * self.pixel_uv[tri[:, 1]] + bv * self.pixel_uv[tri[:, 2]]
+            if self.vertex_uncertainty is None:
+                rel = DEPTH_UNCERTAINTY
+            else:
+                vu = self.vertex_uncertainty
+                rel = ((1 - bu - bv) * vu[tri[:, 0], None] + bu * vu[tri[:, 1], None] + bv * vu[tri[:, 2], None])[:, 0]
             cam = self.face_camera[face].astype(np.int64)
             b = origins[k] - self.camera_centres[cam]
             baseline = np.linalg.norm(b - (b * dirs[k]).sum(axis=1, keepdims=True) * dirs[k], axis=1)  # across the ray
-            sigma = self.focal_px[cam] * DEPTH_UNCERTAINTY * baseline / np.maximum(t_best[k], 1.0)
+            spread[k] = rel * baseline / np.maximum(t_best[k], 1.0)
+            sigma = self.focal_px[cam] * spread[k]
             levels = np.asarray(BLUR_LEVELS_PX)
             hi = np.clip(np.searchsorted(levels, sigma), 1, len(levels) - 1)
             w_hi = np.clip((sigma - levels[hi - 1]) / (levels[hi] - levels[hi - 1]), 0.0, 1.0)[:, None]
             rgb[k] = ((1 - w_hi) * bilinear(self.blurred, (hi - 1) * len(self.channels) + cam, uv)
                       + w_hi * bilinear(self.blurred, hi * len(self.channels) + cam, uv))
-        return hit, t_best, rgb
+        return hit, t_best, rgb, spread
 
     @property
     def n_faces(self) -> int:
@@ -319,7 +361,9 @@ class SeenSurfaces:
                             textures=np.clip(self.textures, 0.0, 65504.0).astype(np.float16),
                             channels=np.array(self.channels, dtype=str), camera_centres=self.camera_centres,
                             focal_px=self.focal_px,
-                            rank=np.zeros(len(self.channels), np.int8) if self.rank is None else self.rank)
+                            rank=np.zeros(len(self.channels), np.int8) if self.rank is None else self.rank,
+                            **({} if self.vertex_uncertainty is None
+                               else {"vertex_uncertainty": self.vertex_uncertainty.astype(np.float16)}))
         write_bytes_atomic(path, buf.getvalue())
 
     @staticmethod
@@ -333,7 +377,9 @@ class SeenSurfaces:
                                     z["pixel_uv"].astype(np.float32), z["face_camera"].astype(np.int16),
                                     z["textures"].astype(np.float32), tuple(str(c) for c in z["channels"]),
                                     z["camera_centres"].astype(np.float64), z["focal_px"].astype(np.float64),
-                                    z["rank"].astype(np.int8) if "rank" in z.files else None)
+                                    z["rank"].astype(np.int8) if "rank" in z.files else None,
+                                    z["vertex_uncertainty"].astype(np.float32) if "vertex_uncertainty" in z.files
+                                    else None)
         except (OSError, KeyError, ValueError) as e:
             raise InputError(f"{path}: cannot read the seen surfaces ({e}); expected arrays schema, vertices, "
                              "faces, pixel_uv, face_camera, textures, channels, camera_centres, focal_px") from None

@@ -56,6 +56,7 @@ from ..core import (
     write_json_atomic,
 )
 from .seen_surfaces import SeenSurfaces
+from .view_blur import uncertainty_blurred_equirect
 from .volume_channels import CH_ALPHA, CH_AXIS, CH_COLOR, CH_SIGMA, N_CHANNELS  # noqa: F401 (re-exported)
 
 if TYPE_CHECKING:
@@ -541,6 +542,26 @@ class HybridLighting:
                 for i in range(0, len(points), CHUNK_RAYS)]
         return ops.cat(outs, (0, 3), dtype)
 
+    def radiance_spread(self, points: np.ndarray, dirs: np.ndarray,
+                        include_sun: bool = True) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`radiance` (N, 3) numpy and each ray's angular reprojection uncertainty (N,) radians: where the ray
+        hits a seen surface, :meth:`.seen_surfaces.SeenSurfaces.trace_spread`'s; 0 elsewhere (the volume and the
+        dome carry no image-resolution detail to misplace)."""
+        if self.seen is None:
+            return as_numpy(self.radiance(points, dirs, include_sun)), np.zeros(len(points))
+        points, dirs = self._ops.rays(points, dirs, self.sky_world.dtype)  # as radiance() sees them
+        rads, spreads = [], []
+        for i in range(0, len(points), CHUNK_RAYS):
+            p, d = points[i : i + CHUNK_RAYS], dirs[i : i + CHUNK_RAYS]
+            hit, _, mesh_rgb, spread = self.seen.trace_spread(as_numpy(p), as_numpy(d))
+            out = mesh_rgb.astype(as_numpy(self.sky_world).dtype)
+            miss = np.flatnonzero(~hit)
+            if len(miss):
+                out[miss] = as_numpy(self._ops.volume_chunk(self, p[miss], d[miss], include_sun))
+            rads.append(out)
+            spreads.append(spread)
+        return np.concatenate(rads), np.concatenate(spreads)
+
     def transmittance(self, points: np.ndarray | torch.Tensor, dirs: np.ndarray | torch.Tensor) -> np.ndarray | torch.Tensor:
         """``tau_K`` (N,): the fraction of the distant light (sky, sun) that reaches points along directions."""
         ops, dtype = self._ops, self.sky_world.dtype
@@ -574,7 +595,10 @@ class HybridLighting:
 
     def envmap_at(self, point: np.ndarray, height: int = 128, width: int = 256,
                   R_vol_from_frame: np.ndarray | None = None) -> np.ndarray:
-        """Local environment map (height, width, 3) float32 at a volume-frame point (3,), sun excluded.
+        """Local environment map (height, width, 3) float32 at a volume-frame point (3,), sun excluded; away from
+        the input cameras' centres, the expected map: blurred per pixel by how uncertain the place of the seen
+        surface it shows is (:func:`.view_blur.uncertainty_blurred_equirect`, as a predicted view is; ~0 at a
+        camera's own centre, where its surfaces lie where they are drawn).
 
         Without ``R_vol_from_frame`` the map uses the world (z-up) equirect convention of the volume frame; with
         it, the camera-frame convention of the frame whose directions rotate into the volume frame by it.
@@ -585,8 +609,9 @@ class HybridLighting:
             d = world_envmap_directions(height, width).reshape(-1, 3)
         else:
             d = camera_envmap_directions(height, width).reshape(-1, 3) @ np.asarray(R_vol_from_frame).T
-        rad = as_numpy(self.radiance(np.repeat(p[None], len(d), axis=0), d, include_sun=False))
-        return rad.reshape(height, width, 3).astype(np.float32)
+        rad, spread = self.radiance_spread(np.repeat(p[None], len(d), axis=0), d, include_sun=False)
+        return uncertainty_blurred_equirect(rad.reshape(height, width, 3).astype(np.float32),
+                                            spread.reshape(height, width))
 
     def envmap_at_cached(self, point: np.ndarray, height: int = 128, width: int = 256) -> np.ndarray:
         """World-convention :meth:`envmap_at`, remembered per point (to the millimetre) while the sky and volume
