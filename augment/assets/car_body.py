@@ -71,7 +71,7 @@ def sedan_spec() -> BodySpec:
         top=((0.0, 0.58), (0.06, 0.70), (0.30, 0.78), (1.55, 0.90), (2.25, H - 0.02), (2.60, H), (3.20, H - 0.03),
              (3.85, 1.00), (4.45, 0.98), (4.56, 0.90), (L, 0.72)),
         bottom=((0.0, 0.42), (0.12, 0.28), (0.55, 0.20), (L - 0.6, 0.21), (L - 0.12, 0.30), (L, 0.45)),
-        tumblehome=0.22, plan_exponent=4.0,
+        tumblehome=0.22, plan_exponent=5.5,
     )
 
 
@@ -97,7 +97,7 @@ def suv_spec() -> BodySpec:
         top=((0.0, 0.72), (0.06, 0.88), (0.30, 0.98), (1.40, 1.08), (2.10, H - 0.02), (2.60, H), (4.35, H - 0.03),
              (4.62, 1.10), (L, 0.95)),
         bottom=((0.0, 0.52), (0.15, 0.36), (0.60, 0.28), (L - 0.6, 0.30), (L - 0.12, 0.38), (L, 0.52)),
-        tumblehome=0.17, plan_exponent=5.0,
+        tumblehome=0.17, plan_exponent=6.5,
     )
 
 
@@ -110,10 +110,13 @@ def van_spec() -> BodySpec:
         top=((0.0, 0.72), (0.06, 0.88), (0.25, 0.98), (0.85, 1.10), (1.70, H - 0.03), (2.30, H), (4.85, H - 0.02),
              (4.97, H - 0.12), (L, H - 0.30)),
         bottom=((0.0, 0.48), (0.15, 0.32), (0.55, 0.24), (L - 0.55, 0.26), (L - 0.12, 0.34), (L, 0.48)),
-        tumblehome=0.10, plan_exponent=6.0,
+        tumblehome=0.10, plan_exponent=7.5,
     )
 
 
+# Plan exponents (issue #20): sedans 5.5, SUVs 6.5, vans 7.5 (were 4 / 5 / 6): real cars seen end-on show a broad,
+# flat front and rear face with lamps out to the corners, the procedural ones a rounded "bubble"; the hatchback
+# keeps 4 (its short rear's bumper lip turned too sharply at its corners).
 BODY_SPECS = {"sedan": sedan_spec, "hatchback": hatchback_spec, "suv": suv_spec, "van": van_spec}
 BODY_WEIGHTS = {"sedan": 0.38, "hatchback": 0.22, "suv": 0.30, "van": 0.10}
 
