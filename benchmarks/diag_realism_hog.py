@@ -294,6 +294,14 @@ def weight_maps(pooled: list[dict]) -> dict:
                                          "inserted": maps[y == 1].mean(axis=(0, 1, 2)).round(4).tolist()},
             "mean_hog_per_row": {"real": maps[y == 0].sum(axis=3).mean(axis=(0, 2)).round(4).tolist(),
                                  "inserted": maps[y == 1].sum(axis=3).mean(axis=(0, 2)).round(4).tolist()},
+            # gradient bins 60-120 deg (bins 3-5): horizontal edges (window bands, lamp bands, bumper, the shadow line);
+            # bins 0-1 and 8 (gradient within 40 deg of horizontal): vertical edges
+            "horizontal_edge_energy_per_row": {
+                n: maps[y == c][..., 3:6].sum(axis=3).mean(axis=(0, 2)).round(4).tolist()
+                for c, n in ((0, "real"), (1, "inserted"))},
+            "vertical_edge_energy_per_row": {
+                n: maps[y == c][..., [0, 1, 8]].sum(axis=3).mean(axis=(0, 2)).round(4).tolist()
+                for c, n in ((0, "real"), (1, "inserted"))},
             "weight_energy_per_cell": np.abs(wm).sum(axis=2).round(4).tolist(),
             "signed_weight_per_orientation": wm.sum(axis=(0, 1)).round(4).tolist(),
             "orientation_bin_centres_deg": orient_deg,
