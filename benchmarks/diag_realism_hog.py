@@ -241,16 +241,17 @@ def analyse_seed(data: dict, seed: int) -> tuple[dict, dict]:
             t = ex[k]["true_mask"]
             tight["inserted_true"].append(tightness(t, hull))
             iou.append(float((t & gc[i]).sum() / max((t | gc[i]).sum(), 1)))
-    out["silhouette"] = {name: {key: float(np.nanmedian([t[key] for t in v])) for key in ("fill", "top_gap", "side_gap")}
-                         for name, v in tight.items()}
+    out["silhouette"] = {name: {key: float(np.nanmedian([t[key] for t in v]))
+                                for key in ("fill", "top_gap", "side_gap")} for name, v in tight.items()}
     out["silhouette"]["grabcut_iou_with_true_inserted_median"] = float(np.median(iou)) if iou else float("nan")
     out["confounds"] = {
         "inserted_visible_fraction_median": float(np.nanmedian(data["visible_fraction"][chosen[y == 1]])),
         "inserted_visible_fraction_below_0.95": float(np.mean(data["visible_fraction"][chosen[y == 1]] < 0.95)),
         "clipped_by_border": {n: float(np.mean([ex[k]["clipped_by_border"] for k in range(len(chosen)) if y[k] == c]))
                               for c, n in ((0, "real"), (1, "inserted"))},
-        "other_box_share_in_hull_median": {n: float(np.median([ex[k]["other_box_share"] for k in range(len(chosen))
-                                                               if y[k] == c])) for c, n in ((0, "real"), (1, "inserted"))},
+        "other_box_share_in_hull_median": {
+            n: float(np.median([ex[k]["other_box_share"] for k in range(len(chosen)) if y[k] == c]))
+            for c, n in ((0, "real"), (1, "inserted"))},
         "crop_aspect_median": {n: float(np.median(geo[y == c, 1])) for c, n in ((0, "real"), (1, "inserted"))},
     }
     pooled = {"hog": H["hog"], "hog_car_only": H["hog_car_only"], "y": y, "yaw": yaw[chosen], "chosen": chosen,
@@ -260,8 +261,8 @@ def analyse_seed(data: dict, seed: int) -> tuple[dict, dict]:
 
 def cell_maps(hog_rows: np.ndarray) -> np.ndarray:
     """(N, 8, 8, 9): HOG of a 64 px crop per 8 px cell and orientation, each cell's values averaged over the up
-    to four 16 px blocks (stride 8) that contain it.  OpenCV's order: blocks x-major? -- the descriptor is
-    blocks column by column (x outer, y inner), cells in a block x outer, y inner, 9 bins innermost."""
+    to four 16 px blocks (stride 8) that contain it.  OpenCV's order: blocks column by column (x outer, y
+    inner), in a block its cells x outer, y inner, the 9 bins innermost."""
     n = hog_rows.shape[0]
     blocks = hog_rows.reshape(n, 7, 7, 2, 2, 9)  # (bx, by, cx, cy, bin)
     acc_ = np.zeros((n, 8, 8, 9))

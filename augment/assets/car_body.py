@@ -589,7 +589,8 @@ def section_half_width(spec: BodySpec, d: np.ndarray, z: np.ndarray) -> np.ndarr
 
 __all__ = [
     "BODY_SPECS", "BODY_WEIGHTS", "BRAKE", "BUMPER_LIP", "B_PILLAR", "BodySpec", "CHROME", "DASH", "GAP", "GAP_HALF_M",
-    "GLASS", "GLASS_REAR", "HEADLIGHT", "INTERIOR", "MonotoneCubic", "N_SLOTS", "PAINT", "PAINT_LOWER", "PLATE_BAND", "PLATE_FRONT",
+    "GLASS", "GLASS_REAR", "HEADLIGHT", "INTERIOR", "MonotoneCubic", "N_SLOTS", "PAINT", "PAINT_LOWER", "PLATE_BAND",
+    "PLATE_FRONT",
     "PLATE_INK", "PLATE_REAR", "REAR_WINDOW", "REFLECTOR", "RIM", "SIDE_GLASS", "TAILLIGHT", "TRIM", "TYRE",
     "UNDERSIDE", "WINDSCREEN", "axle_distances", "body_materials", "body_part", "body_profiles", "hatchback_spec",
     "jitter_spec", "loft_stations", "outline_levels", "panel_gaps", "plan_corner_y", "section_half_width",

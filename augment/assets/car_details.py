@@ -78,7 +78,7 @@ def lamp_parts(surface: BodySurface, spec: BodySpec) -> list[MeshPart]:
     W = spec.width
     zb = _bumper_line(spec)
     zt = spec.belt_rear - (0.12 if spec.length - spec.d_rear > 0.35 else 0.05)  # under a boot lid's rounded edge
-    n_y, n_z = 17, 7  # 17 columns: the sheets stay out of the body (13 sank 1.1 mm into a van, 15 up to 3.7 mm into squarer ends)
+    n_y, n_z = 17, 7  # 17 columns keep the sheets out of the body (13: 1.1 mm into a van; 15: 3.7 mm into squarer ends)
     t_y = np.linspace(0.0, 1.0, n_y)
     t_z = np.linspace(0.0, 1.0, n_z)
     parts = []
@@ -275,5 +275,5 @@ def plate_parts(surface: BodySurface, spec: BodySpec, style: PlateStyle, rng: np
     return parts
 
 
-__all__ = ["BodySurface", "door_handle_parts", "grille_parts", "lamp_parts", "lower_intake_part", "mirror_parts", "paint_over_loft_lamps",
-           "plate_parts", "wiper_parts"]
+__all__ = ["BodySurface", "door_handle_parts", "grille_parts", "lamp_parts", "lower_intake_part", "mirror_parts",
+           "paint_over_loft_lamps", "plate_parts", "wiper_parts"]
