@@ -17,7 +17,6 @@ import functools
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.interpolate import PchipInterpolator
 
 from .mesh_parts import MeshPart, cut_along_levels, grid_faces, signed_volume, weld_vertices
 from .validate import face_normals, smooth_vertex_normals
@@ -71,7 +70,7 @@ def sedan_spec() -> BodySpec:
         top=((0.0, 0.58), (0.06, 0.70), (0.30, 0.78), (1.55, 0.90), (2.25, H - 0.02), (2.60, H), (3.20, H - 0.03),
              (3.85, 1.00), (4.45, 0.98), (4.56, 0.90), (L, 0.72)),
         bottom=((0.0, 0.42), (0.12, 0.28), (0.55, 0.20), (L - 0.6, 0.21), (L - 0.12, 0.30), (L, 0.45)),
-        tumblehome=0.22, plan_exponent=4.0,
+        tumblehome=0.22, plan_exponent=5.5,
     )
 
 
@@ -97,7 +96,7 @@ def suv_spec() -> BodySpec:
         top=((0.0, 0.72), (0.06, 0.88), (0.30, 0.98), (1.40, 1.08), (2.10, H - 0.02), (2.60, H), (4.35, H - 0.03),
              (4.62, 1.10), (L, 0.95)),
         bottom=((0.0, 0.52), (0.15, 0.36), (0.60, 0.28), (L - 0.6, 0.30), (L - 0.12, 0.38), (L, 0.52)),
-        tumblehome=0.17, plan_exponent=5.0,
+        tumblehome=0.17, plan_exponent=6.5,
     )
 
 
@@ -110,10 +109,13 @@ def van_spec() -> BodySpec:
         top=((0.0, 0.72), (0.06, 0.88), (0.25, 0.98), (0.85, 1.10), (1.70, H - 0.03), (2.30, H), (4.85, H - 0.02),
              (4.97, H - 0.12), (L, H - 0.30)),
         bottom=((0.0, 0.48), (0.15, 0.32), (0.55, 0.24), (L - 0.55, 0.26), (L - 0.12, 0.34), (L, 0.48)),
-        tumblehome=0.10, plan_exponent=6.0,
+        tumblehome=0.10, plan_exponent=7.5,
     )
 
 
+# Plan exponents (issue #20): sedans 5.5, SUVs 6.5, vans 7.5 (were 4 / 5 / 6): real cars seen end-on show a broad,
+# flat front and rear face with lamps out to the corners, the procedural ones a rounded "bubble"; the hatchback
+# keeps 4 (its short rear's bumper lip turned too sharply at its corners).
 BODY_SPECS = {"sedan": sedan_spec, "hatchback": hatchback_spec, "suv": suv_spec, "van": van_spec}
 BODY_WEIGHTS = {"sedan": 0.38, "hatchback": 0.22, "suv": 0.30, "van": 0.10}
 
@@ -205,10 +207,65 @@ def side_window_limits(spec: BodySpec, z: np.ndarray) -> tuple[np.ndarray, np.nd
             e[1] - 0.5 * f * (spec.d_rear - spec.d_roof_back))
 
 
+class MonotoneCubic:
+    """Piecewise cubic Hermite interpolation that keeps the data's monotonicity (PCHIP, Fritsch-Carlson with the
+    weighted harmonic mean of Fritsch-Butland at inner knots and the three-point end rule): what
+    ``scipy.interpolate.PchipInterpolator(x, y)`` computes (same slopes, same polynomials, extrapolated with
+    the end pieces), in numpy only, so importing the car body does not import ``scipy.interpolate`` (~0.25 s of
+    the CLI's start-up, issue #19).
+
+    Args:
+        x: (K,) strictly increasing knots, K >= 2. y: (K,) values.
+    """
+
+    def __init__(self, x, y) -> None:
+        x, y = np.asarray(x, np.float64), np.asarray(y, np.float64)
+        if x.ndim != 1 or x.shape != y.shape or len(x) < 2 or not np.all(np.diff(x) > 0):
+            raise ValueError(f"MonotoneCubic: x must be (K,) strictly increasing with K >= 2 and y (K,), got "
+                             f"shapes {x.shape} and {y.shape}")
+        h = np.diff(x)
+        m = np.diff(y) / h
+        d = np.zeros_like(y)
+        if len(x) == 2:
+            d[:] = m[0]
+        else:
+            w1, w2 = 2.0 * h[1:] + h[:-1], h[1:] + 2.0 * h[:-1]
+            same = (np.sign(m[:-1]) * np.sign(m[1:])) > 0
+            with np.errstate(divide="ignore", invalid="ignore"):
+                inv = (w1 / m[:-1] + w2 / m[1:]) / (w1 + w2)
+                d[1:-1] = np.where(same, 1.0 / inv, 0.0)
+            d[0] = self._end_slope(h[0], h[1], m[0], m[1])
+            d[-1] = self._end_slope(h[-1], h[-2], m[-1], m[-2])
+        self.x, self.y, self.d, self.h, self.m = x, y, d, h, m
+
+    @staticmethod
+    def _end_slope(h0: float, h1: float, m0: float, m1: float) -> float:
+        """A non-centred three-point slope at an end, kept shape-preserving (SciPy's ``_edge_case``)."""
+        d = ((2.0 * h0 + h1) * m0 - h0 * m1) / (h0 + h1)
+        if np.sign(d) != np.sign(m0):
+            return 0.0
+        if np.sign(m0) != np.sign(m1) and abs(d) > abs(3.0 * m0):
+            return 3.0 * m0
+        return float(d)
+
+    def __call__(self, t) -> np.ndarray:
+        """Values at ``t`` (any shape); outside the knots the end pieces are extrapolated."""
+        t = np.asarray(t, np.float64)
+        k = np.clip(np.searchsorted(self.x, t, side="right") - 1, 0, len(self.x) - 2)
+        h, m = self.h[k], self.m[k]
+        d0, d1 = self.d[k], self.d[k + 1]
+        s = t - self.x[k]
+        # The Hermite piece's power-basis coefficients and their sum, in SciPy's order of operations
+        # (CubicHermiteSpline's coefficients, PPoly's term-by-term sum): the same floats, not just close ones.
+        c = (d0 + d1 - 2.0 * m) / h
+        c3, c2 = c / h, (m - d0) / h - c
+        return ((self.y[k] + d0 * s) + c2 * (s * s)) + c3 * (s * s * s)
+
+
 @functools.lru_cache(maxsize=64)
-def _profile_curves(spec: BodySpec) -> tuple[PchipInterpolator, PchipInterpolator]:
+def _profile_curves(spec: BodySpec) -> tuple[MonotoneCubic, MonotoneCubic]:
     """The roof line and underbody curves z(d) of a spec (cached: the details query them often)."""
-    return PchipInterpolator(*np.array(spec.top).T), PchipInterpolator(*np.array(spec.bottom).T)
+    return MonotoneCubic(*np.array(spec.top).T), MonotoneCubic(*np.array(spec.bottom).T)
 
 
 def body_profiles(spec: BodySpec, d: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -532,7 +589,8 @@ def section_half_width(spec: BodySpec, d: np.ndarray, z: np.ndarray) -> np.ndarr
 
 __all__ = [
     "BODY_SPECS", "BODY_WEIGHTS", "BRAKE", "BUMPER_LIP", "B_PILLAR", "BodySpec", "CHROME", "DASH", "GAP", "GAP_HALF_M",
-    "GLASS", "GLASS_REAR", "HEADLIGHT", "INTERIOR", "N_SLOTS", "PAINT", "PAINT_LOWER", "PLATE_BAND", "PLATE_FRONT",
+    "GLASS", "GLASS_REAR", "HEADLIGHT", "INTERIOR", "MonotoneCubic", "N_SLOTS", "PAINT", "PAINT_LOWER", "PLATE_BAND",
+    "PLATE_FRONT",
     "PLATE_INK", "PLATE_REAR", "REAR_WINDOW", "REFLECTOR", "RIM", "SIDE_GLASS", "TAILLIGHT", "TRIM", "TYRE",
     "UNDERSIDE", "WINDSCREEN", "axle_distances", "body_materials", "body_part", "body_profiles", "hatchback_spec",
     "jitter_spec", "loft_stations", "outline_levels", "panel_gaps", "plan_corner_y", "section_half_width",
