@@ -170,17 +170,20 @@ def _grid_mesh(view: DepthView, depth_m: np.ndarray, step: int,
     idx = np.arange(h * w).reshape(h, w)
     a, b, c, e = idx[:-1, :-1].ravel(), idx[:-1, 1:].ravel(), idx[1:, :-1].ravel(), idx[1:, 1:].ravel()
     faces = np.concatenate([np.stack([a, c, b], 1), np.stack([b, c, e], 1)])
+    # only the faces whose three vertices have a depth are tested further (the others are never kept)
+    faces = faces[finite[faces].all(axis=1)]
     fd = d.reshape(-1)[faces]
-    ok = np.isfinite(fd).all(axis=1)
     with np.errstate(invalid="ignore", divide="ignore"):
         ratio = fd.max(axis=1) / fd.min(axis=1)
     tri = vertices[faces]
     normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
     flat = np.abs(normal[:, 2]) >= np.cos(np.radians(GROUND_MAX_TILT_DEG)) * np.linalg.norm(normal, axis=1)
     ground = (tri[..., 2] < GROUND_HEIGHT_M).all(axis=1) & flat
-    ok &= ratio <= np.where(ground, MAX_GROUND_DEPTH_RATIO, MAX_DEPTH_RATIO)
+    ok = ratio <= np.where(ground, MAX_GROUND_DEPTH_RATIO, MAX_DEPTH_RATIO)
     faces = faces[ok]
-    used = np.unique(faces)
+    is_used = np.zeros(len(vertices), bool)
+    is_used[faces] = True
+    used = np.flatnonzero(is_used)  # = np.unique(faces), without the sort
     remap = np.full(len(vertices), -1, np.int64)
     remap[used] = np.arange(len(used))
     return vertices[used], remap[faces], uv[used], unc[used]
