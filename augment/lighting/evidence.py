@@ -50,6 +50,8 @@ class PreparedImage:
         elevation: (h, w) rad of each ray above the horizon.
         K: (3, 3) intrinsics of the downscaled image.
         surface_uv: (N, 2) pixels of LiDAR returns (surfaces) in this image, or None.
+        rgb_uint8: (h, w, 3) uint8 the downscaled image itself (:func:`downscale_image` of the input at
+            ``WORK_WIDTH``), or None; later stages at the same width reuse it instead of downscaling again.
     """
 
     hdr: np.ndarray
@@ -58,6 +60,7 @@ class PreparedImage:
     elevation: np.ndarray
     K: np.ndarray
     surface_uv: np.ndarray | None = None
+    rgb_uint8: np.ndarray | None = None
 
     @cached_property
     def ldr_max(self) -> np.ndarray:
@@ -120,8 +123,9 @@ def prepare_image(image_rgb: np.ndarray, K: np.ndarray, up_cam: np.ndarray,
         pts = pts[np.linalg.norm(pts, axis=1) >= SURFACE_MIN_RANGE_M]
         uv, _ = project_points(Ks, pts)
         surface_uv = uv[np.isfinite(uv).all(axis=1)]
+    small.flags.writeable = False
     return PreparedImage(ldr_uint8_to_hdr(small).astype(np.float64), _UINT8_TO_LDR[small], rays, elevation, Ks,
-                         surface_uv)
+                         surface_uv, small)
 
 
 def box_shadow_evidence(work: PreparedImage, T_cam_from_global: np.ndarray, boxes: list[Box],

@@ -52,10 +52,18 @@ class HeightMap:
         p = np.asarray(points_vol, dtype=np.float64)
         p = p[p[:, 2] >= min_height_m] if len(p) else p
         if len(p):
-            ij = np.floor((p[:, :2] + half_extent_m) / cell_m).astype(np.int64)
-            ok = ((ij >= 0) & (ij < n)).all(axis=1)
-            np.maximum.at(h, (ij[ok, 0], ij[ok, 1]), p[ok, 2].astype(np.float32))
+            i = np.floor((p[:, 0] + half_extent_m) / cell_m).astype(np.int64)
+            j = np.floor((p[:, 1] + half_extent_m) / cell_m).astype(np.int64)
+            ok = (i >= 0) & (i < n) & (j >= 0) & (j < n)
+            np.maximum.at(h.reshape(-1), i[ok] * n + j[ok], p[ok, 2].astype(np.float32))
         return HeightMap(h, float(cell_m), float(half_extent_m))
+
+    def merged(self, other: "HeightMap") -> "HeightMap":
+        """The map of both maps' structures (the higher per cell): ``from_points`` of both point sets."""
+        if (other.cell_m, other.half_extent_m, other.heights_m.shape) != (self.cell_m, self.half_extent_m,
+                                                                          self.heights_m.shape):
+            raise ValueError("HeightMap.merged: the maps' cells differ")
+        return HeightMap(np.maximum(self.heights_m, other.heights_m), self.cell_m, self.half_extent_m)
 
     def raised(self, mask_fn, height_m: float) -> "HeightMap":
         """A copy with cells where ``mask_fn(heights, r_xy)`` is True raised to at least ``height_m``."""
