@@ -318,10 +318,15 @@ class SeenSurfaces:
         best = np.argmin(t_all, axis=0)
         if len(self.scenes) > 1:
             same = t_all <= t_near * (1.0 + SAME_SURFACE_FRACTION) + 0.1
-            with np.errstate(invalid="ignore", divide="ignore"):
-                to_hit = origins[None] + np.where(same, t_all, 0.0)[..., None] * dirs[None] - self.camera_centres[:, None]
-                cos = (to_hit * dirs[None]).sum(-1) / np.maximum(np.linalg.norm(to_hit, axis=-1), 1e-9)
-            best = np.where(np.isfinite(t_near), np.argmax(np.where(same, cos, -np.inf), axis=0), best)
+            # a ray with one camera's surface at the nearest distance keeps it (argmin); of several, the camera
+            # that sees it most head-on
+            m = np.flatnonzero(np.isfinite(t_near) & (same.sum(axis=0) > 1))
+            if len(m):
+                sm, o, dm = same[:, m], origins[m], dirs[m]
+                with np.errstate(invalid="ignore", divide="ignore"):
+                    to_hit = o[None] + np.where(sm, t_all[:, m], 0.0)[..., None] * dm[None] - self.camera_centres[:, None]
+                    cos = (to_hit * dm[None]).sum(-1) / np.maximum(np.linalg.norm(to_hit, axis=-1), 1e-9)
+                best[m] = np.argmax(np.where(sm, cos, -np.inf), axis=0)
         rows = np.arange(n)
         hit = np.isfinite(t_near)
         t_best, face_best, bary_best = t_all[best, rows], face_all[best, rows], bary_all[best, rows]
