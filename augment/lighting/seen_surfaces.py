@@ -171,14 +171,20 @@ def _grid_mesh(view: DepthView, depth_m: np.ndarray, step: int,
     a, b, c, e = idx[:-1, :-1].ravel(), idx[:-1, 1:].ravel(), idx[1:, :-1].ravel(), idx[1:, 1:].ravel()
     faces = np.concatenate([np.stack([a, c, b], 1), np.stack([b, c, e], 1)])
     # only the faces whose three vertices have a depth are tested further (the others are never kept)
-    faces = faces[finite[faces].all(axis=1)]
+    # (the reductions over a face's three vertices are written out: the same numbers, without numpy's slow
+    # reductions over an axis of length 3)
+    faces = faces[finite[faces[:, 0]] & finite[faces[:, 1]] & finite[faces[:, 2]]]
     fd = d.reshape(-1)[faces]
+    f0, f1, f2 = fd[:, 0], fd[:, 1], fd[:, 2]
     with np.errstate(invalid="ignore", divide="ignore"):
-        ratio = fd.max(axis=1) / fd.min(axis=1)
+        ratio = np.maximum(np.maximum(f0, f1), f2) / np.minimum(np.minimum(f0, f1), f2)
     tri = vertices[faces]
     normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-    flat = np.abs(normal[:, 2]) >= np.cos(np.radians(GROUND_MAX_TILT_DEG)) * np.linalg.norm(normal, axis=1)
-    ground = (tri[..., 2] < GROUND_HEIGHT_M).all(axis=1) & flat
+    sq = normal * normal
+    length = np.sqrt((sq[:, 0] + sq[:, 1]) + sq[:, 2])  # = np.linalg.norm(normal, axis=1)
+    flat = np.abs(normal[:, 2]) >= np.cos(np.radians(GROUND_MAX_TILT_DEG)) * length
+    low = tri[..., 2] < GROUND_HEIGHT_M
+    ground = low[:, 0] & low[:, 1] & low[:, 2] & flat
     ok = ratio <= np.where(ground, MAX_GROUND_DEPTH_RATIO, MAX_DEPTH_RATIO)
     faces = faces[ok]
     is_used = np.zeros(len(vertices), bool)
