@@ -422,7 +422,13 @@ def bilinear(textures: np.ndarray, camera: np.ndarray, uv: np.ndarray) -> np.nda
     y0 = np.minimum(np.floor(y).astype(np.int64), h - 2 if h > 1 else 0)
     x1, y1 = np.minimum(x0 + 1, w - 1), np.minimum(y0 + 1, h - 1)
     fx, fy = (x - x0)[:, None], (y - y0)[:, None]
-    t = textures
-    top = t[camera, y0, x0] * (1 - fx) + t[camera, y0, x1] * fx
-    bottom = t[camera, y1, x0] * (1 - fx) + t[camera, y1, x1] * fx
+    texels = textures.reshape(-1, 3)  # one flat index per corner: the same texels as t[camera, y, x]
+    base = np.asarray(camera, np.int64) * (h * w)
+    r0, r1 = base + y0 * w, base + y1 * w
+
+    def at(flat: np.ndarray) -> np.ndarray:
+        return texels.take(flat, axis=0)
+
+    top = at(r0 + x0) * (1 - fx) + at(r0 + x1) * fx
+    bottom = at(r1 + x0) * (1 - fx) + at(r1 + x1) * fx
     return (top * (1 - fy) + bottom * fy).astype(np.float32)
