@@ -171,3 +171,34 @@ def test_observe_view_reuses_the_fits_downscaled_image(monkeypatch):
         np.testing.assert_array_equal(getattr(reused, field), getattr(alone, field), err_msg=field)
     np.testing.assert_array_equal(reused.depth_view.radiance, alone.depth_view.radiance)
     assert alone.far_saturated.any() and (alone.radiance.max() > 0)
+
+
+def test_an_estimate_downscales_and_densifies_each_camera_once(monkeypatch):
+    """A two-camera L2 estimate (ephemeris sun, LiDAR): each image is downscaled once (by the L1 fit; the
+    volume's observation reuses it) and each camera's LiDAR densified once. Main downscaled each image twice."""
+    import datetime as dt
+
+    from streetaug.augment.lighting.api import estimate_views_lighting
+    from streetaug.datasets.sample import LidarSweep
+
+    view, pts_cam = _street_view()
+    noon = int(dt.datetime(2018, 7, 24, 4, 0, tzinfo=dt.timezone.utc).timestamp() * 1e6)
+    T_global_from_ego = make_transform(np.eye(3), [300.0, 500.0, 0.0])
+    T_ego_from_cam = np.asarray(view.T_ego_from_cam)
+    views = []
+    for channel, yaw in (("CAM_FRONT", 0.0), ("CAM_FRONT_LEFT", 55.0)):
+        c, s = np.cos(np.radians(yaw)), np.sin(np.radians(yaw))
+        R_yaw = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+        T = make_transform(R_yaw @ T_ego_from_cam[:3, :3], T_ego_from_cam[:3, 3])
+        views.append(CameraView(channel, "tok", "synthetic.png", view.K, view.width, view.height, T,
+                                T_global_from_ego, noon).with_image(np.asarray(view.image)))
+    pts_ego = pts_cam @ T_ego_from_cam[:3, :3].T + T_ego_from_cam[:3, 3]
+    lidar = LidarSweep(pts_ego, np.zeros(len(pts_ego), np.float32), np.eye(4), T_global_from_ego, noon)
+    calls = {"fit": _count(monkeypatch, evidence, "downscale_image"),
+             "observe": _count(monkeypatch, observe, "downscale_image"),
+             "densify": _count(monkeypatch, observe, "densify_lidar_depth")}
+    sl = estimate_views_lighting(views, "singapore-onenorth", "L2", lidar=lidar)
+    assert sl.hybrid is not None and sl.level == "L2"
+    assert len(calls["observe"]) == 0, "the volume's observation downscaled an image again"
+    assert len(calls["fit"]) == len(views)
+    assert len(calls["densify"]) == len(views)
