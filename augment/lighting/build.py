@@ -460,8 +460,12 @@ def assemble_params(grid: LogGrid, occ: np.ndarray, obs: ObservedVoxels, surf: S
 
 def build_volume(grid: LogGrid, observations: list[ViewObservation], lidar_points_vol: np.ndarray | None,
                  light: DistantSun, sky_world: np.ndarray, ground_albedo: float = 0.15,
-                 unseen_keep: float = UNSEEN_KEEP) -> tuple[np.ndarray, dict]:
-    """VSG parameters (X, Y, Z, 8) float32 array of a scene (see module doc), and build statistics."""
+                 unseen_keep: float = UNSEEN_KEEP,
+                 seen_anchor_rgb: np.ndarray | None = None) -> tuple[np.ndarray, dict]:
+    """VSG parameters (X, Y, Z, 8) float32 array of a scene (see module doc), and build statistics.
+
+    ``seen_anchor_rgb``: (3,) the observations' seen mean colour (:func:`.fill.mean_colour_radiance` of their
+    ``radiance`` together) when the caller has it already; None: worked out here."""
     stats: dict = {}
     obs = observed_voxels(grid, observations)
     stats["observed_voxels"] = int(obs.observed.sum())
@@ -477,8 +481,10 @@ def build_volume(grid: LogGrid, observations: list[ViewObservation], lidar_point
     surface, normal = surfaces_and_normals(grid, occ)
     surf = surface_lighting(grid, occ, surface, normal, obs.observed, light, sky_world)
     ego_forward = next((o.ego_forward for o in observations if o.ego_forward is not None), None)
-    seen = [o.radiance for o in observations if len(o.radiance)]
-    anchor = mean_colour_radiance(np.concatenate(seen)) if seen else None
+    anchor = seen_anchor_rgb
+    if anchor is None:
+        seen = [o.radiance for o in observations if len(o.radiance)]
+        anchor = mean_colour_radiance(np.concatenate(seen)) if seen else None
     shaded = shade_surfaces(grid, surf, obs.obs_rgb, light, ground_albedo, ego_forward, stats, anchor, unseen_keep)
     params = assemble_params(grid, occ, obs, surf, shaded, alpha)
     stats["surface_voxels"] = int(len(surf.idx))

@@ -50,6 +50,8 @@ class PreparedImage:
         elevation: (h, w) rad of each ray above the horizon.
         K: (3, 3) intrinsics of the downscaled image.
         surface_uv: (N, 2) pixels of LiDAR returns (surfaces) in this image, or None.
+        rgb_uint8: (h, w, 3) uint8 the downscaled image itself (:func:`downscale_image` of the input at
+            ``WORK_WIDTH``), or None; later stages at the same width reuse it instead of downscaling again.
     """
 
     hdr: np.ndarray
@@ -58,6 +60,7 @@ class PreparedImage:
     elevation: np.ndarray
     K: np.ndarray
     surface_uv: np.ndarray | None = None
+    rgb_uint8: np.ndarray | None = None
 
     @cached_property
     def ldr_max(self) -> np.ndarray:
@@ -120,8 +123,9 @@ def prepare_image(image_rgb: np.ndarray, K: np.ndarray, up_cam: np.ndarray,
         pts = pts[np.linalg.norm(pts, axis=1) >= SURFACE_MIN_RANGE_M]
         uv, _ = project_points(Ks, pts)
         surface_uv = uv[np.isfinite(uv).all(axis=1)]
+    small.flags.writeable = False
     return PreparedImage(ldr_uint8_to_hdr(small).astype(np.float64), _UINT8_TO_LDR[small], rays, elevation, Ks,
-                         surface_uv)
+                         surface_uv, small)
 
 
 def box_shadow_evidence(work: PreparedImage, T_cam_from_global: np.ndarray, boxes: list[Box],
@@ -170,13 +174,17 @@ def box_shadow_evidence(work: PreparedImage, T_cam_from_global: np.ndarray, boxe
 
     free = (silhouettes == 0) & ~work.clipped
     ratios, lit_values, tokens = [], [], []
-    for shadow, z0, token in items:
-        in_shadow = _rasterise_ground(shadow, z0, T_cam_from_global, work.K, (h, w)) & free
+    for shadow, z0, token in items:  # each region rasterised in its own window of the image (its pixels' box)
+        mask, win = _rasterise_ground_window(shadow, z0, T_cam_from_global, work.K, (h, w))
+        in_shadow = mask & free[win]
+        if in_shadow.sum() < 12:
+            continue
         ring = shadow.buffer(2.5).difference(shadow.buffer(0.7)).difference(all_shadows)
-        lit = _rasterise_ground(ring, z0, T_cam_from_global, work.K, (h, w)) & free
-        if in_shadow.sum() >= 12 and lit.sum() >= 12:
-            shadow_med = max(float(np.median(lum[in_shadow])), 1e-9)
-            lit_med = float(np.median(lum[lit]))
+        mask, lit_win = _rasterise_ground_window(ring, z0, T_cam_from_global, work.K, (h, w))
+        lit = mask & free[lit_win]
+        if lit.sum() >= 12:
+            shadow_med = max(float(np.median(lum[win][in_shadow])), 1e-9)
+            lit_med = float(np.median(lum[lit_win][lit]))
             ratios.append(lit_med / shadow_med)
             lit_values.append(lit_med)
             tokens.append(token)
@@ -187,6 +195,40 @@ def box_shadow_evidence(work: PreparedImage, T_cam_from_global: np.ndarray, boxe
     best = int(np.argmax(ratios))
     return {"objects": len(ratios), "contrast": float(ratios[best]), "lit": float(lit_values[best]),
             "per_object_contrast": [float(r) for r in ratios], "per_object_lit": [float(v) for v in lit_values], "per_object_token": tokens}
+
+
+def _rasterise_ground_window(poly, z0: float, T_cam_from_global: np.ndarray, K: np.ndarray,
+                             shape: tuple[int, int]) -> tuple[np.ndarray, tuple[slice, slice]]:
+    """:func:`_rasterise_ground` in the window of the image that can hold its pixels: (the window's mask (hw, ww)
+    bool, the window (rows, columns) as slices of the image); every pixel outside it is False. The same pixels
+    as the whole image's mask (the integer vertices are shifted by the window's corner: the fill is the same)."""
+    empty = (np.zeros((0, 0), bool), (slice(0, 0), slice(0, 0)))
+    rings = []
+    polys = [poly] if poly.geom_type == "Polygon" else list(getattr(poly, "geoms", []))
+    for pg in polys:
+        if pg.is_empty or pg.geom_type != "Polygon":
+            continue
+        for ring, value in [(pg.exterior, 1)] + [(r, 0) for r in pg.interiors]:
+            xy = np.asarray(ring.coords)
+            pts = np.concatenate([xy, np.full((len(xy), 1), z0)], axis=1)
+            pc = (T_cam_from_global[:3, :3] @ pts.T).T + T_cam_from_global[:3, 3]
+            if np.any(pc[:, 2] < 0.5):
+                return empty
+            uv = (pc @ K.T)[:, :2] / pc[:, 2:3]
+            rings.append((np.round(uv).astype(np.int32), value))
+    if not rings:
+        return empty
+    h, w = shape
+    outer = np.concatenate([uv for uv, value in rings if value == 1])
+    c0, r0 = np.clip(outer.min(axis=0), 0, [w, h])
+    c1, r1 = np.clip(outer.max(axis=0).astype(np.int64) + 1, 0, [w, h])
+    if c1 <= c0 or r1 <= r0:
+        return empty
+    mask = np.zeros((int(r1 - r0), int(c1 - c0)), np.uint8)
+    shift = np.array([c0, r0], np.int32)
+    for uv, value in rings:
+        cv2.fillPoly(mask, [uv - shift], value)
+    return mask > 0, (slice(int(r0), int(r1)), slice(int(c0), int(c1)))
 
 
 def _rasterise_ground(poly, z0: float, T_cam_from_global: np.ndarray, K: np.ndarray,

@@ -80,10 +80,22 @@ UNSEEN_KEEP = 0.25  # what no camera saw: this much of the model's log-radiance,
 def mean_colour_radiance(radiance: np.ndarray) -> np.ndarray:
     """(3,) the linear radiance the contract's response records as the mean colour of radiance samples (N, 3):
     the best constant guess of a view of them (the mean *linear* radiance overweights the bright ones)."""
-    r = np.asarray(radiance, dtype=np.float64).reshape(-1, 3)
-    if not len(r):
+    return mean_colour_of_ldr([clipped_ldr(radiance)])
+
+
+def clipped_ldr(radiance: np.ndarray) -> np.ndarray:
+    """(N, 3) float64 the contract's LDR of radiance samples (N, 3), clipped to [0, 1] (what
+    :func:`mean_colour_radiance` averages; an array's LDR once for several means)."""
+    return np.clip(hdr_to_ldr(np.asarray(radiance, dtype=np.float64).reshape(-1, 3)), 0.0, 1.0)
+
+
+def mean_colour_of_ldr(parts: list[np.ndarray]) -> np.ndarray:
+    """(3,) :func:`mean_colour_radiance` of the samples whose :func:`clipped_ldr` are ``parts`` (each (N_i, 3)),
+    all together: the same numbers as of their radiance concatenated."""
+    ldr = np.concatenate(parts) if parts else np.zeros((0, 3))
+    if not len(ldr):
         return np.zeros(3)
-    return np.maximum(ldr_to_hdr(np.clip(hdr_to_ldr(r), 0.0, 1.0).mean(axis=0)), 1e-9)
+    return np.maximum(ldr_to_hdr(ldr.mean(axis=0)), 1e-9)
 
 
 def shrink_unseen(radiance: np.ndarray, anchor_rgb: np.ndarray, keep: float = UNSEEN_KEEP) -> np.ndarray:

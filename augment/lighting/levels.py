@@ -52,10 +52,18 @@ class HeightMap:
         p = np.asarray(points_vol, dtype=np.float64)
         p = p[p[:, 2] >= min_height_m] if len(p) else p
         if len(p):
-            ij = np.floor((p[:, :2] + half_extent_m) / cell_m).astype(np.int64)
-            ok = ((ij >= 0) & (ij < n)).all(axis=1)
-            np.maximum.at(h, (ij[ok, 0], ij[ok, 1]), p[ok, 2].astype(np.float32))
+            i = np.floor((p[:, 0] + half_extent_m) / cell_m).astype(np.int64)
+            j = np.floor((p[:, 1] + half_extent_m) / cell_m).astype(np.int64)
+            ok = (i >= 0) & (i < n) & (j >= 0) & (j < n)
+            np.maximum.at(h.reshape(-1), i[ok] * n + j[ok], p[ok, 2].astype(np.float32))
         return HeightMap(h, float(cell_m), float(half_extent_m))
+
+    def merged(self, other: "HeightMap") -> "HeightMap":
+        """The map of both maps' structures (the higher per cell): ``from_points`` of both point sets."""
+        if (other.cell_m, other.half_extent_m, other.heights_m.shape) != (self.cell_m, self.half_extent_m,
+                                                                          self.heights_m.shape):
+            raise ValueError("HeightMap.merged: the maps' cells differ")
+        return HeightMap(np.maximum(self.heights_m, other.heights_m), self.cell_m, self.half_extent_m)
 
     def raised(self, mask_fn, height_m: float) -> "HeightMap":
         """A copy with cells where ``mask_fn(heights, r_xy)`` is True raised to at least ``height_m``."""
@@ -70,9 +78,22 @@ class HeightMap:
                 box_hi: np.ndarray | None = None, max_dist_m: float = 300.0) -> np.ndarray:
         """(M, D) bool: does a ray from each point (M, 3) along each unit direction (D, 3) hit a structure?
 
-        Only structures inside the xy box ``[box_lo, box_hi]`` (default: the whole map) count. The march runs
-        over blocks of points of at most ``BLOCKED_MARCH_ELEMENTS`` (point, direction, step) samples, so its
-        memory does not grow with the number of points.
+        Only structures inside the xy box ``[box_lo, box_hi]`` (default: the whole map) count.
+        """
+        whole, within = self.blocked_whole_and_within(points, dirs, box_lo, box_hi, max_dist_m)
+        return whole if within is None else within
+
+    def blocked_whole_and_within(self, points: np.ndarray, dirs: np.ndarray, box_lo: np.ndarray | None = None,
+                                 box_hi: np.ndarray | None = None,
+                                 max_dist_m: float = 300.0) -> tuple[np.ndarray, np.ndarray | None]:
+        """:meth:`blocked` by the whole map and by the structures inside the xy box ``[box_lo, box_hi]`` (None
+        without a box), from one march: ((M, D) bool, (M, D) bool or None).
+
+        The rays are marched in horizontal steps of half a cell, one direction at a time, and only as far as a
+        hit is possible: until the ray rises above the map's highest structure (or 200 m) and, when every point
+        is on the map, until it leaves the map; the steps left out could not hit, so the result is the one of
+        marching all ``max_dist_m``. The march runs over blocks of points of at most ``BLOCKED_MARCH_ELEMENTS``
+        (point, direction, step) samples, so its memory does not grow with the number of points.
         """
         pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
         d = np.asarray(dirs, dtype=np.float64).reshape(-1, 3)
@@ -80,26 +101,61 @@ class HeightMap:
         t = np.arange(1, int(max_dist_m / step) + 1) * step  # horizontal distance marched
         per_point = max(len(d) * len(t), 1)
         block = max(1, BLOCKED_MARCH_ELEMENTS // per_point)
-        out = np.zeros((len(pts), len(d)), dtype=bool)
+        whole = np.zeros((len(pts), len(d)), dtype=bool)
+        within = None if box_lo is None else np.zeros((len(pts), len(d)), dtype=bool)
         for start in range(0, len(pts), block):
-            out[start:start + block] = self._blocked_block(pts[start:start + block], d, t, box_lo, box_hi)
-        return out
+            w, b = self._blocked_block(pts[start:start + block], d, t, box_lo, box_hi)
+            whole[start:start + block] = w
+            if within is not None:
+                within[start:start + block] = b
+        return whole, within
+
+    def _march_steps(self, pts: np.ndarray, slope_xy: np.ndarray, slope_z: float, t: np.ndarray) -> int:
+        """How many of the steps ``t`` (T,) can hit for points (m, 3) along one direction (horizontal unit
+        ``slope_xy`` (2,), rise per horizontal metre ``slope_z``): a superset of the steps with a hit."""
+        top = min(float(self.heights_m.max(initial=0.0)), 200.0)  # a hit needs z below both
+        reach = float(t[-1]) if len(t) else 0.0
+        if slope_z > 0.0:
+            reach = min(reach, (top - float(pts[:, 2].min())) / slope_z)
+        half = self.half_extent_m
+        on_map = (np.abs(pts[:, :2]) < half).all()
+        if on_map:  # from a point on the map, a ray that has left it never returns
+            with np.errstate(divide="ignore"):
+                exits = [np.where(s > 0, (half - pts[:, k]) / s, np.where(s < 0, (-half - pts[:, k]) / s, np.inf))
+                         for k, s in enumerate(slope_xy)]
+            reach = min(reach, float(np.minimum(*exits).max()))
+        if reach < 0.0:
+            return 0
+        margin = 1e-6 * (abs(reach) + 1.0) + self.cell_m  # rounding of the marched positions and heights
+        return int(np.searchsorted(t, reach + margin, side="right"))
 
     def _blocked_block(self, pts: np.ndarray, d: np.ndarray, t: np.ndarray, box_lo: np.ndarray | None,
-                       box_hi: np.ndarray | None) -> np.ndarray:
-        """:meth:`blocked` for one block of points (m, 3), directions (D, 3), marched distances (T,)."""
+                       box_hi: np.ndarray | None) -> tuple[np.ndarray, np.ndarray | None]:
+        """:meth:`blocked_whole_and_within` for one block of points (m, 3), directions (D, 3), marched
+        distances (T,)."""
         horiz = np.maximum(np.linalg.norm(d[:, :2], axis=1), 1e-6)
-        pos = pts[:, None, None, :2] + (t[None, None, :, None] * (d[None, :, None, :2] / horiz[None, :, None, None]))
-        z = pts[:, None, None, 2] + t[None, None, :] * (d[None, :, None, 2] / horiz[None, :, None])
         n = self.heights_m.shape[0]
-        ij = np.floor((pos + self.half_extent_m) / self.cell_m).astype(np.int64)
-        inside = ((ij >= 0) & (ij < n)).all(axis=-1)
-        if box_lo is not None:
-            inside &= ((pos >= box_lo[:2]) & (pos <= box_hi[:2])).all(axis=-1)
-        ij = np.clip(ij, 0, n - 1)
-        h = self.heights_m[ij[..., 0], ij[..., 1]]
-        hit = inside & (h > z) & (z < 200.0)
-        return hit.any(axis=-1)
+        whole = np.zeros((len(pts), len(d)), dtype=bool)
+        within = None if box_lo is None else np.zeros((len(pts), len(d)), dtype=bool)
+        for j in range(len(d)):
+            slope_xy = d[j, :2] / horiz[j]
+            slope_z = d[j, 2] / horiz[j]
+            k = self._march_steps(pts, slope_xy, float(slope_z), t)
+            if k == 0:
+                continue
+            tj = t[:k]
+            pos = pts[:, None, :2] + (tj[None, :, None] * slope_xy[None, None, :])
+            z = pts[:, None, 2] + tj[None, :] * slope_z
+            ij = np.floor((pos + self.half_extent_m) / self.cell_m).astype(np.int64)
+            inside = ((ij >= 0) & (ij < n)).all(axis=-1)
+            ij = np.clip(ij, 0, n - 1)
+            h = self.heights_m[ij[..., 0], ij[..., 1]]
+            hit = inside & (h > z) & (z < 200.0)
+            whole[:, j] = hit.any(axis=-1)
+            if within is not None:
+                inbox = ((pos >= box_lo[:2]) & (pos <= box_hi[:2])).all(axis=-1)
+                within[:, j] = (hit & inbox).any(axis=-1)
+        return whole, within
 
 
 def _hemisphere_dirs(n_el: int = 4, n_az: int = 12) -> tuple[np.ndarray, np.ndarray]:
@@ -135,8 +191,7 @@ def predicted_errors(hmap: HeightMap, points_vol: np.ndarray, sun_dir: np.ndarra
     all_dirs = np.concatenate([dirs, sun_dir[None]]) if sun_ok else dirs
     l2 = np.array([*l2_centre_xy, 0.0])
     R2 = np.full(3, 40.0)
-    block3 = hmap.blocked(points_vol, all_dirs)
-    block2 = hmap.blocked(points_vol, all_dirs, l2 - R2, l2 + R2)
+    block3, block2 = hmap.blocked_whole_and_within(points_vol, all_dirs, l2 - R2, l2 + R2)
     e_sun_h = e_sun * sun_dir[2] if sun_ok else 0.0
     wall = WALL_RHO * (0.5 * e_sky_h + 0.25 * e_sun_h)  # pi x radiance of a lit wall
 

@@ -35,7 +35,7 @@ from ..core import (
 )
 from .build import DistantSun, build_volume, lidar_points_in_volume, structure_heights
 from .exposure import exposure_ratios, lidar_luminance, pair_ratio
-from .fill import mean_colour_radiance
+from .fill import clipped_ldr, mean_colour_of_ldr
 from .levels import L2_GRID, L3_GRID, HeightMap, choose_level, predicted_errors, region_points
 from .observe import ViewObservation, observe_view, restrict_to_grid
 from .seen_surfaces import DepthView, SeenSurfaces, carved
@@ -82,8 +82,8 @@ def height_map(observations: list[ViewObservation], lidar_vol: np.ndarray | None
     cap = np.concatenate([o.capped for o in observations]) if observations else np.zeros(0, bool)
     cam_map = HeightMap.from_points(cam)
     cap_map = HeightMap.from_points(np.concatenate([cam[cap][:, :2], np.ones((cap.sum(), 1))], axis=1))
-    all_pts = np.concatenate([cam, lidar_vol]) if lidar_vol is not None and len(lidar_vol) else cam
-    hmap = HeightMap.from_points(all_pts)
+    # the map of camera and LiDAR points together: the camera points' map merged with the LiDAR's (a max per cell)
+    hmap = cam_map.merged(HeightMap.from_points(lidar_vol)) if lidar_vol is not None and len(lidar_vol) else cam_map
     n = hmap.heights_m.shape[0]
     c = (np.arange(n) + 0.5) * hmap.cell_m - hmap.half_extent_m
     r = np.hypot(c[:, None], c[None, :])
@@ -151,9 +151,10 @@ def build_hybrid(ref_est: LightingEstimate, T_vol_from_cam: np.ndarray, observat
     the cameras' seen surfaces (with ``earlier_depth_views``, rank 1, after them)."""
     t = time.perf_counter()
     model = sky_model_world(ref_est, T_vol_from_cam, DOME_HEIGHT, DOME_WIDTH)
-    seen = [o.radiance for o in observations if len(o.radiance)] + [o.far_radiance for o in observations
-                                                                    if len(o.far_radiance)]
-    anchor = mean_colour_radiance(np.concatenate(seen)) if seen else None
+    # the seen mean colours: of every pixel (the dome's), of the pixels inside the volume (the volume's)
+    near_ldr = [clipped_ldr(o.radiance) for o in observations if len(o.radiance)]
+    far_ldr = [clipped_ldr(o.far_radiance) for o in observations if len(o.far_radiance)]
+    anchor = mean_colour_of_ldr(near_ldr + far_ldr) if near_ldr or far_ldr else None
     dome, dome_stats = build_sky_dome(model, observations, anchor_rgb=anchor)
     timing["sky_dome"] = time.perf_counter() - t
     t = time.perf_counter()
@@ -165,7 +166,8 @@ def build_hybrid(ref_est: LightingEstimate, T_vol_from_cam: np.ndarray, observat
         sun_irr = np.asarray(ref_est.light_cam.sun.irradiance_rgb, dtype=np.float64) * factor
         out["sun_irradiance_factor"] = {"factor": factor, "from": how}
     light = DistantSun(sun_dir_vol, np.zeros(3) if sun_irr is None else sun_irr, sky_horizontal_irradiance_world(dome))
-    params, out["volume"] = build_volume(grid, observations, lidar_vol, light, dome, GROUND_ALBEDO)
+    params, out["volume"] = build_volume(grid, observations, lidar_vol, light, dome, GROUND_ALBEDO,
+                                         seen_anchor_rgb=mean_colour_of_ldr(near_ldr) if near_ldr else None)
     timing["volume"] = time.perf_counter() - t
     t = time.perf_counter()
     surfaces = SeenSurfaces.from_views([o.depth_view for o in observations if o.depth_view is not None]

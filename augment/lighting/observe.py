@@ -17,8 +17,10 @@ import numpy as np
 from scipy import ndimage
 
 from ...datasets.sample import CameraView
-from ..core import PinholeCamera, check_shape, clipped_to_lower_bound, ldr_uint8_to_hdr, transform_points
+from ..core import (SATURATION_LDR, SATURATION_RADIANCE, PinholeCamera, check_shape, ldr_uint8_to_hdr,
+                    transform_points)
 from ..core.depth import densify_lidar_depth
+from .evidence import WORK_WIDTH as EVIDENCE_WORK_WIDTH
 from .evidence import PreparedImage, downscale_image, image_sky_mask, prepare_image
 from .seen_surfaces import DEPTH_UNCERTAINTY, MAX_DEPTH_RATIO, DepthView
 from .volume import LogGrid
@@ -208,6 +210,33 @@ def canyon_depth(K: np.ndarray, width: int, height: int, T_vol_from_cam: np.ndar
     return t.astype(np.float32)  # t along rays with camera z = 1 is the z-depth
 
 
+def row_norms(v: np.ndarray) -> np.ndarray:
+    """(N, 1) the lengths of vectors (N, 3): ``np.linalg.norm(v, axis=1, keepdims=True)``'s numbers (its sum of
+    squares in the same order), without numpy's slow reduction over an axis of length 3."""
+    sq = v * v
+    return np.sqrt((sq[:, 0] + sq[:, 1]) + sq[:, 2])[:, None]
+
+
+def first_level_at(ldr: float) -> int:
+    """The first 8-bit level ``k`` with ``k / 255.0 >= ldr`` (256: none)."""
+    ok = np.arange(256, dtype=np.float64) / 255.0 >= ldr
+    return int(np.argmax(ok)) if ok.any() else 256
+
+
+def clipped_radiance(small: np.ndarray, level_max: np.ndarray, exposure_ratio: float) -> np.ndarray:
+    """(h, w, 3) float32 linear radiance of a uint8 image (h, w, 3) on the reference scale: clipped pixels
+    (``level_max`` (h, w), the largest channel, at or above ``SATURATION_LDR``) at the radiance where the response
+    saturates (a lower bound, :func:`.core.response.clipped_to_lower_bound`), divided by ``exposure_ratio``.
+
+    The same numbers as ``(clipped_to_lower_bound(ldr_uint8_to_hdr(small), small / 255.0) / exposure_ratio)
+    .astype(np.float32)``, from a table of the 2 x 3 x 256 values they can take."""
+    hdr = ldr_uint8_to_hdr(np.arange(256, dtype=np.uint8)).astype(np.float64)
+    table = (np.stack([np.broadcast_to(hdr, (3, 256)), np.minimum(hdr[None, :], SATURATION_RADIANCE[:, None])])
+             / exposure_ratio).astype(np.float32)
+    clipped = (level_max >= first_level_at(SATURATION_LDR)).astype(np.intp)
+    return table.reshape(-1)[clipped[..., None] * 768 + np.arange(3) * 256 + small]
+
+
 def observe_view(view: CameraView, T_vol_from_cam: np.ndarray, exposure_ratio: float, lidar_points_cam: np.ndarray | None,
                  ground_plane_cam: tuple[np.ndarray, float], work_width: int = WORK_WIDTH,
                  work: PreparedImage | None = None) -> ViewObservation:
@@ -223,7 +252,10 @@ def observe_view(view: CameraView, T_vol_from_cam: np.ndarray, exposure_ratio: f
     """
     image = np.asarray(view.image)
     check_shape(image, ("H", "W", 3), "image")
-    small, Ks = downscale_image(image, view.K, work_width)
+    if work is not None and work.rgb_uint8 is not None and work_width == EVIDENCE_WORK_WIDTH:
+        small, Ks = work.rgb_uint8, work.K  # the L1 fit's downscale of the same image at the same width
+    else:
+        small, Ks = downscale_image(image, view.K, work_width)
     h, w = small.shape[:2]
     normal, offset = ground_plane_cam
     up_cam = np.asarray(T_vol_from_cam)[2, :3]  # volume +z in the camera frame
@@ -245,22 +277,22 @@ def observe_view(view: CameraView, T_vol_from_cam: np.ndarray, exposure_ratio: f
     window = top_window_px(Ks, MESH_TOP_WINDOW_DEG)
     depth, capped_cols = extend_facades(measured, sky)
     # clipped pixels at the radiance where the response saturates (a lower bound), not its far tail
-    hdr = (clipped_to_lower_bound(ldr_uint8_to_hdr(small), small / 255.0) / exposure_ratio).astype(np.float32)
-    ldr_max = small.max(axis=-1) / 255.0
+    level_max = np.maximum(np.maximum(small[..., 0], small[..., 1]), small[..., 2])  # (h, w) uint8
+    hdr = clipped_radiance(small, level_max, exposure_ratio)
     rays = PinholeCamera(Ks, w, h).rays(unit=False)  # z = 1
     near = np.isfinite(depth)
     R = np.asarray(T_vol_from_cam)[:3, :3]
     centre = np.asarray(T_vol_from_cam)[:3, 3]
     p_vol = transform_points(T_vol_from_cam, rays[near] * depth[near][:, None])
     view_dirs = centre[None] - p_vol
-    view_dirs /= np.maximum(np.linalg.norm(view_dirs, axis=1, keepdims=True), 1e-9)
+    view_dirs /= np.maximum(row_norms(view_dirs), 1e-9)
     far = ~near
     d_far = rays[far] @ R.T
-    d_far /= np.linalg.norm(d_far, axis=1, keepdims=True)
+    d_far /= row_norms(d_far)
     capped = np.broadcast_to(capped_cols[None, :], (h, w))[near]
     return ViewObservation(
         channel=view.channel, points=p_vol, radiance=hdr[near], view_dirs=view_dirs, capped=capped,
-        far_dirs=d_far, far_radiance=hdr[far], far_is_sky=sky[far], far_saturated=ldr_max[far] >= SATURATED_LDR,
+        far_dirs=d_far, far_radiance=hdr[far], far_is_sky=sky[far], far_saturated=level_max[far] >= first_level_at(SATURATED_LDR),
         camera_centre=centre, ego_forward=ego_forward_vol(view, T_vol_from_cam),
         depth_view=DepthView(view.channel, mesh_depth(measured, sky, window), hdr, Ks,
                              np.asarray(T_vol_from_cam, np.float64),
@@ -280,11 +312,13 @@ def ego_forward_vol(view: CameraView, T_vol_from_cam: np.ndarray) -> np.ndarray:
 def restrict_to_grid(obs: ViewObservation, grid: LogGrid) -> ViewObservation:
     """Move the points outside the grid's box to the observation's pixels "at infinity" (distant scenery)."""
     lo, hi = grid.bounds()
-    inside = ((obs.points >= lo) & (obs.points <= hi)).all(axis=1)
+    p = obs.points
+    inside = ((p[:, 0] >= lo[0]) & (p[:, 0] <= hi[0]) & (p[:, 1] >= lo[1]) & (p[:, 1] <= hi[1])
+              & (p[:, 2] >= lo[2]) & (p[:, 2] <= hi[2]))
     if inside.all():
         return obs
     d = obs.points[~inside] - obs.camera_centre
-    d /= np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-9)
+    d /= np.maximum(row_norms(d), 1e-9)
     n_out = int((~inside).sum())
     return replace(
         obs, points=obs.points[inside], radiance=obs.radiance[inside], view_dirs=obs.view_dirs[inside],

@@ -170,17 +170,26 @@ def _grid_mesh(view: DepthView, depth_m: np.ndarray, step: int,
     idx = np.arange(h * w).reshape(h, w)
     a, b, c, e = idx[:-1, :-1].ravel(), idx[:-1, 1:].ravel(), idx[1:, :-1].ravel(), idx[1:, 1:].ravel()
     faces = np.concatenate([np.stack([a, c, b], 1), np.stack([b, c, e], 1)])
+    # only the faces whose three vertices have a depth are tested further (the others are never kept)
+    # (the reductions over a face's three vertices are written out: the same numbers, without numpy's slow
+    # reductions over an axis of length 3)
+    faces = faces[finite[faces[:, 0]] & finite[faces[:, 1]] & finite[faces[:, 2]]]
     fd = d.reshape(-1)[faces]
-    ok = np.isfinite(fd).all(axis=1)
+    f0, f1, f2 = fd[:, 0], fd[:, 1], fd[:, 2]
     with np.errstate(invalid="ignore", divide="ignore"):
-        ratio = fd.max(axis=1) / fd.min(axis=1)
+        ratio = np.maximum(np.maximum(f0, f1), f2) / np.minimum(np.minimum(f0, f1), f2)
     tri = vertices[faces]
     normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-    flat = np.abs(normal[:, 2]) >= np.cos(np.radians(GROUND_MAX_TILT_DEG)) * np.linalg.norm(normal, axis=1)
-    ground = (tri[..., 2] < GROUND_HEIGHT_M).all(axis=1) & flat
-    ok &= ratio <= np.where(ground, MAX_GROUND_DEPTH_RATIO, MAX_DEPTH_RATIO)
+    sq = normal * normal
+    length = np.sqrt((sq[:, 0] + sq[:, 1]) + sq[:, 2])  # = np.linalg.norm(normal, axis=1)
+    flat = np.abs(normal[:, 2]) >= np.cos(np.radians(GROUND_MAX_TILT_DEG)) * length
+    low = tri[..., 2] < GROUND_HEIGHT_M
+    ground = low[:, 0] & low[:, 1] & low[:, 2] & flat
+    ok = ratio <= np.where(ground, MAX_GROUND_DEPTH_RATIO, MAX_DEPTH_RATIO)
     faces = faces[ok]
-    used = np.unique(faces)
+    is_used = np.zeros(len(vertices), bool)
+    is_used[faces] = True
+    used = np.flatnonzero(is_used)  # = np.unique(faces), without the sort
     remap = np.full(len(vertices), -1, np.int64)
     remap[used] = np.arange(len(used))
     return vertices[used], remap[faces], uv[used], unc[used]
@@ -315,10 +324,15 @@ class SeenSurfaces:
         best = np.argmin(t_all, axis=0)
         if len(self.scenes) > 1:
             same = t_all <= t_near * (1.0 + SAME_SURFACE_FRACTION) + 0.1
-            with np.errstate(invalid="ignore", divide="ignore"):
-                to_hit = origins[None] + np.where(same, t_all, 0.0)[..., None] * dirs[None] - self.camera_centres[:, None]
-                cos = (to_hit * dirs[None]).sum(-1) / np.maximum(np.linalg.norm(to_hit, axis=-1), 1e-9)
-            best = np.where(np.isfinite(t_near), np.argmax(np.where(same, cos, -np.inf), axis=0), best)
+            # a ray with one camera's surface at the nearest distance keeps it (argmin); of several, the camera
+            # that sees it most head-on
+            m = np.flatnonzero(np.isfinite(t_near) & (same.sum(axis=0) > 1))
+            if len(m):
+                sm, o, dm = same[:, m], origins[m], dirs[m]
+                with np.errstate(invalid="ignore", divide="ignore"):
+                    to_hit = o[None] + np.where(sm, t_all[:, m], 0.0)[..., None] * dm[None] - self.camera_centres[:, None]
+                    cos = (to_hit * dm[None]).sum(-1) / np.maximum(np.linalg.norm(to_hit, axis=-1), 1e-9)
+                best[m] = np.argmax(np.where(sm, cos, -np.inf), axis=0)
         rows = np.arange(n)
         hit = np.isfinite(t_near)
         t_best, face_best, bary_best = t_all[best, rows], face_all[best, rows], bary_all[best, rows]
@@ -408,7 +422,13 @@ def bilinear(textures: np.ndarray, camera: np.ndarray, uv: np.ndarray) -> np.nda
     y0 = np.minimum(np.floor(y).astype(np.int64), h - 2 if h > 1 else 0)
     x1, y1 = np.minimum(x0 + 1, w - 1), np.minimum(y0 + 1, h - 1)
     fx, fy = (x - x0)[:, None], (y - y0)[:, None]
-    t = textures
-    top = t[camera, y0, x0] * (1 - fx) + t[camera, y0, x1] * fx
-    bottom = t[camera, y1, x0] * (1 - fx) + t[camera, y1, x1] * fx
+    texels = textures.reshape(-1, 3)  # one flat index per corner: the same texels as t[camera, y, x]
+    base = np.asarray(camera, np.int64) * (h * w)
+    r0, r1 = base + y0 * w, base + y1 * w
+
+    def at(flat: np.ndarray) -> np.ndarray:
+        return texels.take(flat, axis=0)
+
+    top = at(r0 + x0) * (1 - fx) + at(r0 + x1) * fx
+    bottom = at(r1 + x0) * (1 - fx) + at(r1 + x1) * fx
     return (top * (1 - fy) + bottom * fy).astype(np.float32)
