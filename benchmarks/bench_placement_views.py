@@ -17,7 +17,8 @@ image, as in ``bench_placement_truncation.py``; or the car ``insert`` would plac
   covered by the hulls of the annotated boxes (any class) nearer to the camera (centre distance); ``overlap_share``
   the same for every other annotated box, nearer or farther (the HOG diagnosis's "other box share": an inserted car
   in front of a parked row overlaps the boxes it hides). Real cars are also summarised with the annotation's
-  visibility >= 60 % (tokens 3, 4: placement keeps at least half of a car visible).
+  visibility >= 60 % (tokens 3, 4: placement keeps at least half of a car visible) and >= 80 % (token 4, against the
+  placed cars whose visible fraction, by the scene depth, is >= 0.8: the sets ``bench_realism.py`` compares).
 
 Runs on the code on ``PYTHONPATH`` (for a before / after comparison run it on both).
 """
@@ -191,6 +192,7 @@ def placed_cars(reader: NuScenesReader, config: PlacementConfig, every: int, see
                 is_parked = p.attribute == VEHICLE_PARKED
                 rows.append({"sample": token, "camera": channel, "seed": seed, "distance_m": p.distance_m,
                              "zone": p.zone, "parked": is_parked, "yaw_source": p.yaw_source,
+                             "visible_fraction": p.visible_fraction,
                              "facing_deg": facing_deg(T),
                              "neighbour_deg": neighbour_deg(p.box.center[:2], yaw_of(p.T_global_from_object[:3, :3]),
                                                             parked) if is_parked else None,
@@ -225,6 +227,8 @@ def main() -> None:
         "definition": __doc__.split("\n\n")[2],
         "real": summary(real), "real_parked_only": summary([r for r in real if r["parked"]]),
         "real_visibility_over_60pct": summary([r for r in real if r["visibility"] in ("3", "4")]),
+        "real_visibility_over_80pct": summary([r for r in real if r["visibility"] == "4"]),
+        "placed_visible_over_80pct": summary([r for r in placed if r["visible_fraction"] >= 0.8]),
         "placed": {"attempts": attempts, **summary(placed)},
         "placed_by_zone": {z: summary([r for r in placed if r["zone"] == z]) for z in sorted({r["zone"] for r in placed})},
         "seconds": time.perf_counter() - t0,
@@ -232,7 +236,8 @@ def main() -> None:
     }
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(result, indent=1))
-    for name in ("real", "real_visibility_over_60pct", "placed"):
+    for name in ("real", "real_visibility_over_60pct", "real_visibility_over_80pct", "placed",
+                 "placed_visible_over_80pct"):
         a = result[name]
         print(f"{name:6s} n {a['n']:4d} ends F/S/R {a['ends_front_side_rear']} covered {a['covered_share']} overlap {a['overlap_share']} "
               f"parked {a['parked']}")
