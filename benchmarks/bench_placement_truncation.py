@@ -1,7 +1,7 @@
 """How often placement puts the car cut by the image frame, against how often the real annotated cars are.
 
 Usage: ``python benchmarks/bench_placement_truncation.py [--dataroot ../shared/data/nuscenes-seq] [--every 2]
-[--seeds 3] [--out benchmarks/results/placement_truncation.json]``
+[--seeds 3] [--track-seeds 0] [--out benchmarks/results/placement_truncation.json]``
 
 Truncation of a box in a camera = the fraction of its projected 3D box (convex hull of the corners) outside the
 image (:func:`~streetaug.placement.rules.projected_inside_fraction`, as the labels' ``truncation``).
@@ -132,12 +132,48 @@ def placed_cars(reader: NuScenesReader, config: PlacementConfig, every: int, see
     return rows, attempts
 
 
+def track_cars(reader: NuScenesReader, config: PlacementConfig, seeds: int, n_tracks: int = 4) -> dict:
+    """Tracks (``plan_tracks``, ``n_tracks`` cars per seed 0..``seeds``-1): the share cut by the frame of their
+    anchor camera at the anchor keyframe (where each was sampled), and over every (keyframe, camera) sighting of
+    them (at least ``min_visible_fraction`` inside) the truncated share, as for the annotated cars."""
+    from streetaug.placement.track import TrackConfig, plan_tracks, track_frames
+
+    samples = [reader.sample(t) for t in reader.sample_tokens()]
+    frames = track_frames(samples)
+    by_token = {s.token: s for s in samples}
+    anchor, sightings, n = [], [], 0
+    for seed in range(seeds):
+        asset = select_assets(item_seed(seed, "asset", "tracks"), 1, location=samples[0].location)[0]
+        obj = ObjectBox(np.asarray(asset.wlh, float), asset.category)
+        plan = plan_tracks(frames, [obj] * n_tracks, np.random.default_rng(seed), TrackConfig(), samples[0].location)
+        for t in plan.tracks:
+            n += 1
+            for q, token in enumerate(t.sample_tokens):
+                seen = []
+                for channel, view in by_token[token].cameras.items():
+                    camera = PinholeCamera(view.K, view.width, view.height)
+                    T = view.T_cam_from_global @ t.T_global_from_object[q]
+                    corners = box_corners_object(t.wlh) @ T[:3, :3].T + T[:3, 3]
+                    if np.any(corners[:, 2] < config.near_plane_m):
+                        continue
+                    inside = float(projected_inside_fraction(corners[None], camera, config.near_plane_m)[0])
+                    if inside >= config.min_visible_fraction:
+                        seen.append(1.0 - inside)
+                    if token == t.anchor_sample_token and channel == t.anchor_camera:
+                        anchor.append(inside < FULL)
+                sightings += seen
+    f = np.asarray(anchor, float)
+    return {"seeds": seeds, "tracks": n, "anchor_view": {"n": len(f), "truncated_share": float(f.mean()) if len(f) else None},
+            "sightings": summary(sightings)}
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--dataroot", type=Path, default=SHARED / "nuscenes-seq")
     ap.add_argument("--version", default="v1.0-mini")
     ap.add_argument("--every", type=int, default=2, help="place in every N-th keyframe")
     ap.add_argument("--seeds", type=int, default=3)
+    ap.add_argument("--track-seeds", type=int, default=0, help="also plan 4 car tracks per seed (0: no tracks)")
     ap.add_argument("--truncated-share", type=float, help="PlacementConfig.truncated_share (default: its default)")
     ap.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "results" / "placement_truncation.json")
     args = ap.parse_args()
@@ -147,12 +183,14 @@ def main() -> None:
     config = PlacementConfig() if args.truncated_share is None else PlacementConfig(truncated_share=args.truncated_share)
     t0 = time.perf_counter()
     real, real_less_than_half = real_cars(reader, config)
-    placed, attempts = placed_cars(reader, config, args.every, args.seeds)
+    placed, attempts = placed_cars(reader, config, args.every, args.seeds) if args.seeds else ([], 0)
+    tracks = track_cars(reader, config, args.track_seeds) if args.track_seeds else None
     import streetaug.placement as placement_pkg
     commit = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--short", "HEAD"], capture_output=True,
                             text=True).stdout.strip()
     result = {
         "command": f"python benchmarks/bench_placement_truncation.py --every {args.every} --seeds {args.seeds}"
+                   + (f" --track-seeds {args.track_seeds}" if args.track_seeds else "")
                    + (f" --truncated-share {args.truncated_share}" if args.truncated_share is not None else ""),
         "code": {"worktree_commit": commit, "placement_package": str(Path(placement_pkg.__path__[0]).resolve()),
                  "truncated_share": getattr(config, "truncated_share", None)},
@@ -165,13 +203,19 @@ def main() -> None:
         "placed": {"attempts": attempts, "all": summary([r["truncation"] for r in placed],
                                                        [r["distance_m"] for r in placed]),
                    "by_camera": grouped(placed, "camera"), "by_zone": grouped(placed, "zone")},
+        "tracks": tracks,
         "seconds": time.perf_counter() - t0,
         "placed_rows": placed,
     }
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(result, indent=1))
+    if tracks:
+        print("tracks", json.dumps({k: v for k, v in tracks.items() if k != "sightings"}),
+              "sightings truncated", tracks["sightings"].get("truncated_share"), "n", tracks["sightings"]["n"])
     for name in ("real", "placed"):
         a = result[name]["all"]
+        if not a["n"]:
+            continue
         print(f"{name:6s} n {a['n']:5d} truncated {a['truncated_share']:.3f} +- {a['truncated_share_se']:.3f} "
               f"hist {a['histogram']['counts']}")
         for cam, s in result[name]["by_camera"].items():

@@ -11,6 +11,11 @@ is in rather than one table for every city:
   centre's signed distance to it (a row of cars in perpendicular bays stands at 90 deg, 2.5 m in; kerb-side
   parking at 0 or 180 deg, about 1 m in). A kerb candidate takes the style of the nearest parked box within
   ``STYLE_REACH_M`` (:func:`kerb_poses`); without one it stands along the edge;
+* the **row** (:func:`row_neighbour`): a kerb candidate standing in the row of a parked box (the gap between them at
+  most one car length) takes that box's heading, the full direction, nose-in or nose-out as it stands. The style
+  alone, measured against the edge's local tangent, turned cars round where that tangent turns between two cars of
+  one row: on scene-0916 only 42 % of the kerb cars stood within 30 deg of their nearest parked neighbour's heading
+  (its annotated parked cars: 80 %), 85 % with the row (``benchmarks/bench_placement_views.py``);
 * the **parking gap** (:func:`parked_gap_m`): how close parked vehicles stand to their nearest parked neighbour
   (scene-0916's bays: median 0.76 m); a kerb placement keeps that from parked vehicles, not the clearance from
   moving things.
@@ -93,14 +98,47 @@ class ParkingStyle:
     """How the parked boxes of one class stand at the road edge (see the module docstring).
 
     Attributes:
-        xy: (P, 2) float64 their centres, global x/y (m).
+        xy: (P, 2) float64 the centres of those by the edge, global x/y (m).
         yaw_to_edge_rad: (P,) heading minus the edge tangent's direction at the centre, (-pi, pi].
         centre_edge_m: (P,) signed distance of the centre to the road edge (m, + on the road).
+        row_xy: (Q, 2) float64 the centres of every parked box of the class in range (by an edge or not), global x/y.
+        row_yaw_rad: (Q,) their headings (rad, global, the full direction: nose-in and nose-out differ by pi).
+        row_wl: (Q, 2) their widths and lengths (m). A kerb candidate in their row takes the heading of its row
+            neighbour (:func:`row_neighbour`).
     """
 
     xy: np.ndarray
     yaw_to_edge_rad: np.ndarray
     centre_edge_m: np.ndarray
+    row_xy: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros((0, 2)))
+    row_yaw_rad: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(0))
+    row_wl: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros((0, 2)))
+
+
+def row_neighbour(style: ParkingStyle, xy: np.ndarray, length_m: float, width_m: float) -> np.ndarray:
+    """(N,) int the parked box (index into ``style.row_*``) whose row each candidate at ``xy`` (N, 2) stands in, -1
+    for none.
+
+    A candidate of ``length_m`` x ``width_m`` standing as parked box j does (its heading) is in j's row when the gap
+    between their boxes, along and across j's heading (the larger of the two), is at most one candidate length: beside
+    it with a free bay or two of a perpendicular row between, or nose to tail with one free bay of a parallel row; not
+    across an aisle or a road, which are wider than a car is long. Of several, the nearest by centre distance.
+    """
+    xy = np.asarray(xy, float).reshape(-1, 2)
+    out = np.full(len(xy), -1, dtype=np.int64)
+    if len(style.row_xy) == 0 or len(xy) == 0:
+        return out
+    d = xy[:, None] - style.row_xy[None]  # (N, Q, 2)
+    c, s = np.cos(style.row_yaw_rad), np.sin(style.row_yaw_rad)
+    along = np.abs(d[..., 0] * c + d[..., 1] * s)  # (N, Q) along j's heading
+    across = np.abs(-d[..., 0] * s + d[..., 1] * c)
+    w_j, l_j = style.row_wl[:, 0], style.row_wl[:, 1]
+    gap = np.maximum(along - (l_j + length_m) / 2, across - (w_j + width_m) / 2)
+    dist = np.where(gap <= length_m, np.hypot(along, across), np.inf)
+    j = dist.argmin(axis=1)
+    found = np.isfinite(dist[np.arange(len(xy)), j])
+    out[found] = j[found]
+    return out
 
 
 def parking_style(zones: SurfaceZones, boxes: Sequence[Box], categories: set[str], camera_xy: np.ndarray,
@@ -114,25 +152,27 @@ def parking_style(zones: SurfaceZones, boxes: Sequence[Box], categories: set[str
         return None
     xy = np.array([b.center[:2] for b in parked], float)
     yaw = np.array([_yaw(b) for b in parked])
+    wl = np.array([b.wlh[:2] for b in parked], float)
     fp = np.stack([footprint_corners(c[None], np.array([y]), float(b.wlh[1]), float(b.wlh[0]))[0]
                    for c, y, b in zip(xy, yaw, parked)])  # (P, 4, 2); tens of boxes
     s_min = zones.signed_distance(fp.reshape(-1, 2)).reshape(-1, 4).min(axis=1)
     near = s_min <= kerb_distance_m + 0.5
-    if not near.any():
-        return None
-    t = zones.edge_tangent(xy[near])
+    t = zones.edge_tangent(xy[near]) if near.any() else np.zeros((0, 2))
     rel = _wrap(yaw[near] - np.arctan2(t[:, 1], t[:, 0]))
-    return ParkingStyle(xy[near], rel, zones.signed_distance(xy[near]))
+    return ParkingStyle(xy[near], rel, zones.signed_distance(xy[near]) if near.any() else np.zeros(0), xy, yaw, wl)
 
 
 def kerb_poses(zones: SurfaceZones, style: ParkingStyle | None, xy: np.ndarray, heading_rad: np.ndarray,
                length_m: float, width_m: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Kerb poses of candidates at ``xy`` (N, 2): (xy (N, 2), heading (N,) rad, styled (N,) bool).
 
-    A candidate with a parked box within ``STYLE_REACH_M`` takes the style of the nearest one (its heading against
-    the edge, its centre's distance in from the edge), then moves inwards until its footprint is ``KERB_INSET_M``
-    inside the road (styled). The others keep their place and stand along the edge, in whichever of its two
-    directions is nearer to ``heading_rad`` (N,) (the lane's, or the ego's or its opposite).
+    A candidate with a parked box by the edge within ``STYLE_REACH_M`` takes the style of the nearest one (its
+    heading against the edge, its centre's distance in from the edge), then moves inwards until its footprint is
+    ``KERB_INSET_M`` inside the road (styled). The others keep their place and stand along the edge, in whichever of
+    its two directions is nearer to ``heading_rad`` (N,) (the lane's, or the ego's or its opposite). Then a
+    candidate standing in the row of a parked box (:func:`row_neighbour`, at its styled place) takes that box's
+    heading, the full direction (nose-in or nose-out as its neighbour; the edge's tangent, which the style is
+    measured against, can turn round between two cars of one row where the edge bends), and is styled too.
     """
     xy = np.asarray(xy, float).reshape(-1, 2)
     normal = zones.road_normal(xy)
@@ -140,21 +180,36 @@ def kerb_poses(zones: SurfaceZones, style: ParkingStyle | None, xy: np.ndarray, 
     edge_yaw = np.arctan2(tangent[:, 1], tangent[:, 0])
     along = np.where(np.cos(np.asarray(heading_rad, float) - edge_yaw) >= 0, edge_yaw, edge_yaw + np.pi)
     out_xy, out_yaw = xy.copy(), _wrap(along)
+    styled = np.zeros(len(xy), dtype=bool)
     if style is None or len(xy) == 0:
-        return out_xy, out_yaw, np.zeros(len(xy), dtype=bool)
-    d = np.linalg.norm(xy[:, None] - style.xy[None], axis=2)  # (N, P)
-    j = d.argmin(axis=1)
-    styled = d[np.arange(len(xy)), j] <= STYLE_REACH_M
-    s = zones.signed_distance(xy)
-    moved = xy + (style.centre_edge_m[j] - s)[:, None] * normal
-    yaw = _wrap(edge_yaw + style.yaw_to_edge_rad[j])
-    fp = footprint_corners(moved, yaw, length_m, width_m)
-    s_corner = zones.signed_distance(fp.reshape(-1, 2)).reshape(-1, 4).min(axis=1)
-    inset = np.maximum(KERB_INSET_M - s_corner, 0.0)
-    moved = moved + inset[:, None] * normal
-    out_xy[styled], out_yaw[styled] = moved[styled], yaw[styled]
+        return out_xy, out_yaw, styled
+    if len(style.xy):
+        d = np.linalg.norm(xy[:, None] - style.xy[None], axis=2)  # (N, P)
+        j = d.argmin(axis=1)
+        styled = d[np.arange(len(xy)), j] <= STYLE_REACH_M
+        s = zones.signed_distance(xy)
+        moved = xy + (style.centre_edge_m[j] - s)[:, None] * normal
+        yaw = _wrap(edge_yaw + style.yaw_to_edge_rad[j])
+        moved = moved + _inset(zones, moved, yaw, length_m, width_m)[:, None] * normal
+        out_xy[styled], out_yaw[styled] = moved[styled], yaw[styled]
+    row = row_neighbour(style, out_xy, length_m, width_m)
+    rowed = row >= 0
+    if rowed.any():
+        yaw = style.row_yaw_rad[row[rowed]]
+        n = zones.road_normal(out_xy[rowed])
+        out_xy[rowed] = out_xy[rowed] + _inset(zones, out_xy[rowed], yaw, length_m, width_m)[:, None] * n
+        out_yaw[rowed] = _wrap(yaw)
+        styled = styled | rowed
     return out_xy, out_yaw, styled
 
 
+def _inset(zones: SurfaceZones, xy: np.ndarray, yaw: np.ndarray, length_m: float, width_m: float) -> np.ndarray:
+    """(N,) how far (m) to move footprints at ``xy`` (N, 2) with ``yaw`` (N,) along the road normal so that they are
+    ``KERB_INSET_M`` inside the road (0 for those already are)."""
+    fp = footprint_corners(xy, yaw, length_m, width_m)
+    s_corner = zones.signed_distance(fp.reshape(-1, 2)).reshape(-1, 4).min(axis=1)
+    return np.maximum(KERB_INSET_M - s_corner, 0.0)
+
+
 __all__ = ["KERB_INSET_M", "MIN_PARKED_GAP_M", "PRIOR_OBJECTS", "parked_gap_m", "ParkingStyle", "STYLE_REACH_M", "kerb_poses", "parked_share",
-           "parking_style", "with_parked_share"]
+           "parking_style", "row_neighbour", "with_parked_share"]

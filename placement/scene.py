@@ -109,7 +109,7 @@ class PlacementScene:
     def parking_style(self, rule: ClassRule) -> ParkingStyle | None:
         """How the sample's parked boxes of ``rule``'s class stand at the road edge
         (:func:`~streetaug.placement.parking.parking_style`); None without ``class_rules``, for a rule with fixed
-        zone weights, or when none is parked by an edge."""
+        zone weights, or when none is parked."""
         if self.class_rules is None or rule.zone_weights != "scene":
             return None
         if rule.name not in self._styles:

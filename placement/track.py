@@ -19,7 +19,8 @@ ego (nuScenes annotates what is near), pushed on at both ends while a camera sti
 ``max_visible_range_m``): it never pops in or out of view inside the scene. In every frame of the span the rules are: drivable footprint, clearance
 to every annotated box of that keyframe, to the ego's swept path (its footprint at every keyframe and between
 them) and to the other tracks at that keyframe, no unannotated LiDAR obstacle nor non-drivable lidarseg point
-in the footprint; at the anchor, the object is in the camera's view and visible (the single-image rules).
+in the footprint; at the anchor, the object is in the camera's view and visible (the single-image rules), and cut
+by that camera's frame with the single-image ``truncated_share`` (each track draws which; :func:`anchor_truncated`).
 Annotated boxes are checked at keyframes only: at urban speeds two boxes cannot pass through each other
 within one 0.5 s interval without violating the clearance at a keyframe (that needs > 15 m of relative motion).
 
@@ -36,7 +37,7 @@ import numpy as np
 from scipy.ndimage import median_filter
 from scipy.spatial.transform import Rotation, Slerp
 
-from streetaug.augment.core import InputError, rotation_to_quat
+from streetaug.augment.core import InputError, PinholeCamera, rotation_to_quat
 from streetaug.datasets.nuscenes_format import VEHICLE_MOVING, VEHICLE_PARKED, VEHICLE_STOPPED
 from streetaug.datasets.sample import Box, Sample
 
@@ -46,9 +47,9 @@ from .config import PlacementConfig
 from .drivable import DrivableArea, drivable_area_for_sample
 from .ego_path import EgoPath, PathCoords, traffic_side
 from .height_drift import height_drift_m, static_bottoms
-from .place import OFF_ROAD_ZONES, Placeable, Placement, check_objects, zone_order
+from .place import FULL_VIEW_FRACTION, OFF_ROAD_ZONES, Placeable, Placement, check_objects, zone_order
 from .rules import (box_corners_object, box_footprint_rect, footprint_corners, occlusion_tolerance_for,
-                    rule_box_clearance, rule_drivable, rule_in_view, rule_lidarseg, rule_mutual, rule_obstacles,
+                    projected_inside_fraction, rule_box_clearance, rule_drivable, rule_in_view, rule_lidarseg, rule_mutual, rule_obstacles,
                     visible_fraction_estimate)
 from .scene import PlacementScene
 
@@ -76,6 +77,7 @@ MAX_LATERAL_ACCEL_MPS2 = 2.0  # comfortable cornering: a moving track slows down
 LANE_WIDTH_M = 3.3  # moving candidates: lane centres at multiples of this from the ego's path ...
 LANE_JITTER_M = 0.3  # ... give or take this (std)
 STOPPED_BELOW_MPS = 0.5  # a moving track slower than this at a keyframe is labelled vehicle.stopped there
+TRUNCATION_EXTRA_ATTEMPTS = 2  # attempts after the first passing track of the other kind, seeking the drawn kind
 CHUNK = 48  # candidates past the flat rules that are stood on the ground per attempt (the first passing wins)
 
 
@@ -550,7 +552,13 @@ def _plan_one(frames, usable, index, obj, moving, rng, config: TrackConfig, path
     ego_v = np.diff(s_ego_path) / np.maximum(np.diff(t_s), 1e-6)  # its speed between keyframes ...
     t_mid = 0.5 * (t_s[1:] + t_s[:-1])  # ... at these times
     tally = _Tally(report)
-    for _ in range(config.attempts):
+    # cut by the frame of the anchor camera with the single-image share (place.place_one); else the first passing
+    want_truncated = bool(side_uniform(rng) < pc.truncated_share)
+    fallback: Track | None = None  # the first track passing every rule, of the other kind
+    fallback_attempt = 0
+    for attempt in range(config.attempts):
+        if fallback is not None and attempt >= fallback_attempt + TRUNCATION_EXTRA_ATTEMPTS:
+            break
         k = int(usable[rng.integers(len(usable))])
         frame = frames[k]
         if moving:  # in lane coordinates: 10-40 m ahead of or behind the ego, in its lane or 1-2 lanes aside
@@ -648,11 +656,8 @@ def _plan_one(frames, usable, index, obj, moving, rng, config: TrackConfig, path
         if not moving and rule is None:
             edge = scene.drivable.edge_distance(flat[alive, k])
             alive = tally.keep("kerb", alive, edge <= pc.kerb_distance_m + 0.5)
-        for c in alive[:CHUNK]:  # the first survivors only: a bounded cost per attempt
-            track = _stand_and_check(frames, k, channel, c, xy_j[c], yaw_j[c], span[c], wlh, moving, swept, static_m,
-                                     placed, config, tally, surface)
-            if track is None:
-                continue
+
+        def build(c: int, track) -> Track:
             velocity = (_trajectory_velocity(path, motion, c, coords.d[c], t_s[span[c]]) if moving
                         else np.zeros((int(span[c].sum()), 3)))
             if moving and motion.follows_ego[c]:
@@ -670,7 +675,18 @@ def _plan_one(frames, usable, index, obj, moving, rng, config: TrackConfig, path
                          zone=zone if rule is not None else ("lane" if moving else "kerb"),
                          fixed_attribute="" if rule is None else
                          (getattr(obj, "attribute", None) if rule.attribute == "asset" else None))
-    return None
+
+        for c in alive[:CHUNK]:  # the first survivors only: a bounded cost per attempt
+            track = _stand_and_check(frames, k, channel, c, xy_j[c], yaw_j[c], span[c], wlh, moving, swept, static_m,
+                                     placed, config, tally, surface)
+            if track is None:
+                continue
+            i_k = int(np.searchsorted(np.flatnonzero(span[c]), k))
+            if anchor_truncated(frame, track[2], track[0][i_k], wlh, pc) == want_truncated:
+                return build(c, track)
+            if fallback is None:
+                fallback, fallback_attempt = build(c, track), attempt
+    return fallback
 
 
 def in_some_view(frames, xy_j: np.ndarray, yaw_j: np.ndarray, wlh: np.ndarray) -> np.ndarray:
@@ -803,6 +819,32 @@ def stand_heights(frames, keep: np.ndarray, xy_j: np.ndarray, moving: bool, stat
     return planes, median_filter(z, size=5, mode="nearest") if len(z) >= 3 else z
 
 
+def side_uniform(rng: np.random.Generator) -> float:
+    """One uniform draw that leaves ``rng``'s own stream as it is: from a child generator spawned from its seed
+    sequence (each call spawns the next child, so it is deterministic per seed); from ``rng`` itself when it has no
+    seed sequence. Adding a choice this way does not reshuffle every later draw of the plan."""
+    try:
+        return float(rng.spawn(1)[0].random())
+    except (TypeError, ValueError):
+        return float(rng.random())
+
+
+def anchor_truncated(frame: "TrackFrame", channel: str, T_global_from_object: np.ndarray, wlh: np.ndarray,
+                     config: PlacementConfig) -> bool:
+    """Whether a track is cut by the image frame in the camera ``channel`` of its anchor keyframe ``frame`` (where
+    it was sampled and passed the single-image visibility rule), at its pose there ``T_global_from_object`` (4, 4):
+    less than ``FULL_VIEW_FRACTION`` of its projected box inside that image, as :func:`~.place.place_one` judges.
+
+    Not the first keyframe of its span: the span is pushed on while any camera still sees the box, so there it is
+    mostly far and small, and wholly inside one of the overlapping cameras."""
+    view = frame.sample.cameras[channel]
+    T_co = view.T_cam_from_global @ T_global_from_object
+    corners = box_corners_object(wlh) @ T_co[:3, :3].T + T_co[:3, 3]
+    inside = float(projected_inside_fraction(corners[None], PinholeCamera(view.K, view.width, view.height),
+                                             config.near_plane_m)[0])
+    return inside < FULL_VIEW_FRACTION
+
+
 def _stand_and_check(frames, k: int, channel: str | None, c: int, xy_j: np.ndarray, yaw_j: np.ndarray, span: np.ndarray,
                      wlh: np.ndarray, moving: bool, swept: np.ndarray, static_m: np.ndarray, placed: Sequence[Track],
                      config: TrackConfig, tally: _Tally, surface: tuple[ClassRule, str] | None = None
@@ -874,5 +916,6 @@ def _trajectory_velocity(path: EgoPath, motion: LaneMotion, c: int, d: float, t:
 
 
 __all__ = ["DirectionVotes", "EGO_HALF_WIDTH_M", "EGO_X_RANGE_M", "SPEED_RANGE_MPS", "TRACK_RULES", "Track",
-           "TrackConfig", "TrackFrame", "TrackPlan", "direction_votes", "ego_footprint", "interpolate_poses",
+           "TrackConfig", "TrackFrame", "TrackPlan", "direction_votes", "ego_footprint", "anchor_truncated",
+           "interpolate_poses",
            "plan_tracks", "speed_range", "swept_ego_footprints", "track_frames"]
