@@ -34,8 +34,9 @@ class _NeutralAxisOnFirstUse(NeutralAxis):
         return "levels" in self.__dict__
 
     def __getattr__(self, name: str):
-        if name in ("levels", "offsets_dn", "n_px"):  # only reached before they are set
-            axis = neutral_axis(self.__dict__["_image_rgb"])
+        image = self.__dict__.get("_image_rgb")
+        if name in ("levels", "offsets_dn", "n_px") and image is not None:  # only reached before they are set
+            axis = neutral_axis(image)
             for f in ("levels", "offsets_dn", "n_px"):
                 object.__setattr__(self, f, getattr(axis, f))
             object.__setattr__(self, "_image_rgb", None)
