@@ -16,7 +16,7 @@ from ..pipeline import InsertOptions, SamplePlacement, insert_into_sample, inser
 from .config import BatchConfig
 from .layout import output_file
 from .row import LogRow
-from .tracks import SceneTracks, track_assets
+from .tracks import SceneTracks, track_asset
 from .write import plan_rows, with_file_checks, write_camera, write_lidar
 
 
@@ -131,11 +131,10 @@ def augment_track_sample(reader: NuScenesReader, config: BatchConfig, out_dir: P
                                  for c in cameras if c not in failed and c in sample.cameras]
                        + [LogRow(token, c, "skipped", f"camera {c} not in this sample") for c in cameras
                           if c not in sample.cameras], failed)
-    assets_by_track = track_assets(config, scene.scene_token, max(t.track_index for t in scene.tracks) + 1,
-                                   sample.location)
     cam_xy = views[0].T_global_from_cam[:2, 3]
     placements = [t.placement_at(token, i, cam_xy) for i, t in enumerate(here)]
-    assets = [assets_by_track[t.track_index] for t in here]
+    # the assets of the tracks annotated here only (each track's asset is its own draw)
+    assets = [track_asset(config, scene.scene_token, t.track_index, sample.location) for t in here]
     load_s = time.perf_counter() - t0
     if dry_run:
         placed = SamplePlacement(placements, [views[0].channel] * len(placements), assets, {}, {})

@@ -36,17 +36,21 @@ def track_rng(seed: int, *keys: str) -> np.random.Generator:
     return item_seed(seed, *keys)
 
 
-def track_assets(config: BatchConfig, scene_token: str, n: int, location: str | None = None) -> list:
-    """The asset of each of the scene's ``n`` tracks (one draw per track: the same in every task); with a class
-    mix, procedural pedestrians stand and two-wheelers have no rider (only vehicles move in tracks); procedural
-    cars carry the plates of the scene's ``location``."""
+def track_asset(config: BatchConfig, scene_token: str, index: int, location: str | None = None):
+    """The asset of track ``index`` of the scene: its own draw (seed, "track-asset", scene token, index), so one
+    track's asset is built without the others'. With a class mix, procedural pedestrians stand and
+    two-wheelers have no rider (only vehicles move in tracks); procedural cars carry the plates of the
+    scene's ``location``."""
     from ..assets.select import select_assets  # deferred: trimesh, procedural meshes
 
-    mix = config.class_mix
-    return [select_assets(track_rng(config.seed, "track-asset", scene_token, str(i)), 1, config.asset,
-                          config.assets_dir, config.asset_front, config.asset_length, mix, still=True,
-                          class_sizes=config.class_sizes, location=location)[0]
-            for i in range(n)]
+    return select_assets(track_rng(config.seed, "track-asset", scene_token, str(index)), 1, config.asset,
+                         config.assets_dir, config.asset_front, config.asset_length, config.class_mix, still=True,
+                         class_sizes=config.class_sizes, location=location)[0]
+
+
+def track_assets(config: BatchConfig, scene_token: str, n: int, location: str | None = None) -> list:
+    """The asset of each of the scene's ``n`` tracks (:func:`track_asset`; the same in every task)."""
+    return [track_asset(config, scene_token, i, location) for i in range(n)]
 
 
 @dataclass(frozen=True)
@@ -163,4 +167,4 @@ def summarize_tracks(planned: list[SceneTracks]) -> dict:
 
 
 __all__ = ["SceneTracks", "TRACKS_FOLDER", "plan_key", "read_scene_tracks", "saved_scene_tracks", "scene_groups", "scene_tables",
-           "summarize_tracks", "track_assets", "tracks_file", "write_scene_tracks"]
+           "summarize_tracks", "track_asset", "track_assets", "tracks_file", "write_scene_tracks"]

@@ -106,3 +106,38 @@ def test_a_shadow_alone_is_composited_without_measuring_the_camera_look(monkeypa
     assert calls == ["effects"]
     assert np.array_equal(alone.image, measured.image)
     assert np.array_equal(alone.shadow_ratio, measured.shadow_ratio)
+
+
+def test_an_image_whose_objects_draw_no_pixel_is_not_measured(monkeypatch):
+    """render_objects measures the neutral axis only once an object has a pixel to tint: a shadow alone (the
+    object off the image) leaves it unmeasured, with the bytes it had when it was measured up front."""
+    W, H = 320, 180
+    K = intrinsics_from_fov(W, H, 60.0)
+    light = sunny_light(sun_dir_cam=(0.95, -0.3, 0.0))  # a low sun on the right: long shadows to the left
+    image, depth, ev = ground_scene(light, K, W, H)
+    T = pose_camera_to_transform(7.0, 1.5, 6.0, 90.0)  # off the image's right edge, its shadow in it
+    options = InsertOptions(quality="draft", seed=0, ev=ev)
+    calls: list[int] = []
+
+    def measure(img, *a, **k):
+        calls.append(1)
+        return camera_look.neutral_axis(img, *a, **k)
+
+    monkeypatch.setattr(objects_module, "neutral_axis", measure, raising=False)
+    monkeypatch.setattr(insert_module, "neutral_axis", measure)
+    out = render_objects(image, K, depth, [light], [procedural_car(7)], [T], [T[:3, 2]], options,
+                         np.random.default_rng(0), {})
+    assert out.objects[0].coverage_px == 0 and (out.shadow_ratio < 0.97).sum() > 1000  # a shadow alone
+    assert calls == []
+    given = render_insertion(image, K, depth, light, procedural_car(7), T, quality="draft", ev=ev,
+                             seed=int(np.random.default_rng(0).integers(2**31)), neutral=camera_look.neutral_axis(image))
+    assert np.array_equal(out.image, given.image)
+
+
+def test_the_axis_measured_on_first_use_has_the_values_of_one_measured_up_front():
+    image, *_ = _scene()
+    lazy = objects_module._NeutralAxisOnFirstUse(image)
+    assert not lazy.measured
+    now = camera_look.neutral_axis(image)
+    assert np.array_equal(lazy.offset_at(np.arange(256.0)), now.offset_at(np.arange(256.0)))
+    assert lazy.measured and np.array_equal(lazy.levels, now.levels) and np.array_equal(lazy.n_px, now.n_px)
