@@ -33,6 +33,8 @@ import platform  # noqa: E402
 import subprocess  # noqa: E402
 import time  # noqa: E402
 from collections import defaultdict  # noqa: E402
+from collections.abc import Iterator  # noqa: E402
+from dataclasses import dataclass  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
@@ -41,8 +43,9 @@ from streetaug.augment.assets.select import select_assets  # noqa: E402
 from streetaug.augment.core import PinholeCamera, transform_points  # noqa: E402
 from streetaug.augment.pipeline import item_seed, scene_depth_for_view  # noqa: E402
 from streetaug.datasets.nuscenes import NuScenesReader  # noqa: E402
+from streetaug.datasets.sample import Sample  # noqa: E402
 from streetaug.placement.config import PlacementConfig  # noqa: E402
-from streetaug.placement.place import ObjectBox, place_objects  # noqa: E402
+from streetaug.placement.place import ObjectBox, Placement, place_objects  # noqa: E402
 from streetaug.placement.rules import box_corners_object, projected_inside_fraction  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -107,8 +110,21 @@ def real_cars(reader: NuScenesReader, config: PlacementConfig) -> tuple[list[dic
     return rows, less_than_half
 
 
-def placed_cars(reader: NuScenesReader, config: PlacementConfig, every: int, seeds: int) -> tuple[list[dict], int]:
-    rows, attempts = [], 0
+@dataclass(frozen=True)
+class PlacementAttempt:
+    """One car ``insert`` would place in one camera of a keyframe, seeded as the pipeline seeds it."""
+
+    sample: Sample
+    channel: str
+    seed: int
+    camera: PinholeCamera
+    placement: Placement | None  # None: no spot passed the rules
+    corners_cam: np.ndarray | None  # (8, 3) box corners in the camera frame, metres
+
+
+def placement_attempts(reader: NuScenesReader, config: PlacementConfig, every: int,
+                       seeds: int) -> Iterator[PlacementAttempt]:
+    """A car placement in each camera of every ``every``-th keyframe for seeds 0..``seeds``-1."""
     for token in reader.sample_tokens()[::every]:
         sample = reader.sample(token)
         for channel, view in sample.cameras.items():
@@ -118,17 +134,26 @@ def placed_cars(reader: NuScenesReader, config: PlacementConfig, every: int, see
                 asset = select_assets(item_seed(seed, "asset", sample.token, channel), 1,
                                       location=sample.location)[0]
                 obj = ObjectBox(np.asarray(asset.wlh, float), asset.category)
-                attempts += 1
                 res = place_objects(sample, view, [obj], item_seed(seed, sample.token, channel), config, depth_m=depth)
-                if not res.placements:
-                    continue
-                p = res.placements[0]
-                T = view.T_cam_from_global @ p.T_global_from_object
-                corners = box_corners_object(p.wlh) @ T[:3, :3].T + T[:3, 3]
-                inside = float(projected_inside_fraction(corners[None], camera, config.near_plane_m)[0])
-                rows.append({"sample": token, "camera": channel, "seed": seed, "distance_m": p.distance_m,
-                             "truncation": 1.0 - inside, "zone": p.zone, "attribute": p.attribute,
-                             "visible_fraction": p.visible_fraction})
+                p = res.placements[0] if res.placements else None
+                corners = None
+                if p is not None:
+                    T = view.T_cam_from_global @ p.T_global_from_object
+                    corners = box_corners_object(p.wlh) @ T[:3, :3].T + T[:3, 3]
+                yield PlacementAttempt(sample, channel, seed, camera, p, corners)
+
+
+def placed_cars(reader: NuScenesReader, config: PlacementConfig, every: int, seeds: int) -> tuple[list[dict], int]:
+    rows, attempts = [], 0
+    for a in placement_attempts(reader, config, every, seeds):
+        attempts += 1
+        if a.placement is None:
+            continue
+        p = a.placement
+        inside = float(projected_inside_fraction(a.corners_cam[None], a.camera, config.near_plane_m)[0])
+        rows.append({"sample": a.sample.token, "camera": a.channel, "seed": a.seed, "distance_m": p.distance_m,
+                     "truncation": 1.0 - inside, "zone": p.zone, "attribute": p.attribute,
+                     "visible_fraction": p.visible_fraction})
     return rows, attempts
 
 

@@ -40,14 +40,14 @@ from pathlib import Path  # noqa: E402
 import numpy as np  # noqa: E402
 import shapely  # noqa: E402
 
-from streetaug.augment.assets.select import select_assets  # noqa: E402
 from streetaug.augment.core import PinholeCamera, transform_points  # noqa: E402
-from streetaug.augment.pipeline import item_seed, scene_depth_for_view  # noqa: E402
 from streetaug.datasets.nuscenes import NuScenesReader  # noqa: E402
 from streetaug.datasets.nuscenes_format import VEHICLE_PARKED  # noqa: E402
 from streetaug.placement.config import PlacementConfig  # noqa: E402
-from streetaug.placement.place import ObjectBox, place_objects  # noqa: E402
-from streetaug.placement.rules import box_corners_object, projected_inside_fraction  # noqa: E402
+from streetaug.placement.rules import projected_inside_fraction  # noqa: E402
+
+# The same placements as the truncation benchmark, seeded as insert seeds them.
+from bench_placement_truncation import placement_attempts  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 SHARED = (ROOT / ".." / "shared" / "data").resolve()
@@ -171,33 +171,28 @@ def real_cars(reader: NuScenesReader, config: PlacementConfig) -> list[dict]:
 
 
 def placed_cars(reader: NuScenesReader, config: PlacementConfig, every: int, seeds: int) -> tuple[list[dict], int]:
-    rows, attempts = [], 0
-    for token in reader.sample_tokens()[::every]:
-        sample = reader.sample(token)
-        for channel, view in sample.cameras.items():
-            camera, cam_xy, dist, hulls, parked = view_context(sample, view, config)
-            depth = scene_depth_for_view(sample, view)
-            for seed in range(seeds):
-                asset = select_assets(item_seed(seed, "asset", sample.token, channel), 1,
-                                      location=sample.location)[0]
-                obj = ObjectBox(np.asarray(asset.wlh, float), asset.category)
-                attempts += 1
-                res = place_objects(sample, view, [obj], item_seed(seed, sample.token, channel), config, depth_m=depth)
-                if not res.placements:
-                    continue
-                p = res.placements[0]
-                T = view.T_cam_from_global @ p.T_global_from_object
-                corners = box_corners_object(p.wlh) @ T[:3, :3].T + T[:3, 3]
-                d3 = float(np.linalg.norm(p.box.center - view.T_global_from_cam[:3, 3]))
-                is_parked = p.attribute == VEHICLE_PARKED
-                rows.append({"sample": token, "camera": channel, "seed": seed, "distance_m": p.distance_m,
-                             "zone": p.zone, "parked": is_parked, "yaw_source": p.yaw_source,
-                             "visible_fraction": p.visible_fraction,
-                             "facing_deg": facing_deg(T),
-                             "neighbour_deg": neighbour_deg(p.box.center[:2], yaw_of(p.T_global_from_object[:3, :3]),
-                                                            parked) if is_parked else None,
-                             "covered_share": covered_share(hull_image(corners, camera, 0.1), d3, dist, hulls),
-                             "overlap_share": covered_share(hull_image(corners, camera, 0.1), np.inf, dist, hulls)})
+    rows, attempts, contexts = [], 0, {}
+    for a in placement_attempts(reader, config, every, seeds):
+        attempts += 1
+        if a.placement is None:
+            continue
+        p, view = a.placement, a.sample.cameras[a.channel]
+        key = (a.sample.token, a.channel)
+        if key not in contexts:
+            contexts = {key: view_context(a.sample, view, config)}  # one view's context at a time
+        camera, cam_xy, dist, hulls, parked = contexts[key]
+        T = view.T_cam_from_global @ p.T_global_from_object
+        d3 = float(np.linalg.norm(p.box.center - view.T_global_from_cam[:3, 3]))
+        is_parked = p.attribute == VEHICLE_PARKED
+        hull = hull_image(a.corners_cam, camera, 0.1)
+        rows.append({"sample": a.sample.token, "camera": a.channel, "seed": a.seed, "distance_m": p.distance_m,
+                     "zone": p.zone, "parked": is_parked, "yaw_source": p.yaw_source,
+                     "visible_fraction": p.visible_fraction,
+                     "facing_deg": facing_deg(T),
+                     "neighbour_deg": neighbour_deg(p.box.center[:2], yaw_of(p.T_global_from_object[:3, :3]),
+                                                    parked) if is_parked else None,
+                     "covered_share": covered_share(hull, d3, dist, hulls),
+                     "overlap_share": covered_share(hull, np.inf, dist, hulls)})
     return rows, attempts
 
 

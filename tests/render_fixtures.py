@@ -146,6 +146,28 @@ def ground_scene(light: DistantLight, K=NUSCENES_K, width: int = 1600, height: i
     return hdr_to_ldr_uint8(hdr, ev), depth, ev
 
 
+
+# Car seeds and poses (x, y, z m in the camera frame, yaw deg) of small multi-car scenes;
+# the third far off to the right (its shadow in the image at most).
+CARS_ON_GROUND = ((4, (-2.0, 1.5, 10.0, 120.0)), (11, (3.0, 1.5, 16.0, 60.0)), (7, (40.0, 1.5, 8.0, 90.0)))
+
+
+def cars_on_ground_scene(n_cars: int, width: int = 320, height: int = 180):
+    """``n_cars`` (1-3) procedural cars on ``ground_scene`` under a sunny light, 60 deg horizontal FOV.
+
+    Returns (image uint8 (H, W, 3), K, depth_m (H, W), lights, cars, T_cam_from_object poses, ev).
+    """
+    from streetaug.augment.assets.procedural import procedural_car
+    from streetaug.augment.core import intrinsics_from_fov, pose_camera_to_transform
+
+    K = intrinsics_from_fov(width, height, 60.0)
+    light = sunny_light(sun_dir_cam=(0.6, -0.55, 0.58))
+    image, depth, ev = ground_scene(light, K, width, height)
+    chosen = CARS_ON_GROUND[:n_cars]
+    cars = [procedural_car(seed) for seed, _ in chosen]
+    poses = [pose_camera_to_transform(*pose) for _, pose in chosen]
+    return image, K, depth, [light] * n_cars, cars, poses, ev
+
 def sharp_polygons(seed: int, width: int, height: int, n_polygons: int, radius_px: tuple[float, float],
                    ss: int = 8) -> np.ndarray:
     """(H, W, 3) float32 in [0, 1]: random polygons with ideally pixel-integrated edges (no blur, no noise)."""

@@ -11,26 +11,18 @@ from pathlib import Path
 
 import numpy as np
 
-from streetaug.augment.assets.procedural import procedural_car
-from streetaug.augment.core import intrinsics_from_fov, pose_camera_to_transform
 from streetaug.augment.pipeline import InsertOptions
 from streetaug.augment.pipeline import objects as objects_module
 from streetaug.augment.pipeline.objects import render_objects
 from streetaug.augment.render import render_insertion
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from render_fixtures import ground_scene, sunny_light  # noqa: E402
+from render_fixtures import cars_on_ground_scene  # noqa: E402
 
 
 def _scene():
-    W, H = 320, 180
-    K = intrinsics_from_fov(W, H, 60.0)
-    light = sunny_light(sun_dir_cam=(0.6, -0.55, 0.58))
-    image, depth, ev = ground_scene(light, K, W, H)
-    cars = [procedural_car(4), procedural_car(11), procedural_car(7)]
-    poses = [pose_camera_to_transform(-2.0, 1.5, 10.0, 120.0), pose_camera_to_transform(3.0, 1.5, 16.0, 60.0),
-             pose_camera_to_transform(40.0, 1.5, 8.0, 90.0)]  # the last far off to the right: its shadow at most
-    return image, K, depth, [light] * 3, cars, poses, InsertOptions(quality="draft", seed=0, ev=ev)
+    image, K, depth, lights, cars, poses, ev = cars_on_ground_scene(3)
+    return image, K, depth, lights, cars, poses, InsertOptions(quality="draft", seed=0, ev=ev)
 
 
 def test_no_full_frame_layer_of_a_composited_object_stays_referenced(monkeypatch):

@@ -18,19 +18,14 @@ from streetaug.augment.render import camera_look, render_insertion
 from streetaug.augment.render import insert as insert_module
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from render_fixtures import ground_scene, sunny_light  # noqa: E402
+from render_fixtures import cars_on_ground_scene, ground_scene, sunny_light  # noqa: E402
 
 
 def _scene():
-    W, H = 320, 180
-    K = intrinsics_from_fov(W, H, 60.0)
-    light = sunny_light(sun_dir_cam=(0.6, -0.55, 0.58))
-    image, depth, ev = ground_scene(light, K, W, H)
+    image, K, depth, lights, cars, poses, ev = cars_on_ground_scene(2)
     image = image.copy()
     image[..., 1] = np.clip(image[..., 1].astype(int) + 3, 0, 255).astype(np.uint8)  # a green cast to measure
-    cars = [procedural_car(4), procedural_car(11)]
-    poses = [pose_camera_to_transform(-2.0, 1.5, 10.0, 120.0), pose_camera_to_transform(3.0, 1.5, 16.0, 60.0)]
-    return image, K, depth, [light] * 2, cars, poses, InsertOptions(quality="draft", seed=0, ev=ev)
+    return image, K, depth, lights, cars, poses, InsertOptions(quality="draft", seed=0, ev=ev)
 
 
 def test_the_neutral_axis_is_measured_once_per_image_on_the_image_as_captured(monkeypatch):
