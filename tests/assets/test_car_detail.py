@@ -4,7 +4,6 @@ panel gaps, lamps, determinism and the old seeds' bodies, generation time, rende
 from __future__ import annotations
 
 import sys
-import time
 from pathlib import Path
 
 import cv2
@@ -221,14 +220,9 @@ def test_deterministic_and_old_seeds_keep_body_and_paint():
     assert procedural_object("car", 1, plate_style="us").name == procedural_object("car", 1, plate_style="eu").name
 
 
-def test_generation_time_and_triangle_budget():
-    times, faces = [], []
-    for seed in range(20):
-        t0 = time.perf_counter()
-        car = procedural_car(seed)
-        times.append(time.perf_counter() - t0)
-        faces.append(len(car.faces))
-    assert np.median(times) < 0.5, np.median(times)
+def test_triangle_budget():
+    # Generation time is a benchmark figure (bench_classes.py: asset ms per class), not a timed test.
+    faces = [len(procedural_car(seed).faces) for seed in range(20)]
     assert 3000 < min(faces) and max(faces) < 20000, (min(faces), max(faces))
 
 

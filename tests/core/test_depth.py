@@ -1,6 +1,5 @@
 """Depth from LiDAR (z-buffer + morphological completion) and the ground-plane prior."""
 
-import time
 import numpy as np
 import pytest
 
@@ -49,11 +48,8 @@ def test_densify_fills_between_scan_lines_and_keeps_sky_empty():
     pts = _synthetic_lidar(rng)
     sparse = sparse_depth(pts, K, W, H)
     assert 0.002 < (sparse > 0).mean() < 0.1  # ~1.1 deg between rings: ~25 px gaps, as with nuScenes' 32 beams
-    t0 = time.perf_counter()
-    dense = densify_lidar_depth(pts, K, W, H)
-    elapsed = time.perf_counter() - t0
+    dense = densify_lidar_depth(pts, K, W, H)  # its time: the depth stage of bench_insert_time / bench_batch --profile
     assert dense.shape == (H, W) and dense.dtype == np.float32
-    assert elapsed < 0.5  # target < 0.1 s on an idle core; loose for a shared test machine
     # the box front face: depth 8 m at its centre pixel
     u = int(K[0, 2])
     v_box = int(K[1, 2] + K[1, 1] * 0.7 / 8.0)
