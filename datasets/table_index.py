@@ -21,17 +21,20 @@ then parses the file whole, as for a small table, and reports what that finds.
 from __future__ import annotations
 
 import hashlib
+import io
 import json
 import logging
 import os
+import struct
 import tempfile
+import zipfile
 from pathlib import Path
 
 import numpy as np
 
 from .errors import DatasetError
 
-INDEX_FORMAT = 1
+INDEX_FORMAT = 2
 WINDOW_BYTES = 4 << 20  # bytes scanned at a time (the scan's memory is a few times this; small: in cache)
 VERIFIED_ROWS = 64  # rows parsed after a scan to check the index against json.loads
 _MAX_VALUE_BYTES = 256  # longest indexed field value (nuScenes tokens: 32)
@@ -42,6 +45,7 @@ _WHITESPACE = b" \t\n\r"
 _IS_SPACE = np.zeros(256, dtype=bool)
 _IS_SPACE[list(_WHITESPACE)] = True
 _MIX_A, _MIX_B = np.uint64(0x9E3779B97F4A7C15), np.uint64(0xBF58476D1CE4E5B9)
+_ALIGN_FIELD = 0xD935  # zip extra field id padding a member's data to alignment (as Android's zipalign)
 _PAD = _MAX_VALUE_BYTES + 16  # zero bytes after each window: gathers need no bounds checks
 
 log = logging.getLogger(__name__)
@@ -102,6 +106,21 @@ def _gather(window: np.ndarray, starts: np.ndarray, width: int) -> np.ndarray:
     return np.lib.stride_tricks.as_strided(window, (len(window), width), (1, 1), writeable=False)[starts]
 
 
+def _words(window: np.ndarray) -> np.ndarray:
+    """(len(window),) little-endian uint64: the 8 bytes from each position (``window`` is zero padded)."""
+    return np.lib.stride_tricks.as_strided(window, (len(window), 8), (1, 1), writeable=False).view("<u8")[:, 0]
+
+
+def _equal_bytes(words: np.ndarray, starts: np.ndarray, text: bytes) -> np.ndarray:
+    """(N,) bool: the bytes from each of ``starts`` begin with ``text`` (``words``: :func:`_words`)."""
+    same = np.ones(len(starts), dtype=bool)
+    for at in range(0, len(text), 8):
+        part = text[at: at + 8]
+        mask = np.uint64((1 << (8 * len(part))) - 1)
+        same &= (words[starts + at] & mask) == np.uint64(int.from_bytes(part, "little"))
+    return same
+
+
 def _unescaped_quotes(window: np.ndarray) -> np.ndarray:
     """Positions of the ``"`` that open or close strings (not those after an odd run of backslashes)."""
     quotes = np.flatnonzero(window == _QUOTE)
@@ -121,14 +140,14 @@ def _unescaped_quotes(window: np.ndarray) -> np.ndarray:
 def _check_gaps(window: np.ndarray, starts: np.ndarray, stops: np.ndarray, separator: int) -> bool:
     """Every ``window[start:stop]`` is whitespace around exactly one ``separator`` byte."""
     length = stops - starts
-    short = length <= _SHORT_GAP
-    seg = _gather(window, starts[short], _SHORT_GAP)
-    live = np.arange(_SHORT_GAP) < length[short, None]
-    sep = (seg == separator) & live
-    if not np.all((sep.sum(axis=1) == 1) & np.all(sep | _IS_SPACE[seg] | ~live, axis=1)):
+    if length.size == 0:
+        return True
+    if np.any(length <= 0):
         return False
-    return all(window[a:b].tobytes().strip(_WHITESPACE) == bytes([separator])
-               for a, b in zip(starts[~short].tolist(), stops[~short].tolist()))
+    first = np.cumsum(length) - length  # where each gap begins in the flat list of gap bytes
+    flat = window[np.repeat(starts - first, length) + np.arange(int(length.sum()))]
+    solid = ~_IS_SPACE[flat]
+    return bool(np.all(np.add.reduceat(solid, first) == 1) and np.all(flat[solid] == separator))
 
 
 def _field_keys(window: np.ndarray, opens: np.ndarray, closes: np.ndarray,
@@ -141,17 +160,13 @@ def _field_keys(window: np.ndarray, opens: np.ndarray, closes: np.ndarray,
         UnexpectedLayout: such a field's value is not a string.
     """
     found, which = [], []
-    for last in {key.encode()[-1] for key in keys}:
-        ending = np.flatnonzero(window[closes - 1] == last)
-        length = closes[ending] - opens[ending] - 1
-        for n, key in enumerate(keys):
-            name = np.frombuffer(key.encode(), dtype=np.uint8)
-            if name[-1] != last:
-                continue
-            k = ending[length == name.size]
-            k = k[np.all(_gather(window, opens[k] + 1, name.size) == name, axis=1)]
-            found.append(k)
-            which.append(np.full(len(k), n, dtype=np.int64))
+    words, length = _words(window), closes - opens - 1
+    for n, key in enumerate(keys):
+        name = key.encode()
+        k = np.flatnonzero(length == len(name))
+        k = k[_equal_bytes(words, opens[k] + 1, name)]
+        found.append(k)
+        which.append(np.full(len(k), n, dtype=np.int64))
     k, which = np.concatenate(found), np.concatenate(which)
     last = k == len(opens) - 1  # no string after it: a key here has a value that is not a string
     nxt = np.where(last, len(window), opens[np.minimum(k + 1, len(opens) - 1)])
@@ -305,8 +320,10 @@ class TableIndex:
         keys: the indexed fields, ``token`` first.
     """
 
-    def __init__(self, path: Path, arrays: dict[str, np.ndarray], keys: tuple[str, ...]) -> None:
-        self.path, self.keys = Path(path), keys
+    def __init__(self, path: Path, arrays: dict[str, np.ndarray], keys: tuple[str, ...],
+                 cache_file: Path | None = None) -> None:
+        self.path, self.keys, self.cache_file = Path(path), keys, cache_file
+        self.size = os.path.getsize(self.path)
         self.offset, self.length = arrays["offset"], arrays["length"]
         self._sorted = {key: arrays[f"sorted_{key}"] for key in keys}
         self._order = {key: arrays[f"order_{key}"] for key in keys}
@@ -320,7 +337,20 @@ class TableIndex:
         h = text_hash(value)
         sorted_hashes = self._sorted[key]
         lo, hi = np.searchsorted(sorted_hashes, h, side="left"), np.searchsorted(sorted_hashes, h, side="right")
-        return np.sort(self._order[key][lo:hi]).tolist()
+        rows = np.sort(self._order[key][lo:hi])
+        if rows.size and (rows[0] < 0 or rows[-1] >= len(self)):
+            self._damaged(f"row {int(rows[-1])} of {len(self)}")
+        return rows.tolist()
+
+    def _damaged(self, what: str) -> None:
+        """DatasetError for a cached index found inconsistent while used (the cache file is removed)."""
+        if self.cache_file is not None:
+            try:
+                os.unlink(self.cache_file)
+            except OSError:
+                pass
+        raise DatasetError(f"{self.cache_file or 'the index'} of table {self.path}: inconsistent ({what}); "
+                           "removed: run again to index the table afresh")
 
     def find(self, token: object) -> int | None:
         """The row number of ``token``, or None."""
@@ -351,6 +381,8 @@ class TableIndex:
         with open(self.path, "rb") as f:
             for i in todo:
                 start, length = int(self.offset[i]), int(self.length[i])
+                if start < 0 or length <= 0 or start + length > self.size:
+                    self._damaged(f"row {i} at bytes {start}-{start + length} of {self.size}")
                 f.seek(start)
                 data = f.read(length)
                 try:
@@ -437,45 +469,107 @@ def _identity(path: Path, keys: tuple[str, ...]) -> dict[str, np.ndarray]:
             "keys": np.array(",".join(keys))}
 
 
+def _mapped_npz(file: Path) -> dict[str, np.ndarray]:
+    """The arrays of an uncompressed ``.npz`` (as ``np.savez`` writes it), memory-mapped, not read.
+
+    Pages are read when touched (a lookup touches a few), so opening costs milliseconds whatever the table's
+    size. Object arrays are refused (no pickles). ``ValueError`` / ``OSError`` on anything else unexpected.
+    """
+    out = {}
+    with zipfile.ZipFile(file) as z, open(file, "rb") as f:
+        for info in z.infolist():
+            if info.compress_type != zipfile.ZIP_STORED or not info.filename.endswith(".npy"):
+                raise ValueError(f"member {info.filename!r} is not a stored .npy")
+            f.seek(info.header_offset)
+            local = f.read(30)
+            if len(local) != 30 or local[:4] != b"PK\x03\x04":
+                raise ValueError(f"member {info.filename!r}: no local header")
+            name_length, extra_length = struct.unpack("<HH", local[26:30])
+            f.seek(info.header_offset + 30 + name_length + extra_length)
+            version = np.lib.format.read_magic(f)
+            if version == (1, 0):
+                shape, fortran, dtype = np.lib.format.read_array_header_1_0(f)
+            elif version == (2, 0):
+                shape, fortran, dtype = np.lib.format.read_array_header_2_0(f)
+            else:
+                raise ValueError(f"member {info.filename!r}: .npy version {version}")
+            if dtype.hasobject:
+                raise ValueError(f"member {info.filename!r} holds Python objects")
+            start = f.tell()
+            nbytes = int(np.prod(shape, dtype=np.int64)) * dtype.itemsize
+            if start + nbytes > info.header_offset + 30 + name_length + extra_length + info.file_size:
+                raise ValueError(f"member {info.filename!r} is shorter than its array")
+            name = info.filename[:-4]
+            if len(shape) == 1 and nbytes > 0 and start % dtype.alignment == 0:
+                out[name] = np.memmap(file, dtype=dtype, mode="r", offset=start, shape=shape,
+                                      order="F" if fortran else "C")
+            else:
+                f.seek(start)
+                out[name] = np.frombuffer(f.read(nbytes), dtype=dtype).reshape(shape).copy()
+    return out
+
+
 def _load(file: Path, identity: dict[str, np.ndarray], keys: tuple[str, ...]) -> dict[str, np.ndarray] | None:
-    """The cached arrays when ``file`` holds a consistent index of the same file version, else None."""
+    """The cached arrays (memory-mapped) when ``file`` holds an index of the same file version, else None.
+
+    Checked here: the file version, the arrays' names, dtypes and lengths, the hashes' order at a few
+    places. Each row's span and position are checked when used (:meth:`TableIndex.read`), so a damaged
+    cache can fail a lookup (naming the cache file, which is then removed) but never return a wrong row.
+    """
+    names = ["offset", "length"] + [f"{p}_{k}" for k in keys for p in ("sorted", "order")]
     try:
-        with np.load(file, allow_pickle=False) as z:
-            if any(z[name].shape != value.shape or z[name].item() != value.item() for name, value in identity.items()):
-                return None
-            arrays = {name: z[name] for name in ["offset", "length"] + [f"{p}_{k}" for k in keys
-                                                                          for p in ("sorted", "order")]}
+        z = _mapped_npz(file)
+        if any(z[name].shape != value.shape or z[name].item() != value.item() for name, value in identity.items()):
+            return None
+        arrays = {name: z[name] for name in names}
     except FileNotFoundError:
         return None
     except Exception as e:  # noqa: BLE001 - any unreadable cache file is rebuilt
         log.info("table index cache %s unreadable (%s); rebuilding it", file, e)
         return None
-    rows, size = len(arrays["offset"]), int(identity["size"])
-    shapes_ok = all(a.ndim == 1 and len(a) == rows for a in arrays.values())
-    if not (shapes_ok and arrays["offset"].dtype == np.int64 and arrays["length"].dtype == np.int64
+    rows = len(arrays["offset"])
+    probe = np.unique(np.linspace(0, max(rows - 2, 0), min(rows, 64)).astype(np.int64))
+    if not (rows > 0 and all(a.ndim == 1 and len(a) == rows for a in arrays.values())
+            and arrays["offset"].dtype == np.int64 and arrays["length"].dtype == np.int64
             and all(arrays[f"sorted_{k}"].dtype == np.uint64 and arrays[f"order_{k}"].dtype.kind == "i" for k in keys)
-            and np.all(arrays["offset"] >= 0) and np.all(arrays["length"] > 0)
-            and np.all(arrays["offset"] + arrays["length"] <= size)
-            and all(np.all((arrays[f"order_{k}"] >= 0) & (arrays[f"order_{k}"] < rows)) for k in keys)):
+            and all(np.all(arrays[f"sorted_{k}"][probe] <= arrays[f"sorted_{k}"][np.minimum(probe + 1, rows - 1)])
+                    for k in keys)):
         log.info("table index cache %s inconsistent; rebuilding it", file)
         return None
     return arrays
 
 
-def _save(file: Path, identity: dict[str, np.ndarray], arrays: dict[str, np.ndarray]) -> None:
-    """Write the index atomically; a folder that cannot be written: warn once, keep it in memory."""
+def _write_aligned_npz(f, arrays: dict[str, np.ndarray]) -> None:
+    """An uncompressed ``.npz`` (``np.load`` reads it) whose arrays start at multiples of 64 bytes in the
+    file, so that :func:`_mapped_npz` maps them aligned (numpy copies an unaligned array to search it)."""
+    with zipfile.ZipFile(f, "w", compression=zipfile.ZIP_STORED) as z:
+        for name, array in arrays.items():
+            data = io.BytesIO()
+            np.lib.format.write_array(data, np.asarray(array, order="C"), allow_pickle=False)
+            info = zipfile.ZipInfo(f"{name}.npy", date_time=(1980, 1, 1, 0, 0, 0))
+            here = f.tell()  # where this member's local header goes
+            pad = -(here + 30 + len(info.filename.encode()) + 4) % 64  # the .npy header is 64-byte padded
+            info.extra = struct.pack("<HH", _ALIGN_FIELD, pad) + bytes(pad)
+            info.compress_type = zipfile.ZIP_STORED
+            z.writestr(info, data.getbuffer())
+
+
+def _save(file: Path, identity: dict[str, np.ndarray], arrays: dict[str, np.ndarray]) -> bool:
+    """Write the index atomically (True); a folder that cannot be written: warn once, False."""
     tmp = None
     try:
         file.parent.mkdir(parents=True, exist_ok=True)
         fd, tmp = tempfile.mkstemp(dir=file.parent, prefix=file.stem + ".", suffix=".tmp")
         with os.fdopen(fd, "wb") as f:
-            np.savez(f, **identity, **arrays)
+            _write_aligned_npz(f, {**identity, **arrays})
         os.replace(tmp, file)
         tmp = None
+        return True
     except OSError as e:
         if str(file.parent) not in _warned:
             _warned.add(str(file.parent))
             log.warning("cannot cache table indexes in %s (%s); indexing in memory for this run", file.parent, e)
+        return False
     finally:
         if tmp is not None:
             try:
@@ -502,16 +596,16 @@ def open_index(path: Path, keys: tuple[str, ...], cache: Path | None = None) -> 
     file = None if folder is None else _cache_file(folder, path, keys)
     arrays = None if file is None else _load(file, identity, keys)
     if arrays is not None:
-        return TableIndex(path, arrays, keys)
+        return TableIndex(path, arrays, keys, file)
     try:
         index = build_index(path, keys)
     except UnexpectedLayout as e:
         log.info("%s: not indexed (%s); parsing it whole", path, e)
         return None
-    if file is not None:
-        _save(file, identity, {"offset": index.offset, "length": index.length,
-                               **{f"sorted_{k}": index._sorted[k] for k in keys},
-                               **{f"order_{k}": index._order[k] for k in keys}})
+    if file is not None and _save(file, identity, {"offset": index.offset, "length": index.length,
+                                                   **{f"sorted_{k}": index._sorted[k] for k in keys},
+                                                   **{f"order_{k}": index._order[k] for k in keys}}):
+        index.cache_file = file
     return index
 
 

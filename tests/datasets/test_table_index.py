@@ -207,18 +207,40 @@ class TestCache:
             with np.load(cached, allow_pickle=False) as z:  # rewritten whole
                 assert len(z["offset"]) == len(load(root, "sample_data"))
 
-    def test_an_inconsistent_cache_file_is_rebuilt(self, tmp_path, cache_home):
+    def test_a_cache_file_of_other_arrays_is_rebuilt(self, tmp_path, cache_home):
         root = table_copy(tmp_path)
         assert_same_reading(*readers(root, BUNDLED_VERSION))  # every index cached
         (cached,) = (cache_home / "streetaug" / "tables").glob("ego_pose-*.npz")
         with np.load(cached, allow_pickle=False) as z:
             arrays = dict(z)
-        arrays["offset"] = arrays["offset"] + 10**9  # past the end of the file
+        for edit in (lambda a: a.update(offset=a["offset"][:-1]),  # a length that differs
+                     lambda a: a.update(length=a["length"].astype(np.float64)),
+                     lambda a: a.update(sorted_token=a["sorted_token"][::-1].copy()),  # not in order
+                     lambda a: a.pop("order_token")):
+            bad = dict(arrays)
+            edit(bad)
+            with open(cached, "wb") as f:
+                np.savez(f, **bad)
+            start = ti.scan_count()
+            indexed, whole = readers(root, BUNDLED_VERSION)
+            assert_same_reading(indexed, whole)
+            assert ti.scan_count() - start == 1
+
+    def test_a_damaged_row_span_fails_naming_the_cache_which_is_then_rebuilt(self, tmp_path, cache_home):
+        root = table_copy(tmp_path)
+        assert_same_reading(*readers(root, BUNDLED_VERSION))  # every index cached
+        (cached,) = (cache_home / "streetaug" / "tables").glob("ego_pose-*.npz")
+        with np.load(cached, allow_pickle=False) as z:
+            arrays = dict(z)
+        arrays["offset"] = arrays["offset"] + 10**9  # past the end of the file: found only when a row is read
         with open(cached, "wb") as f:
             np.savez(f, **arrays)
-        start = ti.scan_count()
         indexed, whole = readers(root, BUNDLED_VERSION)
-        assert_same_reading(indexed, whole)
+        with pytest.raises(DatasetError, match="inconsistent") as e:
+            indexed.sample(whole.sample_tokens()[0])
+        assert str(cached) in str(e.value) and not cached.exists()
+        start = ti.scan_count()
+        assert_same_reading(readers(root, BUNDLED_VERSION)[0], whole)
         assert ti.scan_count() - start == 1
 
     def test_an_unwritable_cache_folder_still_reads_warning_once(self, tmp_path, monkeypatch, caplog):
