@@ -8,9 +8,11 @@ parsing that slice alone; its field is compared with the value asked for, so a h
 can never return a wrong row.
 
 The index is cached under ``$XDG_CACHE_HOME/streetaug/tables/`` (default ``~/.cache/streetaug/tables``) as an
-``.npz`` of plain arrays (read with ``allow_pickle=False``), keyed by the file's absolute path, size and
-``mtime_ns`` and :data:`INDEX_FORMAT`; written atomically (temp file + ``os.replace``). A cache folder that
-cannot be written: the index is kept in memory only (one warning). A stale or unreadable cache file: rebuilt.
+``.npz`` of plain arrays (no pickles; ``np.load(..., allow_pickle=False)`` reads it), keyed by the file's
+absolute path, size and ``mtime_ns`` and :data:`INDEX_FORMAT`; written atomically (temp file + ``os.replace``)
+with its arrays 64-byte aligned, so that a later run memory-maps them (milliseconds, whatever the table's
+size). A cache folder that cannot be written: the index is kept in memory only (one warning). A stale or
+unreadable cache file: rebuilt; one found damaged while used: removed, the lookup fails naming it.
 
 The scan refuses (:class:`UnexpectedLayout`) anything it is not sure to read as ``json.loads`` would: nested
 objects, text between rows other than one comma, a looked-up field that is not a plain string (escapes
@@ -38,7 +40,7 @@ INDEX_FORMAT = 2
 WINDOW_BYTES = 4 << 20  # bytes scanned at a time (the scan's memory is a few times this; small: in cache)
 VERIFIED_ROWS = 64  # rows parsed after a scan to check the index against json.loads
 _MAX_VALUE_BYTES = 256  # longest indexed field value (nuScenes tokens: 32)
-_SHORT_GAP = 8  # bytes between a row's end and the next row's start (or a key and its value) checked in numpy
+_SHORT_GAP = 8  # bytes between a key and its value checked in numpy (longer: in Python)
 
 _QUOTE, _BACKSLASH, _COMMA, _COLON, _OPEN, _CLOSE = 0x22, 0x5C, 0x2C, 0x3A, 0x7B, 0x7D
 _WHITESPACE = b" \t\n\r"
