@@ -325,7 +325,7 @@ class TableIndex:
     Args:
         path: the table file.
         arrays: ``offset``, ``length`` (rows,) int64 and per key ``sorted_<key>`` (rows,) uint64 hashes in
-            ascending order with ``order_<key>`` (rows,) the row of each (equal hashes: rows ascending).
+            ascending order with ``order_<key>`` (rows,) the row of each (equal hashes: rows in any order).
         keys: the indexed fields, ``token`` first.
     """
 
@@ -412,7 +412,7 @@ def _sorted_columns(scan: dict[str, np.ndarray], keys: tuple[str, ...]) -> dict[
     out = {"offset": scan["offset"], "length": scan["length"]}
     order_type = np.int32 if rows < 2**31 else np.int64
     for key in keys:
-        order = np.argsort(scan[f"hash_{key}"], kind="stable")
+        order = np.argsort(scan[f"hash_{key}"])  # equal hashes (rare): rows in any order
         out[f"sorted_{key}"] = scan[f"hash_{key}"][order]
         out[f"order_{key}"] = order.astype(order_type)
     return out
@@ -435,17 +435,24 @@ def _verify(index: TableIndex, scan: dict[str, np.ndarray]) -> None:
 
 def _refuse_duplicates(index: TableIndex) -> None:
     """DatasetError naming both rows for the first repeated token (as :func:`.tables.token_index` reports it)."""
-    sorted_hashes, order = index._sorted["token"], index._order["token"]
-    repeat = np.flatnonzero(sorted_hashes[1:] == sorted_hashes[:-1]) + 1
-    if repeat.size == 0:
+    sorted_hashes = index._sorted["token"]
+    same = sorted_hashes[1:] == sorted_hashes[:-1]
+    if not same.any():
         return
-    group_start = np.searchsorted(sorted_hashes, sorted_hashes[repeat], side="left")
-    for k in np.argsort(order[repeat], kind="stable").tolist():  # repeats in row order
-        i, earlier = int(order[repeat[k]]), order[group_start[k]: repeat[k]].tolist()
+    shared = np.zeros(len(sorted_hashes), dtype=bool)  # rows whose hash another row has too
+    shared[1:] |= same
+    shared[:-1] |= same
+    rows, hashes = np.asarray(index._order["token"])[shared], sorted_hashes[shared]
+    by = np.lexsort((rows, hashes))  # by hash, then row
+    rows, hashes = rows[by], hashes[by]
+    repeat = np.flatnonzero(hashes[1:] == hashes[:-1]) + 1  # not the first row of its hash
+    group_start = np.searchsorted(hashes, hashes[repeat], side="left")
+    for k in np.argsort(rows[repeat], kind="stable").tolist():  # repeats in row order
+        i, earlier = int(rows[repeat[k]]), rows[group_start[k]: repeat[k]].tolist()
         token = index.row(i)["token"]
-        same = [j for j in sorted(earlier) if index.row(j)["token"] == token]
-        if same:
-            raise DatasetError(f"{index.path}: token '{token}' appears in rows {same[0]} and {i}; "
+        matching = [j for j in sorted(earlier) if index.row(j)["token"] == token]
+        if matching:
+            raise DatasetError(f"{index.path}: token '{token}' appears in rows {matching[0]} and {i}; "
                                "tokens must be unique (the table is corrupt or was concatenated twice)")
 
 

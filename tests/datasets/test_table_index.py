@@ -260,10 +260,15 @@ class TestCache:
 
 
 class TestErrors:
-    def test_a_duplicated_token_names_both_rows_as_before(self, tmp_path):
+    @pytest.mark.parametrize("more", ["", "later repeats", "concatenated"])
+    def test_a_duplicated_token_names_both_rows_as_before(self, tmp_path, more):
         root = table_copy(tmp_path)
         rows = load(root, "sample_annotation")
         rows.insert(7, dict(rows[2]))
+        if more == "later repeats":  # repeats of earlier rows after row 7: row 7 is still the first repeat
+            rows += [dict(rows[0]), dict(rows[1]), dict(rows[2])]
+        elif more == "concatenated":  # the whole table again after it: its own repeat at 7 comes first
+            rows += [dict(r) for r in rows]
         save(root, "sample_annotation", rows)
         messages = []
         for reader in readers(root, BUNDLED_VERSION):
