@@ -10,7 +10,9 @@ Layout read (as in nuScenes)::
 
 Frames: ``calibrated_sensor`` gives sensor -> ego (``T_ego_from_cam``; nuScenes camera frames are
 OpenCV frames), ``ego_pose`` gives ego -> global at the sample_data's own timestamp.  Quaternions are
-``[w, x, y, z]``.  Tables load on first use, once; images and LiDAR load only when accessed.
+``[w, x, y, z]``.  Tables load on first use, once; images and LiDAR load only when accessed.  The large
+tables (:data:`INDEXED_TABLES`, hundreds of MB in trainval) are not parsed whole to find one sample's rows: a
+byte-offset index of the file (:mod:`.table_index`, cached on disk) finds them and only those rows are parsed.
 
 Usage::
 
@@ -26,7 +28,7 @@ from __future__ import annotations
 import copy
 from collections import defaultdict
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -40,6 +42,9 @@ from .nuscenes_map import (DrivableArea, LaneCenterlines, map_expansion_path, re
 from .raster_map import MAP_SOURCE_EXPANSION, MAP_SOURCE_RASTER, RasterDrivable, read_semantic_prior, semantic_prior_row
 from .sample import Box, CameraView, LidarSweep, Sample
 from .tables import integer_field, read_table_rows, rotation_field, row_where, size_field, token_index, vector_field
+
+if TYPE_CHECKING:
+    from .table_index import TableIndex
 
 __all__ = ["DatasetError", "NuScenesReader", "read_lidar_points", "read_lidarseg_labels"]
 
@@ -58,6 +63,13 @@ REQUIRED_TABLES = (
 )
 OPTIONAL_TABLES = ("attribute", "visibility", "lidarseg")
 LIDAR_CHANNEL = "LIDAR_TOP"
+INDEXED_TABLES: dict[str, tuple[str, ...]] = {  # table -> the fields its rows are looked up by (token first)
+    "sample_data": ("token", "sample_token"),
+    "sample_annotation": ("token", "sample_token"),
+    "ego_pose": ("token",),
+    "instance": ("token",),
+}
+INDEX_MIN_BYTES = 8 << 20  # an indexed table file this large or larger is read through its index
 _MAX_LISTED = 10
 
 
@@ -75,16 +87,20 @@ class NuScenesReader:
         version: table folder name, e.g. ``v1.0-mini`` or ``v1.0-trainval``.
         with_map: attach the location's drivable area to each ``Sample`` (parsed once per location: the map
             expansion, else the semantic-prior raster of ``map.json``; see :meth:`map_source`).
+        index_min_bytes: a file of :data:`INDEXED_TABLES` at least this large (bytes) is read through a
+            byte-offset index (only the rows asked for are parsed); None: every table is parsed whole.
 
     Raises:
         DatasetError: ``dataroot`` or ``dataroot/version`` is missing, or a required table file is
             absent.  (Table contents are parsed lazily, on first use.)
     """
 
-    def __init__(self, dataroot: str | Path, version: str, *, with_map: bool = True) -> None:
+    def __init__(self, dataroot: str | Path, version: str, *, with_map: bool = True,
+                 index_min_bytes: int | None = INDEX_MIN_BYTES) -> None:
         self.dataroot = Path(dataroot)
         self.version = str(version)
         self.with_map = with_map
+        self.index_min_bytes = index_min_bytes
         if not self.dataroot.is_dir():
             raise DatasetError(f"{self.dataroot}: dataset root folder not found (check --dataroot)")
         self.table_dir = self.dataroot / self.version
@@ -104,6 +120,7 @@ class NuScenesReader:
         self._rows: dict[str, list[dict]] = {}
         self._index: dict[str, dict[str, int]] = {}  # table -> token -> position in self._rows[table]
         self._row_numbers: dict[str, dict[str, int]] = {}  # tables given to with_tables: token -> row in the file
+        self._indexes: dict[str, TableIndex | None] = {}  # indexed table -> its TableIndex, or None: parsed whole
         self._sample_data_by_sample: dict[str, list[dict]] | None = None
         self._annotations_by_sample: dict[str, list[dict]] | None = None
         self._lidarseg_by_sd: dict[str, dict] | None = None
@@ -129,6 +146,7 @@ class NuScenesReader:
         """
         other = copy.copy(self)
         other._rows = dict(tables)
+        other._indexes = {name: index for name, index in self._indexes.items() if name not in tables}
         other._index, other._sample_data_by_sample, other._annotations_by_sample = {}, None, None
         other._lidarseg_by_sd = None
         other._row_numbers = {name: (row_numbers or {}).get(name, {}) for name in tables}
@@ -142,6 +160,9 @@ class NuScenesReader:
         """The row index of ``token`` in the file ``<version>/<table>.json``, or None when not known."""
         if table in self._row_numbers:
             return self._row_numbers[table].get(token)
+        index = self._table_index(table)
+        if index is not None:
+            return index.find(token)
         return self._token_index(table).get(token)
 
     def where(self, table: str, row: dict, field: str | None) -> str:
@@ -161,7 +182,10 @@ class NuScenesReader:
     # ------------------------------------------------------------------ tables
 
     def table(self, name: str) -> list[dict]:
-        """Raw rows of table ``name`` (parsed once; do not mutate).  Absent optional tables -> []."""
+        """Raw rows of table ``name`` (parsed once, the whole file; do not mutate).  Absent optional tables -> [].
+
+        Parses even an indexed table whole: ask :meth:`get`, :meth:`sample_data_rows` ... for the rows needed.
+        """
         if name not in self._rows:
             path = self.table_dir / f"{name}.json"
             if not path.is_file():
@@ -174,13 +198,52 @@ class NuScenesReader:
             self._rows[name] = rows
         return self._rows[name]
 
+    def check_table(self, name: str) -> int:
+        """The number of rows of table ``name``, raising its table-wide faults (not a list of rows with a
+        ``token`` each, a token in two rows). An indexed table is scanned, not parsed: a row that is not
+        valid JSON is found when that row is read."""
+        index = self._table_index(name)
+        return len(index) if index is not None else len(self.table(name))
+
+    def _table_index(self, table: str) -> TableIndex | None:
+        """The byte-offset index (:class:`.table_index.TableIndex`) table ``table`` is read through, or None
+        (parsed whole: not an indexed table, a small file, already parsed, or a layout the scan does not read)."""
+        if table in self._rows or table not in INDEXED_TABLES or self.index_min_bytes is None:
+            return None
+        if table not in self._indexes:
+            path = self.table_dir / f"{table}.json"
+            index = None
+            if path.is_file() and path.stat().st_size >= self.index_min_bytes:
+                from .table_index import open_index  # deferred: only large tables need it
+
+                index = open_index(path, INDEXED_TABLES[table])
+            self._indexes[table] = index
+        return self._indexes[table]
+
     def _token_index(self, table: str) -> dict[str, int]:
         if table not in self._index:
             self._index[table] = token_index(self.table(table), str(self.table_dir / f"{table}.json"))
         return self._index[table]
 
+    def _find(self, table: str, token: Any) -> dict | None:
+        """The row of ``table`` with ``token``, or None."""
+        index = self._table_index(table)
+        if index is not None:
+            number = index.find(token)
+            return None if number is None else index.row(number)
+        position = self._token_index(table).get(token)
+        return None if position is None else self._rows[table][position]
+
     def get(self, table: str, token: str) -> dict:
         """The row of ``table`` with ``token``; DatasetError naming the table and token otherwise."""
+        lazy = self._table_index(table)
+        if lazy is not None:
+            number = lazy.find(token)
+            if number is None:
+                raise DatasetError(
+                    f"{self.table_dir / (table + '.json')}: no {table} with token '{token}' ({len(lazy)} rows)"
+                )
+            return lazy.row(number)
         index = self._token_index(table)
         position = index.get(token)
         if position is None:
@@ -259,7 +322,10 @@ class NuScenesReader:
     # ------------------------------------------------------------------ per-sample indices
 
     def sample_data_rows(self, sample_token: str) -> list[dict]:
-        """All ``sample_data`` rows of a sample (keyframes and sweeps)."""
+        """All ``sample_data`` rows of a sample (keyframes and sweeps), in table order."""
+        lazy = self._table_index("sample_data")
+        if lazy is not None:
+            return lazy.rows_where("sample_token", sample_token)
         if self._sample_data_by_sample is None:
             index: dict[str, list[dict]] = defaultdict(list)
             for r in self.table("sample_data"):
@@ -268,7 +334,10 @@ class NuScenesReader:
         return self._sample_data_by_sample.get(sample_token, [])
 
     def annotation_rows(self, sample_token: str) -> list[dict]:
-        """All ``sample_annotation`` rows of a sample."""
+        """All ``sample_annotation`` rows of a sample, in table order."""
+        lazy = self._table_index("sample_annotation")
+        if lazy is not None:
+            return lazy.rows_where("sample_token", sample_token)
         if self._annotations_by_sample is None:
             index: dict[str, list[dict]] = defaultdict(list)
             for r in self.table("sample_annotation"):
@@ -328,18 +397,19 @@ class NuScenesReader:
         same channel's keyframe in the sample's ``prev`` / ``next`` sample; a missing side is the row
         itself (dt 0).  None when neither side exists (a single frame): no motion is known.
         """
-        rows, samples = self._token_index("sample_data"), self._token_index("sample")
         sample_token = sample_data.get("sample_token") or ""
         sensor = self.sensor_of(sample_data)
 
         def neighbour(direction: str) -> dict | None:
             token = sample_data.get(direction) or ""
-            if token in rows:
-                return self.table("sample_data")[rows[token]]
-            if sample_token not in samples:
+            row = self._find("sample_data", token)
+            if row is not None:
+                return row
+            sample = self._find("sample", sample_token)
+            if sample is None:
                 return None
-            other = self.get("sample", sample_token).get(direction) or ""
-            if other not in samples:
+            other = sample.get(direction) or ""
+            if self._find("sample", other) is None:
                 return None
             return self.keyframe_sample_data(other, sensor.get("modality", "camera")).get(sensor.get("channel"))
 
