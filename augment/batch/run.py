@@ -195,7 +195,7 @@ def _run_locked(config: BatchConfig, out_dir: Path, run: RunOptions, echo: Calla
         scenes = plan_scenes(config, out_dir, reader, slicer, pending, run, echo)
     scene_of = {t: reader.scene_of(t)["token"] for t in pending} if config.tracks else {}
     for name in SLICED_TABLES:  # a table-wide fault (e.g. a duplicated token) stops the batch before any work
-        reader.table(name)
+        reader.check_table(name)  # large tables are scanned into their index, not parsed whole
     unsliceable: list[list[LogRow]] = []  # samples whose rows are missing: failed here, never dispatched
 
     def tasks_of():
