@@ -153,12 +153,26 @@ def depth_mesh_uncertain(view: DepthView, step: int = GEOMETRY_STEP_PX) -> tuple
     if view.backdrop_depth_m is not None:
         parts.append(_grid_mesh(view, view.backdrop_depth_m, step, None))
     if view.sky is not None:
-        parts.append(_grid_mesh(view, sky_depth(view), step, None, max_depth_m=np.inf))
+        parts.append(_sky_mesh(view, step))
     if len(parts) == 1:
         return parts[0]
     offsets = np.cumsum([0] + [len(p[0]) for p in parts[:-1]])
     return (np.concatenate([p[0] for p in parts]), np.concatenate([p[1] + o for p, o in zip(parts, offsets)]),
             np.concatenate([p[2] for p in parts]), np.concatenate([p[3] for p in parts]))
+
+
+def _sky_mesh(view: DepthView, step: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The grid mesh of the view's sky pixels at ``SKY_MESH_RANGE_M`` (:func:`sky_depth`), built over the rows
+    that hold sky only (from a multiple of ``step``: the same vertices as a mesh of the whole image)."""
+    depth = sky_depth(view)
+    rows = np.flatnonzero(np.isfinite(depth).any(axis=1))
+    if not len(rows):
+        return np.zeros((0, 3)), np.zeros((0, 3), np.int64), np.zeros((0, 2)), np.zeros(0, np.float32)
+    r0, r1 = rows[0] // step * step, rows[-1] + 1
+    K = np.array(view.K, np.float64)
+    K[1, 2] -= r0
+    v, f, uv, u = _grid_mesh(replace(view, K=K), depth[r0:r1], step, None, max_depth_m=np.inf)
+    return v, f, uv + np.array([0.0, r0]), u
 
 
 def sky_depth(view: DepthView, range_m: float = SKY_MESH_RANGE_M) -> np.ndarray:

@@ -105,3 +105,20 @@ def test_sky_depth_is_the_sphere_and_skips_seen_surfaces():
     assert len(f_sky) > len(f_old) > 0
     far = np.linalg.norm(v_sky - CENTRE, axis=1) > 0.99 * ss.SKY_MESH_RANGE_M
     assert far.sum() == len(v_sky) - len(v_old)
+
+
+def test_the_sky_mesh_over_its_rows_equals_the_whole_image_grid():
+    """Meshing only the rows that hold sky (from a multiple of the step) gives the whole image's grid mesh of
+    the sky: the same vertices, faces, pixel coordinates."""
+    from streetaug.augment.lighting.seen_surfaces import _grid_mesh, _sky_mesh, sky_depth
+
+    view = scene(with_sky=True)
+    sky = np.zeros((H, W), bool)
+    sky[7:20, 10:60] = True  # starts off the step's grid
+    view = DepthView(view.channel, np.where(sky, np.inf, WALL_M).astype(np.float32), view.radiance, K,
+                     T_VOL_FROM_CAM, sky=sky)
+    part = _sky_mesh(view, ss.GEOMETRY_STEP_PX)
+    whole = _grid_mesh(view, sky_depth(view), ss.GEOMETRY_STEP_PX, None, max_depth_m=np.inf)
+    assert len(part[1]) > 0
+    for a, b in zip(part, whole):
+        assert a.shape == b.shape and np.allclose(a, b)
