@@ -7,8 +7,12 @@ vertex carrying its pixel coordinate (u, v) in that camera's radiance image (lin
 radiometric scale; pixel centres at integer coordinates). Neighbouring pixels are joined; triangles across
 depth discontinuities (vertex depths more than ``MAX_DEPTH_RATIO`` apart; ``MAX_GROUND_DEPTH_RATIO`` for
 ground triangles -- all three vertices below ``GROUND_HEIGHT_M``, normal within ``GROUND_MAX_TILT_DEG`` of
-vertical -- since the ground is continuous but grazing far away) are dropped; sky pixels and pixels
-without depth are not in the mesh.
+vertical -- since the ground is continuous but grazing far away) are dropped; pixels without depth are not in
+the mesh. A camera's *sky* pixels (``DepthView.sky``) are a grid mesh of their own on a sphere of
+``SKY_MESH_RANGE_M`` around its centre: from any point near the cameras, a ray that meets no nearer seen surface
+and leaves along a direction a camera saw as sky takes that sky pixel, at the image's resolution and without
+parallax (the sky is at infinity), rather than the volume's coarse voxels at a canopy's edge and the sky dome's
+cells. (Scene-0916 stride-4 keyframes, six-view forward median PSNR 17.03 -> 17.43 dB.)
 
 A ray query (:meth:`SeenSurfaces.trace`) finds the closest hit in each camera's mesh (Embree); among the
 hits within ``SAME_SURFACE_FRACTION`` of the nearest (the same surface seen by several cameras) it takes the
@@ -24,6 +28,7 @@ Cameras have a *rank*: 0 for the estimate's own cameras, 1 for an earlier keyfra
 takes only hits of the lowest rank that it hits at all: an earlier camera's surfaces fill only what the
 cameras of the instant left open (what is now behind or above them), they never cover what those saw; and
 what an instant camera saw through (its sky, or farther surfaces) is carved out of them first (:func:`carved`).
+An instant camera's sky mesh is a rank-0 hit like its other surfaces: where it saw sky, no earlier surface is taken.
 """
 
 from __future__ import annotations
