@@ -122,3 +122,52 @@ def test_the_sky_mesh_over_its_rows_equals_the_whole_image_grid():
     assert len(part[1]) > 0
     for a, b in zip(part, whole):
         assert a.shape == b.shape and np.allclose(a, b)
+
+
+def test_a_structure_only_the_volume_holds_stands_in_front_of_the_sky_seen_from_far_across():
+    """12 m to the side of the camera (farther across the ray than ``SKY_PREEMPT_BASELINE_M``), a ray along a
+    direction the camera saw as sky crosses an opaque block that only the volume holds (LiDAR / prior occupancy
+    the camera did not see): it shows the block, not the sky pixel (the sky mesh was always in front before).
+    From the camera's own centre the same direction shows the sky pixel exactly."""
+    from streetaug.augment.lighting import volume as vol
+    from streetaug.augment.lighting.volume import CH_ALPHA, CH_COLOR, CH_SIGMA
+
+    h = hybrid(scene(with_sky=True))
+    params = np.array(h.params)
+    c = h.grid.voxel_centres()
+    block = (c[..., 0] > 20) & (c[..., 0] < 45) & (c[..., 1] > 6) & (c[..., 1] < 18) & (c[..., 2] > 0) & (c[..., 2] < 25)
+    params[block, CH_ALPHA] = 1.0
+    params[block, CH_COLOR] = (1.0, 0.0, 0.0)
+    params[block, CH_SIGMA] = 10.0  # a broad lobe: ~the colour from every side
+    h = HybridLighting(h.sky_world, None, None, grid=h.grid, params=params, seen=h.seen)
+    el = np.radians(20.0)
+    d = np.array([[np.cos(el), 0.0, np.sin(el)]])
+    side = np.array([CENTRE + np.array([0.0, 12.0, 0.0])])
+    rgb = np.asarray(h.radiance(side, d, include_sun=False))[0]
+    assert rgb[0] > 0.8 and rgb[1] < 0.1, rgb  # the block
+    assert vol.SKY_PREEMPT_BASELINE_M < 12.0
+    own = np.asarray(h.radiance(CENTRE[None], d, include_sun=False))[0]
+    assert np.abs(own - sky_texture(d)[0]).max() < 0.03, own
+
+
+def test_the_torch_backend_blends_the_sky_like_the_numpy_backend():
+    """Tensors in (the differentiable backend): the same radiance as numpy's to float32 rounding, the sky pixel
+    in front, behind and between (from the camera's centre, 12 m and 6 m to the side of it)."""
+    import torch
+
+    h = hybrid(scene(with_sky=True))
+    params = np.array(h.params)
+    params[..., 3:6] = (0.0, 0.0, 1.0)
+    c = h.grid.voxel_centres()
+    params[(c[..., 0] > 20) & (c[..., 0] < 45) & (c[..., 1] > 0) & (c[..., 2] > 0) & (c[..., 2] < 25), 7] = 0.5
+    params[..., 0] = 0.7
+    hn = HybridLighting(h.sky_world, None, None, grid=h.grid, params=params, seen=h.seen)
+    ht = HybridLighting(torch.from_numpy(np.array(h.sky_world)), None, None, grid=h.grid,
+                        params=torch.from_numpy(params), seen=h.seen)
+    el = np.radians(np.linspace(10.0, 25.0, 7))
+    d = np.stack([np.cos(el), np.zeros_like(el), np.sin(el)], axis=1)
+    for side_m in (0.0, 6.0, 12.0):
+        o = np.repeat((CENTRE + np.array([0.0, side_m, 0.0]))[None], len(d), axis=0)
+        a = np.asarray(hn.radiance(o, d, include_sun=False))
+        b = ht.radiance(torch.from_numpy(o), torch.from_numpy(d), include_sun=False).detach().numpy()
+        assert np.allclose(a, b, atol=1e-4), (side_m, np.abs(a - b).max())
