@@ -50,6 +50,7 @@ BACKDROP_ROWS = 4
 # they change nothing: 17.37 -> 17.35.)
 DEPTH_AT_RETURN = 0.02
 DEPTH_SPREAD_PX = 12.0
+SKY_MESH = True  # the sky pixels meshed far away (seen_surfaces.SKY_MESH_RANGE_M)
 
 
 @dataclass(frozen=True)
@@ -297,7 +298,8 @@ def observe_view(view: CameraView, T_vol_from_cam: np.ndarray, exposure_ratio: f
         depth_view=DepthView(view.channel, mesh_depth(measured, sky, window), hdr, Ks,
                              np.asarray(T_vol_from_cam, np.float64),
                              mesh_backdrop(measured, sky, window),
-                             depth_uncertainty=depth_uncertainty_map(measured, returns_uv)),
+                             depth_uncertainty=depth_uncertainty_map(measured, returns_uv),
+                             sky=sky if SKY_MESH else None),
     )
 
 

@@ -7,8 +7,12 @@ vertex carrying its pixel coordinate (u, v) in that camera's radiance image (lin
 radiometric scale; pixel centres at integer coordinates). Neighbouring pixels are joined; triangles across
 depth discontinuities (vertex depths more than ``MAX_DEPTH_RATIO`` apart; ``MAX_GROUND_DEPTH_RATIO`` for
 ground triangles -- all three vertices below ``GROUND_HEIGHT_M``, normal within ``GROUND_MAX_TILT_DEG`` of
-vertical -- since the ground is continuous but grazing far away) are dropped; sky pixels and pixels
-without depth are not in the mesh.
+vertical -- since the ground is continuous but grazing far away) are dropped; pixels without depth are not in
+the mesh. A camera's *sky* pixels (``DepthView.sky``) are a grid mesh of their own on a sphere of
+``SKY_MESH_RANGE_M`` around its centre: from any point near the cameras, a ray that meets no nearer seen surface
+and leaves along a direction a camera saw as sky takes that sky pixel, at the image's resolution and without
+parallax (the sky is at infinity), rather than the volume's coarse voxels at a canopy's edge and the sky dome's
+cells. (Scene-0916 stride-4 keyframes, six-view forward median PSNR 17.03 -> 17.43 dB.)
 
 A ray query (:meth:`SeenSurfaces.trace`) finds the closest hit in each camera's mesh (Embree); among the
 hits within ``SAME_SURFACE_FRACTION`` of the nearest (the same surface seen by several cameras) it takes the
@@ -24,6 +28,7 @@ Cameras have a *rank*: 0 for the estimate's own cameras, 1 for an earlier keyfra
 takes only hits of the lowest rank that it hits at all: an earlier camera's surfaces fill only what the
 cameras of the instant left open (what is now behind or above them), they never cover what those saw; and
 what an instant camera saw through (its sky, or farther surfaces) is carved out of them first (:func:`carved`).
+An instant camera's sky mesh is a rank-0 hit like its other surfaces: where it saw sky, no earlier surface is taken.
 """
 
 from __future__ import annotations
@@ -51,6 +56,11 @@ DEPTH_UNCERTAINTY = 0.1  # relative error of the densified depth (0.05 / 0.1 / 0
 SAME_SURFACE_FRACTION = 0.05  # hits this much farther than the nearest (+ 0.1 m) are the same surface
 BLUR_LEVELS_PX = (0.0, 1.0, 2.0, 4.0, 8.0, 16.0)  # Gaussian sigmas of the texture copies
 SEEN_THROUGH_WINDOW_PX = 3  # seen_through: the depth a camera saw is the nearest within this window
+# a camera's sky pixels (DepthView.sky) are meshed on a sphere of this radius around its centre: the sky seen at
+# the image's resolution, at (practically) infinity -- from anywhere near the cameras a ray that misses every nearer
+# seen surface and leaves along a direction a camera saw as sky shows that sky, sharp and without parallax, instead
+# of the coarse volume's voxels and the dome's cells
+SKY_MESH_RANGE_M = 1.0e4
 
 
 @dataclass(frozen=True)
@@ -69,6 +79,8 @@ class DepthView:
         rank: 0 for a camera of the estimate's instant, 1 for an earlier keyframe's (see module doc).
         depth_uncertainty: (h, w) float32 each pixel's relative depth error (of ``depth_m``; the backdrop's is
             ``DEPTH_UNCERTAINTY``), or None: ``DEPTH_UNCERTAINTY`` everywhere (see module doc).
+        sky: (h, w) bool the camera's sky pixels (depth inf in ``depth_m``), meshed at ``SKY_MESH_RANGE_M`` from
+            its centre, or None: no sky mesh.
     """
 
     channel: str
@@ -79,6 +91,7 @@ class DepthView:
     backdrop_depth_m: np.ndarray | None = None
     rank: int = 0
     depth_uncertainty: np.ndarray | None = None
+    sky: np.ndarray | None = None
 
 
 def seen_through(view: DepthView, by: list[DepthView], margin: float = MAX_DEPTH_RATIO,
@@ -141,18 +154,49 @@ def depth_mesh_uncertain(view: DepthView, step: int = GEOMETRY_STEP_PX) -> tuple
     unc = view.depth_uncertainty
     if unc is not None:
         check_shape(np.asarray(unc), view.depth_m.shape, "depth_uncertainty")
-    v, f, uv, u = _grid_mesh(view, view.depth_m, step, unc)
-    if view.backdrop_depth_m is None:
-        return v, f, uv, u
-    vb, fb, uvb, ub = _grid_mesh(view, view.backdrop_depth_m, step, None)
-    return (np.concatenate([v, vb]), np.concatenate([f, fb + len(v)]), np.concatenate([uv, uvb]),
-            np.concatenate([u, ub]))
+    parts = [_grid_mesh(view, view.depth_m, step, unc)]
+    if view.backdrop_depth_m is not None:
+        parts.append(_grid_mesh(view, view.backdrop_depth_m, step, None))
+    if view.sky is not None:
+        parts.append(_sky_mesh(view, step))
+    if len(parts) == 1:
+        return parts[0]
+    offsets = np.cumsum([0] + [len(p[0]) for p in parts[:-1]])
+    return (np.concatenate([p[0] for p in parts]), np.concatenate([p[1] + o for p, o in zip(parts, offsets)]),
+            np.concatenate([p[2] for p in parts]), np.concatenate([p[3] for p in parts]))
 
 
-def _grid_mesh(view: DepthView, depth_m: np.ndarray, step: int,
-               uncertainty: np.ndarray | None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def _sky_mesh(view: DepthView, step: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The grid mesh of the view's sky pixels at ``SKY_MESH_RANGE_M`` (:func:`sky_depth`), built over the rows
+    that hold sky only (from a multiple of ``step``: the same vertices as a mesh of the whole image)."""
+    depth = sky_depth(view)
+    rows = np.flatnonzero(np.isfinite(depth).any(axis=1))
+    if not len(rows):
+        return np.zeros((0, 3)), np.zeros((0, 3), np.int64), np.zeros((0, 2)), np.zeros(0, np.float32)
+    r0, r1 = rows[0] // step * step, rows[-1] + 1
+    K = np.array(view.K, np.float64)
+    K[1, 2] -= r0
+    v, f, uv, u = _grid_mesh(replace(view, K=K), depth[r0:r1], step, None, max_depth_m=np.inf)
+    return v, f, uv + np.array([0.0, r0]), u
+
+
+def sky_depth(view: DepthView, range_m: float = SKY_MESH_RANGE_M) -> np.ndarray:
+    """(h, w) float64 camera-z depth of the view's sky pixels (``view.sky``) on the sphere of ``range_m`` around
+    its centre (inf elsewhere and where ``depth_m`` is finite: a seen surface is never sky)."""
+    sky = np.asarray(view.sky, bool)
+    check_shape(sky, view.depth_m.shape, "sky")
+    h, w = sky.shape
+    K = np.asarray(view.K, np.float64)
+    x = (np.arange(w) - K[0, 2]) / K[0, 0]
+    y = (np.arange(h) - K[1, 2]) / K[1, 1]
+    z_per_range = 1.0 / np.sqrt(1.0 + x[None, :] ** 2 + y[:, None] ** 2)  # camera z of a unit-length ray
+    return np.where(sky & ~np.isfinite(view.depth_m), range_m * z_per_range, np.inf)
+
+
+def _grid_mesh(view: DepthView, depth_m: np.ndarray, step: int, uncertainty: np.ndarray | None,
+               max_depth_m: float = MAX_DEPTH_M) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """:func:`depth_mesh_uncertain` of one depth image (h, w) of ``view`` with its relative uncertainty (h, w)
-    (None: ``DEPTH_UNCERTAINTY``)."""
+    (None: ``DEPTH_UNCERTAINTY``); depths beyond ``max_depth_m`` are left out."""
     depth = np.asarray(depth_m, dtype=np.float64)
     check_shape(depth, ("H", "W"), "depth_m")
     rows = np.arange(0, depth.shape[0], step)
@@ -161,7 +205,7 @@ def _grid_mesh(view: DepthView, depth_m: np.ndarray, step: int,
     d = depth[np.ix_(rows, cols)]
     unc = (np.full(d.size, DEPTH_UNCERTAINTY, np.float32) if uncertainty is None
            else np.asarray(uncertainty, np.float32)[np.ix_(rows, cols)].reshape(-1))
-    d = np.where(d <= MAX_DEPTH_M, d, np.inf)
+    d = np.where(d <= max_depth_m, d, np.inf)
     uv = np.stack([u, v], axis=-1).reshape(-1, 2)
     finite = np.isfinite(d).reshape(-1)
     p_cam = unproject_depth(view.K, uv, np.where(finite, d.reshape(-1), 0.0))

@@ -96,16 +96,30 @@ class TorchBackend:
     def radiance_chunk(h, points: torch.Tensor, dirs: torch.Tensor, include_sun: bool) -> torch.Tensor:
         if h.seen is None:
             return TorchBackend.volume_chunk(h, points, dirs, include_sun)
-        hit, _, mesh_rgb = h.seen.trace(points.detach().numpy(), dirs.detach().numpy())
-        miss = torch.from_numpy(np.flatnonzero(~hit))
+        from .volume import sky_preempt_weight, through_volume
+
+        hit, t, mesh_rgb, spread = h.seen.trace_spread(points.detach().numpy(), dirs.detach().numpy())
+        to_volume, sky = through_volume(hit, t)  # as the numpy backend's volume.sky_blend
+        miss_np = np.flatnonzero(to_volume)
+        miss = torch.from_numpy(miss_np)
         out = torch.from_numpy(mesh_rgb).to(h.sky_world.dtype)
         if len(miss):
-            out = out.index_put((miss,), TorchBackend.volume_chunk(h, points[miss], dirs[miss], include_sun))
+            vol = TorchBackend.volume_chunk(h, points[miss], dirs[miss], include_sun, (sky[miss_np], mesh_rgb[miss_np]))
+            w = torch.from_numpy(sky_preempt_weight(sky[miss_np], t[miss_np], spread[miss_np])).to(out.dtype)[:, None]
+            out = out.index_put((miss,), w * out[miss] + (1.0 - w) * vol)
         return out
 
     @staticmethod
-    def volume_chunk(h, points: torch.Tensor, dirs: torch.Tensor, include_sun: bool) -> torch.Tensor:
+    def volume_chunk(h, points: torch.Tensor, dirs: torch.Tensor, include_sun: bool,
+                     backdrop: tuple[np.ndarray, np.ndarray] | None = None) -> torch.Tensor:
+        """Eq. 1 along rays; ``backdrop`` (which rays (N,) bool, radiance (N, 3) numpy): those rays' sky behind
+        the volume instead of the dome's (the sun's disc still added)."""
         env = TorchBackend.env_radiance(h, dirs, include_sun)
+        if backdrop is not None and backdrop[0].any():
+            k_np = np.flatnonzero(backdrop[0])
+            k = torch.from_numpy(k_np)
+            env = env.index_add(0, k, torch.from_numpy(backdrop[1][k_np]).to(env.dtype)
+                                - sample_world_equirect(h.sky_world, dirs[k]))
         if h.params is None:
             return env
         flat, alpha, _ = TorchBackend.march(h, points, dirs)

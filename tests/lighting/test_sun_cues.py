@@ -363,7 +363,7 @@ def test_without_sky_in_view_the_network_direction_stands_and_no_sun_is_reported
     pred = predict_sky(hidden, K, up, models=models)
     assert pred.cues["sky_fraction"] < FIT_MIN_SKY_FRACTION and not pred.cues["clear_sky_fit"]
     alone = predict_sky(hidden, K, up, models=models, use_cues=False)
-    assert angle_deg(pred.direction_cam, alone.direction_cam) < 1e-6
+    assert angle_deg(pred.direction_cam, alone.direction_cam) < 1e-4  # arccos of a rounded unit dot: ~1e-6 deg
     assert pred.sun_dir_cam is None and not pred.confident and "too little sky" in pred.reason
     with_sky = predict_sky(image, K, up, models=models)
     assert with_sky.cues["clear_sky_fit"] and with_sky.cues["sky_fraction"] >= FIT_MIN_SKY_FRACTION
