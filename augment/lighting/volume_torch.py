@@ -15,6 +15,7 @@ import numpy as np
 import torch
 
 from ..core import check_rays
+from .sky_preempt import sky_preempt_weight, through_volume
 from .volume_channels import CH_ALPHA, CH_AXIS, CH_COLOR, CH_SIGMA, N_CHANNELS
 
 
@@ -96,8 +97,6 @@ class TorchBackend:
     def radiance_chunk(h, points: torch.Tensor, dirs: torch.Tensor, include_sun: bool) -> torch.Tensor:
         if h.seen is None:
             return TorchBackend.volume_chunk(h, points, dirs, include_sun)
-        from .volume import sky_preempt_weight, through_volume
-
         hit, t, mesh_rgb, spread = h.seen.trace_spread(points.detach().numpy(), dirs.detach().numpy())
         to_volume, sky = through_volume(hit, t)  # as the numpy backend's volume.sky_blend
         miss_np = np.flatnonzero(to_volume)
