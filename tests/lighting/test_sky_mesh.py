@@ -10,13 +10,7 @@ from streetaug.augment.lighting import seen_surfaces as ss
 from streetaug.augment.lighting.seen_surfaces import DepthView, SeenSurfaces, depth_mesh
 from streetaug.augment.lighting.volume import HybridLighting, LogGrid, empty_params
 
-W, H, F = 96, 64, 60.0
-K = np.array([[F, 0.0, (W - 1) / 2], [0.0, F, (H - 1) / 2], [0.0, 0.0, 1.0]])
-CENTRE = np.array([0.0, 0.0, 1.5])
-# camera x right, y down, z forward -> volume x forward, y left, z up
-R_VOL_FROM_CAM = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
-T_VOL_FROM_CAM = np.eye(4)
-T_VOL_FROM_CAM[:3, :3], T_VOL_FROM_CAM[:3, 3] = R_VOL_FROM_CAM, CENTRE
+from lighting_rig import CENTRE, F, H, K, R_VOL_FROM_CAM, T_VOL_FROM_CAM, W  # noqa: E402
 WALL_M = 20.0  # a wall this far ahead fills the image's lower half; sky above it
 GREY_DOME = 0.05
 

@@ -17,12 +17,7 @@ from streetaug.augment.lighting import seen_surfaces as ss
 from streetaug.augment.lighting.predicted_view import uncertainty_blurred
 from streetaug.augment.lighting.seen_surfaces import DepthView, SeenSurfaces
 
-W, H, F = 96, 64, 60.0
-K = np.array([[F, 0.0, (W - 1) / 2], [0.0, F, (H - 1) / 2], [0.0, 0.0, 1.0]])
-CENTRE = np.array([0.0, 0.0, 1.5])
-R_VOL_FROM_CAM = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
-T_VOL_FROM_CAM = np.eye(4)
-T_VOL_FROM_CAM[:3, :3], T_VOL_FROM_CAM[:3, 3] = R_VOL_FROM_CAM, CENTRE
+from lighting_rig import CENTRE, H, K, T_VOL_FROM_CAM, W  # noqa: E402
 SEQ = SHARED_DATA / "nuscenes-seq"
 
 
