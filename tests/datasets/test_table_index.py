@@ -155,6 +155,16 @@ def test_hashes_do_not_depend_on_the_padding():
     assert len(set(hashes.tolist())) == len(texts)
 
 
+
+def cached_ego_pose_index(tmp_path: Path, cache_home: Path) -> tuple[Path, Path, dict[str, np.ndarray]]:
+    """A copy of the bundled tables read once (every index cached): (its root, the ego_pose index's cache file,
+    that file's arrays)."""
+    root = table_copy(tmp_path)
+    assert_same_reading(*readers(root, BUNDLED_VERSION))
+    (cached,) = (cache_home / "streetaug" / "tables").glob("ego_pose-*.npz")
+    with np.load(cached, allow_pickle=False) as z:
+        return root, cached, dict(z)
+
 class TestCache:
     def test_the_second_reader_loads_the_cached_index(self, tmp_path, cache_home):
         root = table_copy(tmp_path)
@@ -208,11 +218,7 @@ class TestCache:
                 assert len(z["offset"]) == len(load(root, "sample_data"))
 
     def test_a_cache_file_of_other_arrays_is_rebuilt(self, tmp_path, cache_home):
-        root = table_copy(tmp_path)
-        assert_same_reading(*readers(root, BUNDLED_VERSION))  # every index cached
-        (cached,) = (cache_home / "streetaug" / "tables").glob("ego_pose-*.npz")
-        with np.load(cached, allow_pickle=False) as z:
-            arrays = dict(z)
+        root, cached, arrays = cached_ego_pose_index(tmp_path, cache_home)
         for edit in (lambda a: a.update(offset=a["offset"][:-1]),  # a length that differs
                      lambda a: a.update(length=a["length"].astype(np.float64)),
                      lambda a: a.update(sorted_token=a["sorted_token"][::-1].copy()),  # not in order
@@ -227,11 +233,7 @@ class TestCache:
             assert ti.scan_count() - start == 1
 
     def test_a_damaged_row_span_fails_naming_the_cache_which_is_then_rebuilt(self, tmp_path, cache_home):
-        root = table_copy(tmp_path)
-        assert_same_reading(*readers(root, BUNDLED_VERSION))  # every index cached
-        (cached,) = (cache_home / "streetaug" / "tables").glob("ego_pose-*.npz")
-        with np.load(cached, allow_pickle=False) as z:
-            arrays = dict(z)
+        root, cached, arrays = cached_ego_pose_index(tmp_path, cache_home)
         arrays["offset"] = arrays["offset"] + 10**9  # past the end of the file: found only when a row is read
         with open(cached, "wb") as f:
             np.savez(f, **arrays)
