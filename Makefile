@@ -46,7 +46,7 @@ demo: setup
 	@echo "  $(OUT)/classes/                    pedestrians, bicycles, cone lines, barriers, trucks and buses in CAM_FRONT"
 
 test: setup $(BIN)/.devkit
-	STREETAUG_REQUIRE_DEVKIT=1 $(BIN)/pytest -q
+	STREETAUG_REQUIRE_DEVKIT=1 $(BIN)/pytest -q -n 2 --dist loadfile  # one file per process: module fixtures built once
 
 bench: setup
 	$(BIN)/python benchmarks/bench_render.py
