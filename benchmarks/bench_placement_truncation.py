@@ -192,33 +192,48 @@ def track_cars(reader: NuScenesReader, config: PlacementConfig, seeds: int, n_tr
             "sightings": summary(sightings)}
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+def placement_bench_parser(description: str, out_name: str) -> argparse.ArgumentParser:
+    """The placement benchmarks' common options (the real scene, keyframe stride, seeds, output JSON)."""
+    ap = argparse.ArgumentParser(description=description)
     ap.add_argument("--dataroot", type=Path, default=SHARED / "nuscenes-seq")
     ap.add_argument("--version", default="v1.0-mini")
     ap.add_argument("--every", type=int, default=2, help="place in every N-th keyframe")
     ap.add_argument("--seeds", type=int, default=3)
-    ap.add_argument("--track-seeds", type=int, default=0, help="also plan 4 car tracks per seed (0: no tracks)")
-    ap.add_argument("--truncated-share", type=float, help="PlacementConfig.truncated_share (default: its default)")
-    ap.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "results" / "placement_truncation.json")
-    args = ap.parse_args()
+    ap.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "results" / out_name)
+    return ap
+
+
+def open_real_scene(args: argparse.Namespace) -> NuScenesReader:
+    """The reader of ``--dataroot``, or exit with what is missing."""
     if not args.dataroot.is_dir():
         raise SystemExit(f"{args.dataroot} not found (the real scene; see ../shared/data/README.md)")
-    reader = NuScenesReader(args.dataroot, args.version)
+    return NuScenesReader(args.dataroot, args.version)
+
+
+def code_provenance() -> dict:
+    """Which code ran: this tree's commit and where the imported placement package lives."""
+    import streetaug.placement as placement_pkg
+    commit = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--short", "HEAD"], capture_output=True,
+                            text=True).stdout.strip()
+    return {"worktree_commit": commit, "placement_package": str(Path(placement_pkg.__path__[0]).resolve())}
+
+
+def main() -> None:
+    ap = placement_bench_parser(__doc__.splitlines()[0], "placement_truncation.json")
+    ap.add_argument("--track-seeds", type=int, default=0, help="also plan 4 car tracks per seed (0: no tracks)")
+    ap.add_argument("--truncated-share", type=float, help="PlacementConfig.truncated_share (default: its default)")
+    args = ap.parse_args()
+    reader = open_real_scene(args)
     config = PlacementConfig() if args.truncated_share is None else PlacementConfig(truncated_share=args.truncated_share)
     t0 = time.perf_counter()
     real, real_less_than_half = real_cars(reader, config)
     placed, attempts = placed_cars(reader, config, args.every, args.seeds) if args.seeds else ([], 0)
     tracks = track_cars(reader, config, args.track_seeds) if args.track_seeds else None
-    import streetaug.placement as placement_pkg
-    commit = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--short", "HEAD"], capture_output=True,
-                            text=True).stdout.strip()
     result = {
         "command": f"python benchmarks/bench_placement_truncation.py --every {args.every} --seeds {args.seeds}"
                    + (f" --track-seeds {args.track_seeds}" if args.track_seeds else "")
                    + (f" --truncated-share {args.truncated_share}" if args.truncated_share is not None else ""),
-        "code": {"worktree_commit": commit, "placement_package": str(Path(placement_pkg.__path__[0]).resolve()),
-                 "truncated_share": getattr(config, "truncated_share", None)},
+        "code": {**code_provenance(), "truncated_share": getattr(config, "truncated_share", None)},
         "machine": {"python": platform.python_version(), "load_avg": os.getloadavg()},
         "dataroot": str(args.dataroot),
         "definition": "truncation = fraction of the projected 3D box outside the image; truncated = truncation > 0.001",

@@ -30,10 +30,8 @@ import os
 for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
 
-import argparse  # noqa: E402
 import json  # noqa: E402
 import platform  # noqa: E402
-import subprocess  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
@@ -47,7 +45,8 @@ from streetaug.placement.config import PlacementConfig  # noqa: E402
 from streetaug.placement.rules import projected_inside_fraction  # noqa: E402
 
 # The same placements as the truncation benchmark, seeded as insert seeds them.
-from bench_placement_truncation import placement_attempts  # noqa: E402
+from bench_placement_truncation import (code_provenance, open_real_scene, placement_attempts,  # noqa: E402
+                                        placement_bench_parser)
 
 ROOT = Path(__file__).resolve().parents[1]
 SHARED = (ROOT / ".." / "shared" / "data").resolve()
@@ -197,27 +196,16 @@ def placed_cars(reader: NuScenesReader, config: PlacementConfig, every: int, see
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--dataroot", type=Path, default=SHARED / "nuscenes-seq")
-    ap.add_argument("--version", default="v1.0-mini")
-    ap.add_argument("--every", type=int, default=2, help="place in every N-th keyframe")
-    ap.add_argument("--seeds", type=int, default=3)
-    ap.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "results" / "placement_views.json")
-    args = ap.parse_args()
-    if not args.dataroot.is_dir():
-        raise SystemExit(f"{args.dataroot} not found (the real scene; see ../shared/data/README.md)")
-    reader = NuScenesReader(args.dataroot, args.version)
+    args = placement_bench_parser(__doc__.splitlines()[0], "placement_views.json").parse_args()
+    reader = open_real_scene(args)
     config = PlacementConfig()
     t0 = time.perf_counter()
     real = real_cars(reader, config)
     placed, attempts = placed_cars(reader, config, args.every, args.seeds)
-    import streetaug.placement as placement_pkg
-    commit = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--short", "HEAD"], capture_output=True,
-                            text=True).stdout.strip()
     result = {
         "command": f"python benchmarks/bench_placement_views.py --dataroot {args.dataroot} --every {args.every} "
                    f"--seeds {args.seeds}",
-        "code": {"worktree_commit": commit, "placement_package": str(Path(placement_pkg.__path__[0]).resolve())},
+        "code": code_provenance(),
         "machine": {"python": platform.python_version(), "load_avg": os.getloadavg()},
         "definition": __doc__.split("\n\n")[2],
         "real": summary(real), "real_parked_only": summary([r for r in real if r["parked"]]),
