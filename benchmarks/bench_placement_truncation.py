@@ -82,15 +82,16 @@ def grouped(rows: list[dict], key: str) -> dict:
     return {k: summary([r["truncation"] for r in v], [r["distance_m"] for r in v]) for k, v in sorted(groups.items())}
 
 
-def real_cars(reader: NuScenesReader, config: PlacementConfig) -> tuple[list[dict], int]:
-    """(the eligible annotated cars per camera, the count of cars in range but less than half in the image)."""
-    rows, less_than_half = [], 0
+def cars_in_range(reader: NuScenesReader, config: PlacementConfig):
+    """Every annotated ``vehicle.car`` 10-40 m (the config's range) from a camera, wholly in front of it and
+    partly in its image: yields ``(sample_token, sample, channel, view, box_index, box, distance_m,
+    inside_fraction)``, per sample and camera in order."""
     for token in reader.sample_tokens():
         sample = reader.sample(token)
         for channel, view in sample.cameras.items():
             camera = PinholeCamera(view.K, view.width, view.height)
             cam_xy = view.T_global_from_cam[:2, 3]
-            for box in sample.boxes:
+            for i, box in enumerate(sample.boxes):
                 if box.category != "vehicle.car":
                     continue
                 d = float(np.hypot(*(box.center[:2] - cam_xy)))
@@ -100,13 +101,19 @@ def real_cars(reader: NuScenesReader, config: PlacementConfig) -> tuple[list[dic
                 if np.any(corners[:, 2] < config.near_plane_m):
                     continue
                 inside = float(projected_inside_fraction(corners[None], camera, config.near_plane_m)[0])
-                if inside <= 0.0:
-                    continue
-                if inside < config.min_visible_fraction:
-                    less_than_half += 1
-                    continue
-                rows.append({"sample": token, "camera": channel, "distance_m": d, "truncation": 1.0 - inside,
-                             "attribute": ",".join(box.attributes)})
+                if inside > 0.0:
+                    yield token, sample, channel, view, i, box, d, inside
+
+
+def real_cars(reader: NuScenesReader, config: PlacementConfig) -> tuple[list[dict], int]:
+    """(the eligible annotated cars per camera, the count of cars in range but less than half in the image)."""
+    rows, less_than_half = [], 0
+    for token, _, channel, _, _, box, d, inside in cars_in_range(reader, config):
+        if inside < config.min_visible_fraction:
+            less_than_half += 1
+            continue
+        rows.append({"sample": token, "camera": channel, "distance_m": d, "truncation": 1.0 - inside,
+                     "attribute": ",".join(box.attributes)})
     return rows, less_than_half
 
 

@@ -42,11 +42,10 @@ from streetaug.augment.core import PinholeCamera, transform_points  # noqa: E402
 from streetaug.datasets.nuscenes import NuScenesReader  # noqa: E402
 from streetaug.datasets.nuscenes_format import VEHICLE_PARKED  # noqa: E402
 from streetaug.placement.config import PlacementConfig  # noqa: E402
-from streetaug.placement.rules import projected_inside_fraction  # noqa: E402
 
 # The same placements as the truncation benchmark, seeded as insert seeds them.
-from bench_placement_truncation import (code_provenance, open_real_scene, placement_attempts,  # noqa: E402
-                                        placement_bench_parser)
+from bench_placement_truncation import (cars_in_range, code_provenance, open_real_scene,  # noqa: E402
+                                        placement_attempts, placement_bench_parser)
 
 ROOT = Path(__file__).resolve().parents[1]
 SHARED = (ROOT / ".." / "shared" / "data").resolve()
@@ -139,33 +138,22 @@ def summary(rows: list[dict]) -> dict:
 
 
 def real_cars(reader: NuScenesReader, config: PlacementConfig) -> list[dict]:
-    rows = []
-    for token in reader.sample_tokens():
-        sample = reader.sample(token)
-        for channel, view in sample.cameras.items():
-            camera, cam_xy, dist, hulls, parked = view_context(sample, view, config)
-            for i, box in enumerate(sample.boxes):
-                if box.category != "vehicle.car":
-                    continue
-                d = float(np.hypot(*(box.center[:2] - cam_xy)))
-                if not config.min_distance_m <= d <= config.max_distance_m:
-                    continue
-                corners = transform_points(view.T_cam_from_global, box.corners())
-                if np.any(corners[:, 2] < config.near_plane_m):
-                    continue
-                if float(projected_inside_fraction(corners[None], camera, config.near_plane_m)[0]) < \
-                        config.min_visible_fraction:
-                    continue
-                T = box.T_global_from_box
-                is_parked = VEHICLE_PARKED in box.attributes
-                rows.append({"sample": token, "camera": channel, "distance_m": d, "parked": is_parked,
-                             "facing_deg": facing_deg(view.T_cam_from_global @ T),
-                             "neighbour_deg": neighbour_deg(box.center[:2], yaw_of(box.T_global_from_box), parked, i)
-                             if is_parked else None,
-                             "covered_share": covered_share(hulls[i], dist[i], dist, hulls, i),
-                             "overlap_share": covered_share(hulls[i], np.inf, dist, hulls, i),
-                             "visibility": reader.get("sample_annotation", box.token).get("visibility_token", "")
-                             if box.token else ""})
+    rows, contexts = [], {}
+    for token, sample, channel, view, i, box, d, inside in cars_in_range(reader, config):
+        if inside < config.min_visible_fraction:
+            continue
+        if (token, channel) not in contexts:
+            contexts[(token, channel)] = view_context(sample, view, config)
+        _, _, dist, hulls, parked = contexts[(token, channel)]
+        is_parked = VEHICLE_PARKED in box.attributes
+        rows.append({"sample": token, "camera": channel, "distance_m": d, "parked": is_parked,
+                     "facing_deg": facing_deg(view.T_cam_from_global @ box.T_global_from_box),
+                     "neighbour_deg": neighbour_deg(box.center[:2], yaw_of(box.T_global_from_box), parked, i)
+                     if is_parked else None,
+                     "covered_share": covered_share(hulls[i], dist[i], dist, hulls, i),
+                     "overlap_share": covered_share(hulls[i], np.inf, dist, hulls, i),
+                     "visibility": reader.get("sample_annotation", box.token).get("visibility_token", "")
+                     if box.token else ""})
     return rows
 
 
