@@ -33,7 +33,7 @@ import cv2
 import numpy as np
 
 from ..core import PinholeCamera, invert_transform, luminance
-from .brdf import BRDFParams, row_norm, schlick_weight
+from .brdf import BRDFParams, mirror_fresnel, row_norm
 from .footprint import PixelBox, edge_pixels
 from . import shade as shade_module
 from .shade import RAY_EPS_M, ShadingContext, shade
@@ -285,8 +285,7 @@ def _trace_chunk(ctx: ShadingContext, o: np.ndarray, d: np.ndarray, idx: np.ndar
         return _NONE_GOING
     params = surf.params
     nv = np.clip(np.einsum("ij,ij->i", surf.normal[cont], -dh[cont]), 0.0, 1.0)
-    c_spec = params.take(cont).c_spec
-    F = c_spec + (1 - c_spec) * schlick_weight(nv)[:, None]
+    F = mirror_fresnel(nv, params.take(cont))  # smooth glass: the pane's Fresnel, as its reflection (brdf.py)
     tint = np.sqrt(np.clip(params.base_color[cont], 0.0, 1.0))
     tp_next = tp[cont] * (1.0 - surf.opacity[cont])[:, None] * (1.0 - F) * tint
     return ids[cont], p[cont] - RAY_EPS_M * surf.geometric_normal[cont], dh[cont], tp_next
