@@ -179,15 +179,16 @@ def binned_points(grid: LogGrid, obs: ViewObservation) -> np.ndarray:
     LiDAR beam came back from beyond it) the points between ``FREE_SPACE_VIEW_HEIGHT_M`` and ``STRUCTURE_MIN_TOP_M``
     above the ground, within ``FREE_SPACE_MAX_DIST_M`` of the grid's centre (at ``FREE_SPACE_VIEW_HEIGHT_M``) that
     the move turns by more than ``FREE_SPACE_MIN_ANGLE_DEG`` as seen from there; the others at ``obs.points``."""
-    if obs.free_points is None or not len(obs.points):
+    free = getattr(obs, "free_points", None)  # observation-like records without it: as they are
+    if free is None or not len(obs.points):
         return obs.points
     c = np.array([*grid.centre_xy_m, FREE_SPACE_VIEW_HEIGHT_M])
-    a, b = obs.points - c[None], obs.free_points - c[None]
+    a, b = obs.points - c[None], free - c[None]
     cos = np.einsum("ij,ij->i", a, b) / np.maximum(np.linalg.norm(a, axis=1) * np.linalg.norm(b, axis=1), 1e-9)
     z = obs.points[:, 2]
     moved = ((cos < np.cos(np.radians(FREE_SPACE_MIN_ANGLE_DEG))) & (np.linalg.norm(a, axis=1) < FREE_SPACE_MAX_DIST_M)
              & (z > FREE_SPACE_VIEW_HEIGHT_M) & (z < STRUCTURE_MIN_TOP_M))
-    return np.where(moved[:, None], obs.free_points, obs.points)
+    return np.where(moved[:, None], free, obs.points)
 
 
 def observed_voxels(grid: LogGrid, observations: list[ViewObservation]) -> ObservedVoxels:
