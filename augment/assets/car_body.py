@@ -65,9 +65,9 @@ def sedan_spec() -> BodySpec:
     L, H = 4.60, 1.45
     return BodySpec(
         length=L, width=1.80, height=H, wheel_radius=0.32, front_overhang=0.92, rear_overhang=1.00,
-        belt_front=0.90, belt_rear=0.98, d_ws=1.55, d_roof_front=2.25, d_roof_back=3.20, d_rear=3.85,
+        belt_front=0.90, belt_rear=0.98, d_ws=1.36, d_roof_front=2.50, d_roof_back=3.20, d_rear=3.85,
         pillars=(2.75,),
-        top=((0.0, 0.58), (0.06, 0.70), (0.30, 0.78), (1.55, 0.90), (2.25, H - 0.02), (2.60, H), (3.20, H - 0.03),
+        top=((0.0, 0.58), (0.06, 0.70), (0.30, 0.78), (1.36, 0.90), (2.50, H - 0.02), (2.75, H), (3.20, H - 0.03),
              (3.85, 1.00), (4.45, 0.98), (4.56, 0.90), (L, 0.72)),
         bottom=((0.0, 0.42), (0.12, 0.28), (0.55, 0.20), (L - 0.6, 0.21), (L - 0.12, 0.30), (L, 0.45)),
         tumblehome=0.22, plan_exponent=5.5,
@@ -78,9 +78,9 @@ def hatchback_spec() -> BodySpec:
     L, H = 4.10, 1.50
     return BodySpec(
         length=L, width=1.75, height=H, wheel_radius=0.31, front_overhang=0.82, rear_overhang=0.68,
-        belt_front=0.92, belt_rear=1.00, d_ws=1.35, d_roof_front=2.00, d_roof_back=3.25, d_rear=3.92,
+        belt_front=0.92, belt_rear=1.00, d_ws=1.18, d_roof_front=2.32, d_roof_back=3.25, d_rear=3.92,
         pillars=(2.55,),
-        top=((0.0, 0.58), (0.06, 0.70), (0.28, 0.79), (1.35, 0.92), (2.00, H - 0.02), (2.50, H), (3.25, H - 0.05),
+        top=((0.0, 0.58), (0.06, 0.70), (0.28, 0.79), (1.18, 0.92), (2.32, H - 0.02), (2.62, H), (3.25, H - 0.05),
              (3.92, 1.02), (4.04, 0.95), (L, 0.78)),
         bottom=((0.0, 0.42), (0.12, 0.28), (0.50, 0.20), (L - 0.5, 0.22), (L - 0.10, 0.32), (L, 0.48)),
         tumblehome=0.20, plan_exponent=4.0,
@@ -91,9 +91,9 @@ def suv_spec() -> BodySpec:
     L, H = 4.70, 1.75
     return BodySpec(
         length=L, width=1.90, height=H, wheel_radius=0.37, front_overhang=0.92, rear_overhang=0.98,
-        belt_front=1.08, belt_rear=1.14, d_ws=1.40, d_roof_front=2.10, d_roof_back=4.35, d_rear=4.62,
+        belt_front=1.08, belt_rear=1.14, d_ws=1.30, d_roof_front=2.30, d_roof_back=4.35, d_rear=4.62,
         pillars=(2.75, 3.75),
-        top=((0.0, 0.72), (0.06, 0.88), (0.30, 0.98), (1.40, 1.08), (2.10, H - 0.02), (2.60, H), (4.35, H - 0.03),
+        top=((0.0, 0.72), (0.06, 0.88), (0.30, 0.98), (1.30, 1.08), (2.30, H - 0.02), (2.75, H), (4.35, H - 0.03),
              (4.62, 1.10), (L, 0.95)),
         bottom=((0.0, 0.52), (0.15, 0.36), (0.60, 0.28), (L - 0.6, 0.30), (L - 0.12, 0.38), (L, 0.52)),
         tumblehome=0.17, plan_exponent=6.5,
@@ -104,9 +104,9 @@ def van_spec() -> BodySpec:
     L, H = 5.00, 1.95
     return BodySpec(
         length=L, width=2.00, height=H, wheel_radius=0.34, front_overhang=0.95, rear_overhang=1.05,
-        belt_front=1.10, belt_rear=1.12, d_ws=0.85, d_roof_front=1.70, d_roof_back=4.90, d_rear=4.96,
+        belt_front=1.10, belt_rear=1.12, d_ws=0.75, d_roof_front=1.85, d_roof_back=4.90, d_rear=4.96,
         pillars=(2.30, 3.60),
-        top=((0.0, 0.72), (0.06, 0.88), (0.25, 0.98), (0.85, 1.10), (1.70, H - 0.03), (2.30, H), (4.85, H - 0.02),
+        top=((0.0, 0.72), (0.06, 0.88), (0.25, 0.98), (0.75, 1.10), (1.85, H - 0.03), (2.40, H), (4.85, H - 0.02),
              (4.97, H - 0.12), (L, H - 0.30)),
         bottom=((0.0, 0.48), (0.15, 0.32), (0.55, 0.24), (L - 0.55, 0.26), (L - 0.12, 0.34), (L, 0.48)),
         tumblehome=0.10, plan_exponent=7.5,

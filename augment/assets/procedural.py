@@ -225,7 +225,9 @@ def _materials(rng: np.random.Generator, detail_rng: np.random.Generator, paint:
         # paint (a bare-metal lobe rendered them at L* ~30, reflecting the road; real ones look light grey).
         Material("rim", base_color=np.array([0.12, 0.12, 0.13]) if rim_dark else np.array([0.62, 0.62, 0.64]),
                  metallic=0.0, roughness=0.3, clearcoat=1.0, flake=0.7),
-        Material("headlight", base_color=np.array([0.80, 0.82, 0.84]), metallic=0.0, roughness=0.04, opacity=0.3,
+        # A headlamp's lens is clear polycarbonate: its own diffuse (base x opacity) 0.07, not the milky 0.24 of
+        # opacity 0.3 (the lamps read as white plastic), so the reflector behind it shows (issue #20).
+        Material("headlight", base_color=np.array([0.80, 0.82, 0.84]), metallic=0.0, roughness=0.04, opacity=0.09,
                  emission=np.array([0.03, 0.03, 0.03])),
         Material("taillight", base_color=np.array([0.50, 0.010, 0.015]), metallic=0.0, roughness=0.06, opacity=0.6),
         Material("glass_rear", base_color=rear_tint, metallic=0.0, roughness=0.05,
@@ -240,7 +242,9 @@ def _materials(rng: np.random.Generator, detail_rng: np.random.Generator, paint:
         Material("interior", base_color=seat_rgb, roughness=0.85, specular=0.3),
         Material("dashboard", base_color=np.array([0.022, 0.022, 0.024]), roughness=0.7, specular=0.35),
         Material("chrome", base_color=np.array([0.80, 0.80, 0.82]), metallic=1.0, roughness=0.15),
-        Material("lamp_reflector", base_color=np.array([0.85, 0.85, 0.86]), metallic=1.0, roughness=0.3),
+        # Vacuum-metallised reflector: a near mirror (roughness 0.1, the shader's mirror term in full; 0.3 was a
+        # blurred grey).
+        Material("lamp_reflector", base_color=np.array([0.85, 0.85, 0.86]), metallic=1.0, roughness=0.1),
         Material("brake_disc", base_color=brake_rgb, metallic=1.0, roughness=0.45),
     ]
     if len(mats) != N_SLOTS:

@@ -183,13 +183,16 @@ def build_hybrid(ref_est: LightingEstimate, T_vol_from_cam: np.ndarray, observat
 
 
 def _observe(view: CameraView, T_vol_from_cam: np.ndarray, ratio: float, lidar_vol: np.ndarray | None,
-             vi: ViewInputs | None) -> ViewObservation:
-    """One camera's observation (:func:`observe_view`) with the LiDAR and the ground plane z = 0 in its frame."""
+             vi: ViewInputs | None, lidar_origin_vol: np.ndarray | None = None) -> ViewObservation:
+    """One camera's observation (:func:`observe_view`) with the LiDAR (its returns and, if given, its centre) and
+    the ground plane z = 0 in its frame."""
     T_cam_from_vol = invert_transform(T_vol_from_cam)
     n_cam = T_cam_from_vol[:3, :3] @ np.array([0.0, 0.0, 1.0])
     ground = (n_cam, float(-n_cam @ T_cam_from_vol[:3, 3]))
     pts_cam = transform_points(T_cam_from_vol, lidar_vol) if lidar_vol is not None else None
-    return observe_view(view, T_vol_from_cam, ratio, pts_cam, ground, work=None if vi is None else vi.work)
+    origin_cam = None if lidar_origin_vol is None else transform_points(T_cam_from_vol, np.asarray(lidar_origin_vol)[None])[0]
+    return observe_view(view, T_vol_from_cam, ratio, pts_cam, ground, work=None if vi is None else vi.work,
+                        lidar_origin_cam=origin_cam)
 
 
 @dataclass(frozen=True)
@@ -276,7 +279,8 @@ def observe_scene(views: Sequence[CameraView], inputs: Sequence[ViewInputs], T_g
     T_vol_from_cams = [T_vol_from_global @ np.asarray(v.T_global_from_cam) for v in views]
     lidar_vol = lidar_points_in_volume(lidar, T_vol_from_global) if lidar is not None else None
     widest = L3_GRID if grid is None or grid.half_extent_xy_m < L3_GRID.half_extent_xy_m else grid
-    observations = [restrict_to_grid(_observe(v, T_vc, ratios[v.channel], lidar_vol, vi), widest)
+    origin = None if lidar is None else (T_vol_from_global @ np.asarray(lidar.T_global_from_lidar))[:3, 3]
+    observations = [restrict_to_grid(_observe(v, T_vc, ratios[v.channel], lidar_vol, vi, origin), widest)
                     for v, T_vc, vi in zip(views, T_vol_from_cams, inputs)]
     timing["observe"] = time.perf_counter() - t
     depth_views: list[DepthView] = []

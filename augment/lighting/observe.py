@@ -51,6 +51,20 @@ BACKDROP_ROWS = 4
 DEPTH_AT_RETURN = 0.02
 DEPTH_SPREAD_PX = 12.0
 SKY_MESH = True  # the sky pixels meshed far away (seen_surfaces.SKY_MESH_RANGE_M)
+# LiDAR free space (lidar_passed_through): a pixel's point that a LiDAR beam passed on its way to a farther return
+# is empty; what the pixel shows lies farther (densified depth grown over a near object's top: the sky and facades
+# above a parked car's roof put on the car). The HDL-32E's rings are LIDAR_RING_DEG apart from
+# LIDAR_LOWEST_RING_DEG; its returns are binned per ring and LIDAR_AZIMUTH_BIN_DEG of azimuth.
+LIDAR_LOWEST_RING_DEG = -30.67
+LIDAR_RING_DEG = 41.33 / 31
+LIDAR_N_RINGS = 32
+LIDAR_AZIMUTH_BIN_DEG = 0.4
+# a return counts as "farther" when beyond the point by this (metres) + this share of the point's range
+LIDAR_PASS_MARGIN_M = 0.5
+LIDAR_PASS_MARGIN_SHARE = 0.05
+LIDAR_PASS_WINDOW_BINS = 3  # azimuth cells either side (+-1.2 deg; the HDL-32E fires every ~0.16-0.35 deg)
+LIDAR_FREE_MIN_HEIGHT_M = 0.3  # the ground and kerbs (build.GROUND_SNAP_M) are left to the ground plane
+LIDAR_FREE_SPACE = True
 
 
 @dataclass(frozen=True)
@@ -70,6 +84,9 @@ class ViewObservation:
         camera_centre: (3,) camera centre in the volume frame.
         ego_forward: (3,) unit forward axis of the ego vehicle in the volume frame (the street's direction), or None.
         depth_view: the whole depth and radiance images (the seen-surface mesh of :mod:`.seen_surfaces`), or None.
+        free_points: (M, 3) ``points`` with those a LiDAR beam passed on its way to a farther return moved along
+            their rays to that return (:func:`lidar_passed_through`), or None (no LiDAR centre given). The volume
+            takes them where the move changes what its centre sees (``build.observed_voxels``).
     """
 
     channel: str
@@ -84,6 +101,55 @@ class ViewObservation:
     camera_centre: np.ndarray
     ego_forward: np.ndarray | None = None
     depth_view: DepthView | None = None
+    free_points: np.ndarray | None = None
+
+
+def lidar_passed_through(points: np.ndarray, lidar_points: np.ndarray,
+                         lidar_origin: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The points (M, 3) that a LiDAR beam passed on its way to a farther return: ((M,) bool, (M,) the range
+    (metres, from the LiDAR) of the nearest of those farther returns, inf elsewhere), in any one frame (z up for
+    the rings' elevation; the LiDAR's returns (N, 3) and centre (3,) in it).
+
+    Each point is looked up in the LiDAR's range image (nearest return per ring and ``LIDAR_AZIMUTH_BIN_DEG``): it
+    is free space if its ring's cells within ``LIDAR_PASS_WINDOW_BINS`` of its azimuth hold returns and all of
+    them lie farther than the point by ``LIDAR_PASS_MARGIN_M`` + ``LIDAR_PASS_MARGIN_SHARE`` x its range (empty
+    cells between them are beams that did not come back: dropouts). Points outside the rings' span, with no
+    return in the window (sky, out of range, a black or glass surface the beams did not come back from) or a
+    nearer one, are kept.
+    """
+    o = np.asarray(lidar_origin, np.float64)
+    n_az = int(round(360.0 / LIDAR_AZIMUTH_BIN_DEG))
+
+    def cells(p: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        d = np.asarray(p, np.float64) - o[None]
+        r_xy = np.hypot(d[:, 0], d[:, 1])
+        el = np.degrees(np.arctan2(d[:, 2], r_xy))
+        ring = np.round((el - LIDAR_LOWEST_RING_DEG) / LIDAR_RING_DEG).astype(np.int64)
+        az = np.floor(np.degrees(np.arctan2(d[:, 1], d[:, 0])) % 360.0 / LIDAR_AZIMUTH_BIN_DEG).astype(np.int64) % n_az
+        near_ring = np.abs(el - (LIDAR_LOWEST_RING_DEG + ring * LIDAR_RING_DEG)) <= 0.5 * LIDAR_RING_DEG
+        ok = (ring >= 0) & (ring < LIDAR_N_RINGS) & near_ring
+        return np.linalg.norm(d, axis=1), ring, az, ok
+
+    out = np.zeros(len(points), bool)
+    behind = np.full(len(points), np.inf)
+    if not len(points) or not len(lidar_points):
+        return out, behind
+    r_l, ring_l, az_l, ok_l = cells(lidar_points)
+    nearest = np.full(LIDAR_N_RINGS * n_az, np.inf)
+    np.minimum.at(nearest, (ring_l * n_az + az_l)[ok_l], r_l[ok_l])
+    r_p, ring_p, az_p, ok_p = cells(points)
+    idx = np.flatnonzero(ok_p)
+    beyond = r_p[idx] * (1.0 + LIDAR_PASS_MARGIN_SHARE) + LIDAR_PASS_MARGIN_M
+    first = np.full(len(idx), np.inf)
+    free = np.ones(len(idx), bool)
+    for da in range(-LIDAR_PASS_WINDOW_BINS, LIDAR_PASS_WINDOW_BINS + 1):
+        r = nearest[ring_p[idx] * n_az + (az_p[idx] + da) % n_az]
+        first = np.minimum(first, r)
+        free &= r > beyond  # an empty cell (inf) does not object
+    free &= np.isfinite(first)
+    out[idx] = free
+    behind[idx[free]] = first[free]
+    return out, behind
 
 
 def extend_facades(depth_m: np.ndarray, sky: np.ndarray, window_px: int = 1) -> tuple[np.ndarray, np.ndarray]:
@@ -240,7 +306,7 @@ def clipped_radiance(small: np.ndarray, level_max: np.ndarray, exposure_ratio: f
 
 def observe_view(view: CameraView, T_vol_from_cam: np.ndarray, exposure_ratio: float, lidar_points_cam: np.ndarray | None,
                  ground_plane_cam: tuple[np.ndarray, float], work_width: int = WORK_WIDTH,
-                 work: PreparedImage | None = None) -> ViewObservation:
+                 work: PreparedImage | None = None, lidar_origin_cam: np.ndarray | None = None) -> ViewObservation:
     """Unproject one camera's image (see module doc, step 1).
 
     Args:
@@ -250,6 +316,9 @@ def observe_view(view: CameraView, T_vol_from_cam: np.ndarray, exposure_ratio: f
         lidar_points_cam: (N, 3) LiDAR points in this camera's frame, or None.
         ground_plane_cam: (normal (3,), offset d) of the ground ``n . p + d = 0`` in the camera frame.
         work: the L1 fit's prepared image of this view (reused for the sky mask), or None.
+        lidar_origin_cam: (3,) the LiDAR's centre in this camera's frame, or None: the pixels whose point a LiDAR
+            beam passed on its way to a farther return (:func:`lidar_passed_through`) show what it came back from:
+            ``free_points`` has them there, along their rays; ``points`` and the seen-surface mesh keep them.
     """
     image = np.asarray(view.image)
     check_shape(image, ("H", "W", 3), "image")
@@ -285,6 +354,16 @@ def observe_view(view: CameraView, T_vol_from_cam: np.ndarray, exposure_ratio: f
     R = np.asarray(T_vol_from_cam)[:3, :3]
     centre = np.asarray(T_vol_from_cam)[:3, 3]
     p_vol = transform_points(T_vol_from_cam, rays[near] * depth[near][:, None])
+    free_points = None
+    if lidar_origin_cam is not None and lidar_points_cam is not None and LIDAR_FREE_SPACE:
+        lidar_vol = transform_points(T_vol_from_cam, np.asarray(lidar_points_cam, np.float64))
+        origin_vol = transform_points(T_vol_from_cam, np.asarray(lidar_origin_cam, np.float64)[None])[0]
+        passed, behind_m = lidar_passed_through(p_vol, lidar_vol, origin_vol)
+        passed &= p_vol[:, 2] > LIDAR_FREE_MIN_HEIGHT_M
+        free_points = p_vol.copy()
+        if passed.any():  # the pixel shows what the beam came back from: there along its ray
+            r_p = np.linalg.norm(p_vol[passed] - origin_vol[None], axis=1)
+            free_points[passed] = centre[None] + (p_vol[passed] - centre[None]) * (behind_m[passed] / r_p)[:, None]
     view_dirs = centre[None] - p_vol
     view_dirs /= np.maximum(row_norms(view_dirs), 1e-9)
     far = ~near
@@ -294,7 +373,7 @@ def observe_view(view: CameraView, T_vol_from_cam: np.ndarray, exposure_ratio: f
     return ViewObservation(
         channel=view.channel, points=p_vol, radiance=hdr[near], view_dirs=view_dirs, capped=capped,
         far_dirs=d_far, far_radiance=hdr[far], far_is_sky=sky[far], far_saturated=level_max[far] >= first_level_at(SATURATED_LDR),
-        camera_centre=centre, ego_forward=ego_forward_vol(view, T_vol_from_cam),
+        camera_centre=centre, ego_forward=ego_forward_vol(view, T_vol_from_cam), free_points=free_points,
         depth_view=DepthView(view.channel, mesh_depth(measured, sky, window), hdr, Ks,
                              np.asarray(T_vol_from_cam, np.float64),
                              mesh_backdrop(measured, sky, window),
@@ -325,6 +404,7 @@ def restrict_to_grid(obs: ViewObservation, grid: LogGrid) -> ViewObservation:
     return replace(
         obs, points=obs.points[inside], radiance=obs.radiance[inside], view_dirs=obs.view_dirs[inside],
         capped=obs.capped[inside], far_dirs=np.concatenate([obs.far_dirs, d]),
+        free_points=None if obs.free_points is None else obs.free_points[inside],
         far_radiance=np.concatenate([obs.far_radiance, obs.radiance[~inside]]),
         far_is_sky=np.concatenate([obs.far_is_sky, np.zeros(n_out, bool)]),
         far_saturated=np.concatenate([obs.far_saturated, np.zeros(n_out, bool)]),

@@ -169,8 +169,13 @@ def build_sky_dome(model_world: np.ndarray, observations: list[ViewObservation],
         elev = np.arcsin(np.clip(world_envmap_directions(H, W)[..., 2], -1.0, 1.0))
         # the top of what was seen: a high percentile, not the single highest pixel (noise must not move it)
         top = float(np.percentile(lat[~sat], 99.0)) if (~sat).any() else -np.pi / 2
-        below = (elev <= top)[..., None]
-        band = band_anchor_rgb(observed, mean_obs, anchor_rgb)[:, None, :]
+        # a cell a clipped pixel fell in was seen: at least the clip level (the floor below), not unseen
+        below = ((elev <= top) & ~(floor > 0))[..., None]
+        # the clipped cells are seen too: at least the clip level there (censored: the corrected model's if brighter)
+        clipped_cell = (floor > 0) & ~observed
+        censored = np.maximum(corrected, (floor / np.maximum(luminance(corrected), 1e-12))[..., None] * corrected)
+        band = band_anchor_rgb(observed | clipped_cell, np.where(clipped_cell[..., None], censored, mean_obs),
+                               anchor_rgb)[:, None, :]
         corrected = np.where(below, shrink_unseen(corrected, band, keep), corrected)
     dome = blend_observed(corrected, observed, mean_obs, blur_deg)
     lum = np.maximum(luminance(dome), 1e-12)

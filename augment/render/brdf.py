@@ -28,6 +28,16 @@ is ~210 cd/lx/m^2 coaxially for a white (0.8) base, the order of real sheeting; 
 from the light it is zero, so in daylight with the sun at the side the material is its base BRDF.
 It is not part of :func:`eval_brdf` (a sampled lobe of 0.4 deg would only give fireflies): the
 shader adds it for the sun's samples and in closed form for the environment.
+
+Smooth dielectrics (windows, lamp lenses: roughness below :data:`PANE_ROUGHNESS` (0.1), faded out linearly by
+0.15; non-metallic, no clear coat) reflect like a glass pane, not like Schlick's single face: the pane's exact
+unpolarised Fresnel :func:`pane_reflectance` (two faces of n = :data:`PANE_IOR` with their multiple reflections,
+per polarisation), mapped affinely so that it equals the material's F0 head-on and 1 at grazing
+(:func:`pane_fresnel`).  The GGX lobe is scaled by ``sqrt(g(n.v) g(n.l))`` with ``g = pane_fresnel / E_spec``
+(``E_spec`` the lobe's own directional albedo, :func:`specular_albedo`): reciprocal, and its mirror albedo
+(:func:`mirror_albedo`, the shader's environment reflection) is the pane's reflectance exactly.  For clear glass
+(F0 5.4 %) that is 5.4 % head-on, 14.7 % at 62 deg, 53 % at 80 deg (Schlick with the lobe's masking: 5.4, 7.2, 15):
+a raked windscreen seen from a camera ahead mirrors the sky as real ones do.
 """
 
 from __future__ import annotations
@@ -46,6 +56,8 @@ RETRO_ALBEDO = 0.08  # fraction of the light a full-strength retro-reflector ret
 RETRO_LOBE_RAD = np.radians(0.4)  # angular sigma of the returned cone (sheeting: R_A halves by ~0.5 deg)
 RETRO_ENERGY_CAP = 0.96  # the diffuse colour plus the retro lobe's albedo stays below this (+ ~4 % specular)
 FLAKE_ROUGHNESS = 0.45  # the flake lobe's GGX roughness (alpha 0.2: flake normals spread by ~10-15 deg)
+PANE_IOR = 1.5  # refractive index of window and lamp-lens glass
+PANE_ROUGHNESS = (0.1, 0.15)  # dielectrics smoother than this reflect with the pane's Fresnel, faded out by the second
 
 
 @dataclass(frozen=True)
@@ -95,7 +107,7 @@ class BRDFParams:
         flake = None if self.flake is None else self.flake[index]
         out = BRDFParams(*(getattr(self, f)[index] for f in ("base_color", "metallic", "roughness", "specular", "clearcoat")),
                          retroreflective=retro, flake=flake)
-        for key in ("c_diff", "c_spec", "alpha", "lobe_probs", "c_retro"):
+        for key in ("c_diff", "c_spec", "alpha", "lobe_probs", "c_retro", "pane_weight"):
             if self.__dict__.get(key) is not None:
                 out.__dict__[key] = self.__dict__[key][index]
         return out
@@ -142,6 +154,14 @@ class BRDFParams:
     def has_retro(self) -> bool:
         """Whether any sample has a retro-reflective lobe."""
         return self.retroreflective is not None and bool(np.any(self.retroreflective > 0))
+
+    @cached_property
+    def pane_weight(self) -> np.ndarray:
+        """(N,) in [0, 1]: how far the specular lobe reflects with the pane's Fresnel (:func:`pane_fresnel`): 1 for
+        smooth dielectrics (roughness < 0.1, no metal, no clear coat), fading out linearly by roughness 0.15."""
+        lo, hi = PANE_ROUGHNESS
+        smooth = np.clip((hi - self.roughness) / (hi - lo), 0.0, 1.0)
+        return smooth * np.clip(1.0 - self.metallic, 0.0, 1.0) * np.clip(1.0 - self.clearcoat, 0.0, 1.0)
 
     @cached_property
     def alpha(self) -> np.ndarray:
@@ -197,6 +217,10 @@ def eval_brdf(n: np.ndarray, v: np.ndarray, l: np.ndarray, params: BRDFParams,
     f90 = np.clip(50.0 * c_spec[:, 1:2], 0.0, 1.0)  # UE4 (BRDF.ush): F0 < 2 % fades the Fresnel rim out
     F = c_spec + (f90 - c_spec) * fw
     spec = (ggx_d(n_h, params.alpha) * smith_g(n_l, n_v, params.roughness) / (4.0 * n_l * n_v))[:, None] * F
+    pane = np.flatnonzero(params.pane_weight > 0)
+    if len(pane):  # smooth glass: the pane's Fresnel, reciprocally (module docstring)
+        r, c, w = params.roughness[pane], c_spec[pane], params.pane_weight[pane]
+        spec[pane] *= np.sqrt(_pane_gain(n_v[pane], r, c, w) * _pane_gain(n_l[pane], r, c, w))
     if params.has_flake:
         f = params.c_lambert / np.pi + spec + flake_lobe(n_h, n_l, n_v, params)
     else:
@@ -236,8 +260,56 @@ def mirror_albedo(n_dot_v: np.ndarray, params: BRDFParams, spec_weight: np.ndarr
     out = (params.clearcoat * F_c * G_c)[:, None] * np.ones((1, 3))
     if np.any(spec_weight > 0):
         alb = specular_albedo(n_dot_v, params) if spec_albedo is None else spec_albedo
+        w = params.pane_weight[:, None]
+        if np.any(w > 0):  # the lobe's gain g(n.v) (n.l = n.v at the mirror) times its albedo: the pane's Fresnel
+            alb = alb + w * (pane_fresnel(n_v, params.c_spec) - alb)
         out = out + (spec_weight * (1.0 - params.clearcoat * F_c))[:, None] * alb
     return out
+
+
+def dielectric_fresnel(cos_i: np.ndarray, ior: float = PANE_IOR) -> tuple[np.ndarray, np.ndarray]:
+    """Exact Fresnel reflectances (R_s, R_p), each (N,), of one face air -> dielectric of index ``ior`` at incidence
+    cosines ``cos_i`` (N,) in [0, 1]."""
+    c = np.clip(np.asarray(cos_i, dtype=np.float64), 0.0, 1.0)
+    c_t = np.sqrt(np.clip(1.0 - (1.0 - c * c) / (ior * ior), 0.0, 1.0))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        r_s = np.nan_to_num(((c - ior * c_t) / (c + ior * c_t)) ** 2, nan=1.0)
+        r_p = np.nan_to_num(((c_t - ior * c) / (c_t + ior * c)) ** 2, nan=1.0)
+    return r_s, r_p
+
+
+def pane_reflectance(cos_i: np.ndarray, ior: float = PANE_IOR) -> np.ndarray:
+    """Unpolarised reflectance (N,) of a clear, non-absorbing pane (two parallel faces of index ``ior``) with all
+    its inner reflections: ``R + T^2 R / (1 - R^2) = 2 R / (1 + R)`` per polarisation (T = 1 - R), averaged.
+    ~7.7 % head-on for n = 1.5, 16.8 % at 62 deg, 54 % at 80 deg, 1 at grazing."""
+    r_s, r_p = dielectric_fresnel(cos_i, ior)
+    return r_s / (1.0 + r_s) + r_p / (1.0 + r_p)
+
+
+def pane_fresnel(n_dot_v: np.ndarray, f0: np.ndarray) -> np.ndarray:
+    """The pane's reflectance (N, 3) at ``n_dot_v`` (N,) mapped affinely so that it is the material's F0 ``f0``
+    (N, 3) head-on and 1 at grazing: ``F0 + (1 - F0) (P - P_0) / (1 - P_0)`` (P :func:`pane_reflectance`)."""
+    p0 = float(pane_reflectance(np.ones(1))[0])
+    t = ((pane_reflectance(n_dot_v) - p0) / (1.0 - p0))[:, None]
+    return f0 + (1.0 - f0) * t
+
+
+def mirror_fresnel(n_dot_v: np.ndarray, params: BRDFParams) -> np.ndarray:
+    """The Fresnel reflectance (N, 3) of a mirror-like surface at ``n_dot_v`` (N,): Schlick's
+    ``F0 + (1 - F0) (1 - n.v)^5``, blended into :func:`pane_fresnel` by ``params.pane_weight`` (smooth glass).
+    What a ray that goes on through the glass loses: it is transmitted ``1 - F``."""
+    n_v = np.clip(np.asarray(n_dot_v, dtype=np.float64), 0.0, 1.0)
+    c_spec = params.c_spec
+    F = c_spec + (1.0 - c_spec) * schlick_weight(n_v)[:, None]
+    w = params.pane_weight[:, None]
+    return F + w * (pane_fresnel(n_v, c_spec) - F) if np.any(w > 0) else F
+
+
+def _pane_gain(n_dot: np.ndarray, roughness: np.ndarray, c_spec: np.ndarray, weight: np.ndarray) -> np.ndarray:
+    """The pane lobe's gain (N, 3) at one direction (cosine ``n_dot`` (N,) to the normal): ``1 + w (g - 1)``,
+    ``g = pane_fresnel / E_spec`` (``E_spec`` the GGX lobe's directional albedo there)."""
+    e = _albedo_from_table(n_dot, roughness, c_spec)
+    return 1.0 + weight[:, None] * (pane_fresnel(n_dot, c_spec) / np.maximum(e, 1e-6) - 1.0)
 
 
 def flake_lobe(n_h: np.ndarray, n_l: np.ndarray, n_v: np.ndarray, params: BRDFParams) -> np.ndarray:
@@ -455,17 +527,21 @@ _ALBEDO_TABLE: np.ndarray | None = None
 
 def specular_albedo(n_dot_v: np.ndarray, params: BRDFParams) -> np.ndarray:
     """Directional albedo (N, 3) of the specular (GGX) lobe, ``int f_spec(v, l) (n.l) dl``, from a cached table."""
+    return _albedo_from_table(n_dot_v, params.roughness, params.c_spec)
+
+
+def _albedo_from_table(n_dot_v: np.ndarray, roughness: np.ndarray, c_spec: np.ndarray) -> np.ndarray:
+    """:func:`specular_albedo` (N, 3) from the lobe's roughness (N,) and F0 ``c_spec`` (N, 3)."""
     global _ALBEDO_TABLE
     if _ALBEDO_TABLE is None:
         _ALBEDO_TABLE = _specular_albedo_table()
     size = _ALBEDO_TABLE.shape[0]
     x = np.clip(np.asarray(n_dot_v, dtype=np.float64) * size - 0.5, 0.0, size - 1.0)
-    y = np.clip(np.asarray(params.roughness, dtype=np.float64) * size - 0.5, 0.0, size - 1.0)
+    y = np.clip(np.asarray(roughness, dtype=np.float64) * size - 0.5, 0.0, size - 1.0)
     x0 = np.minimum(np.floor(x).astype(np.int64), size - 2)
     y0 = np.minimum(np.floor(y).astype(np.int64), size - 2)
     fx, fy = (x - x0)[:, None], (y - y0)[:, None]
     t = _ALBEDO_TABLE
     ab = (t[x0, y0] * (1 - fy) + t[x0, y0 + 1] * fy) * (1 - fx) + (t[x0 + 1, y0] * (1 - fy) + t[x0 + 1, y0 + 1] * fy) * fx
-    c_spec = params.c_spec
     f90 = np.clip(50.0 * c_spec[:, 1:2], 0.0, 1.0)
     return c_spec * ab[:, :1] + f90 * ab[:, 1:2]

@@ -33,7 +33,7 @@ import cv2
 import numpy as np
 
 from ..core import PinholeCamera, invert_transform, luminance
-from .brdf import BRDFParams, row_norm, schlick_weight
+from .brdf import BRDFParams, mirror_albedo, mirror_fresnel, reflect, row_norm
 from .footprint import PixelBox, edge_pixels
 from . import shade as shade_module
 from .shade import RAY_EPS_M, ShadingContext, shade
@@ -285,8 +285,7 @@ def _trace_chunk(ctx: ShadingContext, o: np.ndarray, d: np.ndarray, idx: np.ndar
         return _NONE_GOING
     params = surf.params
     nv = np.clip(np.einsum("ij,ij->i", surf.normal[cont], -dh[cont]), 0.0, 1.0)
-    c_spec = params.take(cont).c_spec
-    F = c_spec + (1 - c_spec) * schlick_weight(nv)[:, None]
+    F = mirror_fresnel(nv, params.take(cont))  # smooth glass: the pane's Fresnel, as its reflection (brdf.py)
     tint = np.sqrt(np.clip(params.base_color[cont], 0.0, 1.0))
     tp_next = tp[cont] * (1.0 - surf.opacity[cont])[:, None] * (1.0 - F) * tint
     return ids[cont], p[cont] - RAY_EPS_M * surf.geometric_normal[cont], dh[cont], tp_next
@@ -408,17 +407,21 @@ def _shade_hits(ctx: ShadingContext, surf: SurfaceHits, p: np.ndarray, v: np.nda
     (``queue.radiance``; front faces through the shading ``queue``).
 
     Seen through glass (``inside_glass``), the opaque interior (seats, dashboard) gets the interior light
-    ``ctx.interior_rgb`` (a tenth of the sky through the windows) x its base colour, brighter on faces that
-    look up (``interior_shading``), not the full light transport: it is dark, seen through tinted glass,
-    and shading it fully cost a third of a car's render for no visible difference at 10-40 m.
+    ``ctx.interior_rgb`` (the sky through the windows, :data:`~.insert.INTERIOR_SKY_FRACTION`) x its base colour,
+    brighter on faces that look up (``interior_shading``), not the full light transport: it is dark, seen through
+    tinted glass, and shading it fully cost a third of a car's render for no visible difference at 10-40 m.
+    Metal behind glass (a lamp's reflector behind its lens, :data:`MIRROR_BEHIND_GLASS_METALLIC`) shows the
+    environment's mirror image, as chrome does outside (:func:`_mirror_behind_glass`), not the cabin's light.
     """
     radiance = queue.radiance
     if inside_glass:  # the interior's opaque front faces: cheap light; glass (a far window) is shaded fully
-        opaque = np.flatnonzero(surf.front & ~(surf.opacity < 1.0))
+        metal = surf.params.metallic >= MIRROR_BEHIND_GLASS_METALLIC
+        opaque = np.flatnonzero(surf.front & ~(surf.opacity < 1.0) & ~metal)
         if len(opaque):
             shading = interior_shading(surf.normal[opaque], OBJECT_UP)
             radiance[idx[opaque], :3] += tp[opaque] * (
                 surf.params.base_color[opaque] * ctx.interior_rgb[None] * shading[:, None] + surf.emission[opaque])
+        _mirror_behind_glass(ctx, surf, v, tp, idx, radiance, np.flatnonzero(surf.front & ~(surf.opacity < 1.0) & metal))
         surf_front = surf.front & (surf.opacity < 1.0)
     else:
         surf_front = surf.front
@@ -440,6 +443,24 @@ def _shade_hits(ctx: ShadingContext, surf: SurfaceHits, p: np.ndarray, v: np.nda
 
 
 OBJECT_UP = np.array([0.0, 0.0, 1.0])
+MIRROR_BEHIND_GLASS_METALLIC = 0.5  # opaque faces behind glass at least this metallic mirror the environment
+
+
+def _mirror_behind_glass(ctx: ShadingContext, surf: SurfaceHits, v: np.ndarray, tp: np.ndarray, idx: np.ndarray,
+                         radiance: np.ndarray, sel: np.ndarray) -> None:
+    """Add to ``radiance`` (rows ``idx[sel]``) the mirror image of the environment on metal seen through glass (a
+    lamp's reflector behind its lens): the lobe's mirror albedo x the full-resolution map at the mirror direction
+    (the shader's smooth mirror term, unoccluded), x the throughput ``tp`` twice: the light comes in through the
+    same lens it leaves by.  Plus the face's emission x ``tp``."""
+    if len(sel) == 0:
+        return
+    pr = surf.params.take(sel)
+    n, vv = surf.normal[sel], v[sel]
+    n_v = np.clip(np.einsum("ij,ij->i", n, vv), 0.0, 1.0)
+    r_cam = reflect(vv, n) @ ctx.R_cam_from_obj.T
+    alb = mirror_albedo(n_v, pr, np.ones(len(sel)))  # the lobe taken as a mirror
+    L = shade_module.lookup_envmap(ctx.env.pyramid[0], r_cam)
+    radiance[idx[sel], :3] += tp[sel] * (tp[sel] * alb * L + surf.emission[sel])
 
 
 def interior_shading(normal: np.ndarray, up: np.ndarray) -> np.ndarray:

@@ -52,3 +52,32 @@ def test_band_anchor_falls_back_to_the_anchor_where_nothing_was_seen():
     few = np.zeros((H, W), bool)
     few[22, :3] = True  # three cells: mostly the anchor
     assert luminance(band_anchor_rgb(few, mean_obs, anchor)[22]) < 0.5 * luminance(band[22])
+
+
+def test_a_clipped_sky_band_is_filled_as_brightly_as_one_seen_at_the_clip_level():
+    """The band of sky seen through the gap clipped (a brighter exposure: each pixel only "at least the clip
+    level"), dark canopy seen up to 30 deg elsewhere: the band's unseen azimuths are filled at least as brightly
+    as when the same pixels are measured at the clip level (a clipped cell is seen; its band's colour is the
+    sky's), not shrunk to the canopy's anchor (before: LDR 0.30 against 0.58)."""
+    from streetaug.augment.core import SATURATION_RADIANCE
+
+    H, W = 64, 256
+    model = np.full((H, W, 3), 0.5, np.float32)
+    rng = np.random.default_rng(1)
+    az, el = rng.uniform(-0.35, 0.35, 3000), np.radians(rng.uniform(5.0, 20.0, 3000))
+    sky_rgb = np.broadcast_to(np.asarray(SATURATION_RADIANCE, np.float64), (3000, 3))
+    az_t, el_t = rng.uniform(2.5, 3.5, 3000), np.radians(rng.uniform(0.0, 30.0, 3000))
+    dirs = np.concatenate([_dirs(az, el), _dirs(az_t, el_t)])
+    rgb = np.concatenate([sky_rgb, np.full((3000, 3), 0.03)]).astype(np.float32)
+    sky = np.r_[np.ones(3000, bool), np.zeros(3000, bool)]
+    d = world_envmap_directions(H, W)
+    lon = np.arctan2(d[..., 1], d[..., 0])
+    elev = np.degrees(np.arcsin(d[..., 2]))
+    unseen_band = (np.abs(lon) > 0.8) & (np.abs(lon) < 2.2) & (elev > 8.0) & (elev < 17.0)
+    fills = []
+    for clipped in (sky, np.zeros(6000, bool)):
+        obs = ViewObservation("CAM", np.zeros((0, 3)), np.zeros((0, 3), np.float32), np.zeros((0, 3)),
+                              np.zeros(0, bool), dirs, rgb, sky, clipped, np.zeros(3))
+        dome, _ = build_sky_dome(model, [obs], anchor_rgb=np.full(3, 0.03))
+        fills.append(float(np.median(hdr_to_ldr(luminance(dome[unseen_band])))))
+    assert fills[0] >= 0.98 * fills[1], fills

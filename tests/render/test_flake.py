@@ -169,7 +169,9 @@ def test_shading_under_a_uniform_sky_is_unbiased_with_flakes_and_mirror_variates
                                             np.random.default_rng(seed), np.zeros(3), np.zeros(3))
             smooth, noisy = shade(ctx, p, n, n, v, params)
             out.append((smooth + noisy).mean(axis=0))
-        nv = np.einsum("ij,ij->i", n, v)[::40]  # isotropic: only n.v matters; the view in the local frame of n
+        # Isotropic: only n.v matters; the view in the local frame of n.  Every 10th point: the smooth glass's pane
+        # Fresnel rises steeply at grazing n.v, and every 40th point mis-estimated its mean by up to 7 %.
+        nv = np.einsum("ij,ij->i", n, v)[::10]
         albedo = np.mean([_albedo_sampled(np.array([np.sqrt(1 - c * c), 0.0, c]), BRDFParams.uniform(1, **kw), 20_000, i)
                           for i, c in enumerate(nv)], axis=0)
         np.testing.assert_allclose(np.mean(out, axis=0), 0.5 * albedo, rtol=0.04, atol=0.004)
