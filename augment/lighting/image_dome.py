@@ -38,6 +38,7 @@ from ..core import (SATURATION_RADIANCE, camera_dir_to_lonlat, camera_envmap_dir
                     luminance)
 from .evidence import SATURATED_LDR, PreparedImage
 from .fill import UNSEEN_KEEP, mean_colour_radiance, shrink_unseen
+from .sky_prior import censored_sky_log_gain
 from .skydome import blend_observed
 
 BAND_DEG = 4.0  # elevation bands of the row correction
@@ -118,16 +119,17 @@ def sky_log_gain(radiance: np.ndarray, clipped_rgb: np.ndarray, model: np.ndarra
     A clipped channel (``clipped_rgb`` (N, 3)) holds the saturation level, above every unclipped value of its
     channel: its median is exact while fewer than half of the channel is clipped (a censored median; the
     unclipped pixels alone are the sky's darker part, its edges and haze). Past half, the median is only a
-    lower bound: the sky is at least that bright, and the model's (gain >= 0) unless the bound is brighter. So
-    the sky of a brighter exposure is never darker than that of a darker one (an all-clipped sky used to
-    take the ratio of the highest unclipped band: trees and facades).
+    lower bound: the sky is at least that bright, and takes the expected gain given that bound under the prior
+    of unclipped skies (:func:`.sky_prior.censored_sky_log_gain`: the channels share the sky's offset from the prior). So the sky of a brighter exposure is never darker
+    than that of a darker one (an all-clipped sky used to take the ratio of the highest unclipped band: trees
+    and facades).
     """
     if len(radiance) < MIN_SKY_PIXELS:
         return None
     med = np.median(radiance, axis=0)
     gain = np.log(np.maximum(med, 1e-9) / np.maximum(np.median(model, axis=0), 1e-9))
     censored = clipped_rgb.mean(axis=0) >= 0.5
-    return np.where(censored, np.maximum(gain, 0.0), gain)
+    return censored_sky_log_gain(gain[None], censored[None])[0]
 
 
 def band_log_gains(log_ratio_cells: np.ndarray, cell_elev_deg: np.ndarray, all_elev_deg: np.ndarray,

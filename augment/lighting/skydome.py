@@ -15,6 +15,7 @@ from ..core import camera_dir_to_lonlat, check_shape, hdr_to_ldr, ldr_to_hdr, lu
 from .fill import UNSEEN_KEEP, shrink_unseen
 from .observe import ViewObservation
 from .sky import sky_radiance
+from .sky_prior import censored_sky_log_gain
 from .volume import world_envmap_directions
 
 SKY_GAIN_KAPPA = 2.0  # several cameras: von Mises weight of a camera's sky correction over azimuth (~60 deg wide)
@@ -158,8 +159,12 @@ def build_sky_dome(model_world: np.ndarray, observations: list[ViewObservation],
     gain = np.ones(3)
     if sel.sum() >= 20:
         log_ratio = np.log(np.maximum(rgb[sel], 1e-9) / model.reshape(-1, 3)[pix[sel]])
-        # a clipped pixel only says "at least": no correction unless the model is dimmer than the clip level
-        log_ratio[sat[sel]] = np.maximum(log_ratio[sat[sel]], 0.0)
+        # a clipped channel only says "at least": its expected ratio given that bound under the prior of unclipped
+        # skies (.sky_prior; the model itself only where the bound and the prior both say so); a clipped pixel's
+        # other channels are measurements (the clipped ones hold the pixel's largest value, the saturation level)
+        rgb_sel = rgb[sel]
+        clipped_ch = sat[sel][:, None] & (rgb_sel >= rgb_sel.max(axis=1, keepdims=True) * (1.0 - 1e-6))
+        log_ratio = censored_sky_log_gain(log_ratio, clipped_ch)
         gain = np.exp(np.median(log_ratio, axis=0))
         view = np.concatenate([np.full(len(o.far_dirs), i) for i, o in enumerate(observations)])[sel]
         log_gain = _sky_log_gain(log_ratio, row[sel], lon[sel], view, len(observations), H, W)
