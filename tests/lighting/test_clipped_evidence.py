@@ -8,6 +8,7 @@ import numpy as np
 from streetaug.augment.core import SATURATION_RADIANCE, hdr_to_ldr_uint8, ldr_uint8_to_hdr
 from streetaug.augment.lighting.evidence import ground_evidence, prepare_image
 from streetaug.augment.lighting.image_dome import sky_log_gain
+from streetaug.augment.lighting.sky_prior import censored_sky_log_gain
 
 UP = np.array([0.0, -1.0, 0.0])  # a level camera
 
@@ -42,14 +43,18 @@ def test_sky_gain_is_the_median_ratio_while_less_than_half_clips():
 
 
 def test_an_all_clipped_sky_is_at_least_the_model_and_its_saturation():
+    """All clipped: the gain is at least the clip bound in every channel, and the expected ratio given that
+    bound under the prior of unclipped skies (:mod:`.sky_prior`), one offset shared by the channels."""
     sky = _sky() * 4.0
     rad, clipped = _clip(sky)
     assert clipped.all()
-    bright_model = np.full((400, 3), 2.0)  # above the saturation level: the sky is the model's
-    np.testing.assert_allclose(sky_log_gain(rad, clipped, bright_model), 0.0, atol=1e-12)
-    dim_model = np.full((400, 3), 0.3)  # below it: the sky is at least the saturation level
-    np.testing.assert_allclose(sky_log_gain(rad, clipped, dim_model), np.log(SATURATION_RADIANCE / 0.3), atol=1e-9)
-    assert sky_log_gain(rad[:5], clipped[:5], bright_model[:5]) is None  # too few pixels
+    for level in (2.0, 0.3):  # a model above the saturation level, below it
+        model = np.full((400, 3), level)
+        bound = np.log(SATURATION_RADIANCE / level)
+        gain = sky_log_gain(rad, clipped, model)
+        assert np.all(gain >= bound - 1e-12)
+        np.testing.assert_allclose(gain, censored_sky_log_gain(bound[None], clipped[:1])[0], atol=1e-9)
+    assert sky_log_gain(rad[:5], clipped[:5], model[:5]) is None  # too few pixels
 
 
 def _road_image(w=640, h=360):
