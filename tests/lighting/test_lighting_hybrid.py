@@ -32,6 +32,7 @@ from streetaug.augment.lighting.levels import L3_GRID, HeightMap, choose_level, 
 from streetaug.augment.lighting.observe import ViewObservation, extend_facades
 from streetaug.augment.lighting.outputs import write_lighting_outputs
 from streetaug.augment.lighting.sky import make_sky_light
+from streetaug.augment.lighting.sky_prior import censored_sky_log_gain
 from streetaug.augment.lighting.skydome import build_sky_dome
 from streetaug.augment.lighting.sun import sun_direction_global
 from streetaug.augment.lighting.volume import HybridLighting
@@ -81,9 +82,12 @@ def test_sky_dome_pastes_observations_and_corrects_the_model():
     assert np.allclose(stats["sky_gain_rgb"], 2.0)
     assert np.allclose(dome[3, W // 2 + W // 4], 2.0, rtol=1e-3)  # unobserved sky: model x gain by elevation
     assert np.allclose(dome[H - 2], 1.0)  # below the horizon untouched
-    # a clipped (saturated) observation only raises the sky
-    dome2, _ = build_sky_dome(model, [_obs(dirs, np.full((400, 3), 0.5), np.ones(400, bool), np.ones(400, bool))])
-    assert np.all(dome2 >= model - 1e-6)
+    # a clipped (saturated) observation is a lower bound: the sky never falls below it, and takes the expected
+    # ratio given that bound under the prior of unclipped skies (.sky_prior; far below the model: the prior's)
+    dome2, stats2 = build_sky_dome(model, [_obs(dirs, np.full((400, 3), 0.5), np.ones(400, bool), np.ones(400, bool))])
+    assert np.all(dome2[: H // 2] >= 0.5 - 1e-6)
+    expected = censored_sky_log_gain(np.full((1, 3), np.log(0.5)), np.ones((1, 3), bool))[0]
+    np.testing.assert_allclose(np.log(stats2["sky_gain_rgb"]), expected, atol=1e-6)
 
 
 def test_each_cameras_sky_corrects_the_dome_around_its_own_azimuth():
