@@ -22,9 +22,9 @@ sun followed the dome's correction (x1.55-1.59 of EV 0's sun).
 Session 15: the car's glass reflects as a real pane (steeper Fresnel, raked windscreens), so the sky it mirrors
 counts for more. With that glass and the +1 EV sky at the model, L2 +1 EV fell to 25.05 / 24.72 (lighting /
 composite; with session 10's censoring undone as well: L1 +1 EV 17.9 / 17.9, L2 24.6 / 24.2).
-A clipped sky channel now takes its expected sky/model ratio given the clip bound under a prior measured on unclipped real skies (lighting.sky_prior): L2 dome
-and sun x1.84-1.87 of EV 0's. Lighting at -1 / +1 EV, then composite: L1 29.6 / 25.3 and 25.9 / 24.9; L2 29.5 /
-26.5 and 25.7 / 25.8.
+A clipped sky channel now takes its expected sky/model ratio given the clip bound, under a prior measured on
+unclipped real skies (lighting.sky_prior): L2 dome and sun x1.84-1.87 of EV 0's. Lighting at -1 / +1 EV, then
+composite: L1 29.6 / 25.3 and 25.9 / 24.9; L2 29.5 / 26.5 and 25.7 / 25.8.
 """
 
 from __future__ import annotations
