@@ -179,7 +179,7 @@ def binned_points(grid: LogGrid, obs: ViewObservation) -> np.ndarray:
     LiDAR beam came back from beyond it) the points between ``FREE_SPACE_VIEW_HEIGHT_M`` and ``STRUCTURE_MIN_TOP_M``
     above the ground, within ``FREE_SPACE_MAX_DIST_M`` of the grid's centre (at ``FREE_SPACE_VIEW_HEIGHT_M``) that
     the move turns by more than ``FREE_SPACE_MIN_ANGLE_DEG`` as seen from there; the others at ``obs.points``."""
-    free = getattr(obs, "free_points", None)  # observation-like records without it: as they are
+    free = obs.free_points
     if free is None or not len(obs.points):
         return obs.points
     c = np.array([*grid.centre_xy_m, FREE_SPACE_VIEW_HEIGHT_M])

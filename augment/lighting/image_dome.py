@@ -120,9 +120,9 @@ def sky_log_gain(radiance: np.ndarray, clipped_rgb: np.ndarray, model: np.ndarra
     channel: its median is exact while fewer than half of the channel is clipped (a censored median; the
     unclipped pixels alone are the sky's darker part, its edges and haze). Past half, the median is only a
     lower bound: the sky is at least that bright, and takes the expected gain given that bound under the prior
-    of unclipped skies (:func:`.sky_prior.censored_sky_log_gain`: the channels share the sky's offset from the prior). So the sky of a brighter exposure is never darker
-    than that of a darker one (an all-clipped sky used to take the ratio of the highest unclipped band: trees
-    and facades).
+    of unclipped skies (:func:`.sky_prior.censored_sky_log_gain`: the channels share the sky's offset from the
+    prior). So the sky of a brighter exposure is never darker than that of a darker one (an all-clipped sky
+    used to take the ratio of the highest unclipped band: trees and facades).
     """
     if len(radiance) < MIN_SKY_PIXELS:
         return None

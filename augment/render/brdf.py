@@ -289,9 +289,11 @@ def pane_reflectance(cos_i: np.ndarray, ior: float = PANE_IOR) -> np.ndarray:
 def pane_fresnel(n_dot_v: np.ndarray, f0: np.ndarray) -> np.ndarray:
     """The pane's reflectance (N, 3) at ``n_dot_v`` (N,) mapped affinely so that it is the material's F0 ``f0``
     (N, 3) head-on and 1 at grazing: ``F0 + (1 - F0) (P - P_0) / (1 - P_0)`` (P :func:`pane_reflectance`)."""
-    p0 = float(pane_reflectance(np.ones(1))[0])
-    t = ((pane_reflectance(n_dot_v) - p0) / (1.0 - p0))[:, None]
+    t = ((pane_reflectance(n_dot_v) - _PANE_HEAD_ON) / (1.0 - _PANE_HEAD_ON))[:, None]
     return f0 + (1.0 - f0) * t
+
+
+_PANE_HEAD_ON = float(pane_reflectance(np.ones(1))[0])  # the pane's reflectance at normal incidence (~7.7 %)
 
 
 def mirror_fresnel(n_dot_v: np.ndarray, params: BRDFParams) -> np.ndarray:

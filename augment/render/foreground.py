@@ -416,12 +416,13 @@ def _shade_hits(ctx: ShadingContext, surf: SurfaceHits, p: np.ndarray, v: np.nda
     radiance = queue.radiance
     if inside_glass:  # the interior's opaque front faces: cheap light; glass (a far window) is shaded fully
         metal = surf.params.metallic >= MIRROR_BEHIND_GLASS_METALLIC
-        opaque = np.flatnonzero(surf.front & ~(surf.opacity < 1.0) & ~metal)
+        opaque_front = surf.front & ~(surf.opacity < 1.0)
+        opaque = np.flatnonzero(opaque_front & ~metal)
         if len(opaque):
             shading = interior_shading(surf.normal[opaque], OBJECT_UP)
             radiance[idx[opaque], :3] += tp[opaque] * (
                 surf.params.base_color[opaque] * ctx.interior_rgb[None] * shading[:, None] + surf.emission[opaque])
-        _mirror_behind_glass(ctx, surf, v, tp, idx, radiance, np.flatnonzero(surf.front & ~(surf.opacity < 1.0) & metal))
+        _mirror_behind_glass(ctx, surf, v, tp, idx, radiance, np.flatnonzero(opaque_front & metal))
         surf_front = surf.front & (surf.opacity < 1.0)
     else:
         surf_front = surf.front

@@ -359,7 +359,7 @@ def test_observed_voxels_equals_the_reference(all_inside):
         d = rng.normal(size=(len(p), 3))
         obs.append(SimpleNamespace(points=p, radiance=rng.uniform(0, 4, (len(p), 3)).astype(np.float32),
                                    view_dirs=d / np.linalg.norm(d, axis=1, keepdims=True),
-                                   capped=rng.uniform(size=len(p)) < 0.1))
+                                   capped=rng.uniform(size=len(p)) < 0.1, free_points=None))
     new, ref = observed_voxels(g, obs), ref_observed_voxels(g, obs)
     assert new.observed.sum() > 1000
     for f in ("observed", "obs_rgb", "dir_sum", "cam_top_m", "cam_capped"):
